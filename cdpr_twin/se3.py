@@ -1,0 +1,270 @@
+"""SO(3)/SE(3) helpers: exp/log, adjoint, θu, quaternions, file poses, pose distance.
+
+Conventions (DESIGN §3): homogeneous transforms are 4×4 arrays named ``T_<to>_<from>``;
+twists are ``[v, ω]`` (linear first); quaternions are ``quat_wxyz`` (scalar first, the MuJoCo
+order); poses in files are ``[x, y, z, rx, ry, rz]`` in metres and degrees with
+R = Rx(rx)·Ry(ry)·Rz(rz) (intrinsic XYZ). Everything here imports numpy only.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+_SMALL = 1e-8
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrix [v]×.
+
+    Args:
+        v: (3,) vector.
+
+    Returns:
+        (3, 3) matrix with ``skew(v) @ w == np.cross(v, w)``.
+    """
+    x, y, z = v
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def rot_x(angle: float) -> np.ndarray:
+    """Rotation matrix about x by ``angle`` rad. Returns (3, 3)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def rot_y(angle: float) -> np.ndarray:
+    """Rotation matrix about y by ``angle`` rad. Returns (3, 3)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rot_z(angle: float) -> np.ndarray:
+    """Rotation matrix about z by ``angle`` rad. Returns (3, 3)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def transform(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Homogeneous transform from rotation (3, 3) and translation (3,) [m]. Returns (4, 4)."""
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = t
+    return T
+
+
+def inverse(T: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid transform (4, 4): ``inverse(T_a_b) == T_b_a``."""
+    R = T[:3, :3]
+    return transform(R.T, -R.T @ T[:3, 3])
+
+
+def so3_exp(theta_u: np.ndarray) -> np.ndarray:
+    """Rotation matrix of the rotation vector θu (Rodrigues).
+
+    Args:
+        theta_u: (3,) rotation vector [rad].
+
+    Returns:
+        (3, 3) rotation matrix.
+    """
+    theta_u = np.asarray(theta_u, dtype=float)
+    theta2 = float(theta_u @ theta_u)
+    K = skew(theta_u)
+    if theta2 < _SMALL:
+        a = 1.0 - theta2 / 6.0
+        b = 0.5 - theta2 / 24.0
+    else:
+        theta = np.sqrt(theta2)
+        a = np.sin(theta) / theta
+        b = (1.0 - np.cos(theta)) / theta2
+    return np.eye(3) + a * K + b * (K @ K)
+
+
+def quat_wxyz_from_matrix(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w ≥ 0) of a rotation matrix, by Shepperd's method.
+
+    Args:
+        R: (3, 3) rotation matrix.
+
+    Returns:
+        (4,) ``quat_wxyz``.
+    """
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    diag = (R[0, 0], R[1, 1], R[2, 2])
+    k = int(np.argmax((tr, *diag)))
+    if k == 0:
+        s = 2.0 * np.sqrt(1.0 + tr)
+        q = np.array(
+            [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
+        )
+    elif k == 1:
+        s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q = np.array(
+            [(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s]
+        )
+    elif k == 2:
+        s = 2.0 * np.sqrt(1.0 - R[0, 0] + R[1, 1] - R[2, 2])
+        q = np.array(
+            [(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s]
+        )
+    else:
+        s = 2.0 * np.sqrt(1.0 - R[0, 0] - R[1, 1] + R[2, 2])
+        q = np.array(
+            [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
+        )
+    q /= np.linalg.norm(q)
+    return -q if q[0] < 0.0 else q
+
+
+def matrix_from_quat_wxyz(quat_wxyz: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a quaternion; the quaternion need not be normalised.
+
+    Args:
+        quat_wxyz: (4,) quaternion, scalar first. Must be non-zero.
+
+    Returns:
+        (3, 3) rotation matrix.
+    """
+    q = np.asarray(quat_wxyz, dtype=float)
+    n = np.linalg.norm(q)
+    if not np.isfinite(n) or n < 1e-12:
+        raise ValueError(f"quaternion {q} is zero or not finite; pass a non-zero finite wxyz")
+    w, x, y, z = q / n
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def so3_log(R: np.ndarray) -> np.ndarray:
+    """Rotation vector θu of a rotation matrix, θ ∈ [0, π].
+
+    Robust at θ → 0 and θ → π (computed through the quaternion).
+
+    Args:
+        R: (3, 3) rotation matrix.
+
+    Returns:
+        (3,) rotation vector [rad].
+    """
+    q = quat_wxyz_from_matrix(R)
+    v = q[1:]
+    s = np.linalg.norm(v)
+    if s < _SMALL:
+        return 2.0 * v / q[0]  # first order: θu ≈ 2 v
+    theta = 2.0 * np.arctan2(s, q[0])
+    return theta * v / s
+
+
+def _left_jacobian_terms(theta2: float) -> tuple[float, float]:
+    """Coefficients (b, c) of V = I + b[ω]× + c[ω]×² for θ² = |ω|²."""
+    if theta2 < _SMALL:
+        return 0.5 - theta2 / 24.0, 1.0 / 6.0 - theta2 / 120.0
+    theta = np.sqrt(theta2)
+    return (1.0 - np.cos(theta)) / theta2, (theta - np.sin(theta)) / (theta2 * theta)
+
+
+def se3_exp(twist: np.ndarray) -> np.ndarray:
+    """Exponential map of a twist ``[v, ω]`` (the motion of eq. 9 over unit time).
+
+    Args:
+        twist: (6,) ``[v, ω]`` [m, rad] (already multiplied by the time interval).
+
+    Returns:
+        (4, 4) rigid transform.
+    """
+    twist = np.asarray(twist, dtype=float)
+    v, w = twist[:3], twist[3:]
+    b, c = _left_jacobian_terms(float(w @ w))
+    K = skew(w)
+    V = np.eye(3) + b * K + c * (K @ K)
+    return transform(so3_exp(w), V @ v)
+
+
+def se3_log(T: np.ndarray) -> np.ndarray:
+    """Logarithm of a rigid transform, inverse of :func:`se3_exp` (θ < π).
+
+    Args:
+        T: (4, 4) rigid transform.
+
+    Returns:
+        (6,) twist ``[v, ω]``.
+    """
+    w = so3_log(T[:3, :3])
+    theta2 = float(w @ w)
+    K = skew(w)
+    if theta2 < _SMALL:
+        d = 1.0 / 12.0 + theta2 / 720.0
+    else:
+        theta = np.sqrt(theta2)
+        d = (1.0 - theta * np.sin(theta) / (2.0 * (1.0 - np.cos(theta)))) / theta2
+    V_inv = np.eye(3) - 0.5 * K + d * (K @ K)
+    return np.concatenate([V_inv @ T[:3, 3], w])
+
+
+def adjoint(T_a_b: np.ndarray) -> np.ndarray:
+    """Adjoint of ``T_a_b`` for ``[v, ω]`` twists (eq. 4): maps a twist in F_b to F_a.
+
+    Args:
+        T_a_b: (4, 4) rigid transform.
+
+    Returns:
+        (6, 6) ``[[R, [t]× R], [0, R]]``.
+    """
+    R, t = T_a_b[:3, :3], T_a_b[:3, 3]
+    Ad = np.zeros((6, 6))
+    Ad[:3, :3] = R
+    Ad[:3, 3:] = skew(t) @ R
+    Ad[3:, 3:] = R
+    return Ad
+
+
+def matrix_from_euler_xyz(angles: np.ndarray) -> np.ndarray:
+    """R = Rx(a)·Ry(b)·Rz(c) (intrinsic XYZ, scipy ``"XYZ"``) for angles in rad. Returns (3, 3)."""
+    a, b, c = angles
+    return rot_x(a) @ rot_y(b) @ rot_z(c)
+
+
+def euler_xyz_from_matrix(R: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`matrix_from_euler_xyz`; b ∈ [−π/2, π/2]. Returns (3,) rad."""
+    b = np.arcsin(np.clip(R[0, 2], -1.0, 1.0))
+    if abs(R[0, 2]) < 1.0 - 1e-12:
+        a = np.arctan2(-R[1, 2], R[2, 2])
+        c = np.arctan2(-R[0, 1], R[0, 0])
+    else:  # gimbal lock: only a ± c is defined; put it all in a
+        a = np.arctan2(R[2, 1], R[1, 1])
+        c = 0.0
+    return np.array([a, b, c])
+
+
+def pose_from_vector(p: np.ndarray) -> np.ndarray:
+    """Transform from a file pose ``[x, y, z, rx, ry, rz]`` (m, degrees, intrinsic XYZ).
+
+    Args:
+        p: (6,) pose as written in scenario files and the paper.
+
+    Returns:
+        (4, 4) transform, e.g. ``T_base_platform``.
+    """
+    p = np.asarray(p, dtype=float)
+    if p.shape != (6,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"pose {p!r} must be 6 finite numbers [x, y, z (m), rx, ry, rz (deg)]")
+    return transform(matrix_from_euler_xyz(np.deg2rad(p[3:])), p[:3])
+
+
+def vector_from_pose(T: np.ndarray) -> np.ndarray:
+    """File pose ``[x, y, z, rx, ry, rz]`` (m, degrees) of a transform (4, 4). Returns (6,)."""
+    return np.concatenate([T[:3, 3], np.rad2deg(euler_xyz_from_matrix(T[:3, :3]))])
+
+
+def pose_distance(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
+    """Translational [m] and rotational [rad] distance between two poses (paper Fig. 5b).
+
+    The rotational distance is the angle θ of the axis-angle form of ``R_aᵀ R_b``.
+    """
+    dt = float(np.linalg.norm(T_a[:3, 3] - T_b[:3, 3]))
+    dr = float(np.linalg.norm(so3_log(T_a[:3, :3].T @ T_b[:3, :3])))
+    return dt, dr

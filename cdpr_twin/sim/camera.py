@@ -1,0 +1,90 @@
+"""Onboard camera: offscreen rendering, intrinsics, and the MuJoCo ↔ OpenCV frame change.
+
+MuJoCo cameras look along their −z with y up; OpenCV cameras look along +z with y down. The two
+differ by a rotation of π about x, applied here and nowhere else.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from cdpr_twin.se3 import matrix_from_quat_wxyz, rot_x, transform
+from cdpr_twin.vision import CameraIntrinsics
+
+R_MJCAM_CV = rot_x(np.pi)
+"""Rotation from the OpenCV camera frame to MuJoCo's camera frame (its own inverse)."""
+
+CAMERA_NAME = "platform_cam"
+
+
+def camera_id(model: mujoco.MjModel, name: str = CAMERA_NAME) -> int:
+    """Id of a named camera, with an error that says what the model lacks."""
+    cid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, name)
+    if cid < 0:
+        raise ValueError(
+            f"the model has no camera named {name!r}; add <camera name={name!r}> "
+            "to the platform body"
+        )
+    return cid
+
+
+def intrinsics(model: mujoco.MjModel, name: str = CAMERA_NAME) -> CameraIntrinsics:
+    """OpenCV intrinsics of a MuJoCo camera rendered at its ``resolution`` attribute."""
+    cid = camera_id(model, name)
+    width, height = (int(v) for v in model.cam_resolution[cid])
+    return CameraIntrinsics.from_fovy(width, height, np.deg2rad(model.cam_fovy[cid]))
+
+
+def T_body_cam(model: mujoco.MjModel, name: str = CAMERA_NAME) -> np.ndarray:
+    """(4, 4) OpenCV camera frame in the frame of the body carrying the camera."""
+    cid = camera_id(model, name)
+    R = matrix_from_quat_wxyz(model.cam_quat[cid]) @ R_MJCAM_CV
+    return transform(R, model.cam_pos[cid])
+
+
+def T_world_cam(data: mujoco.MjData, cid: int) -> np.ndarray:
+    """(4, 4) OpenCV camera frame in the world (base) frame, from current kinematics."""
+    return transform(data.cam_xmat[cid].reshape(3, 3) @ R_MJCAM_CV, data.cam_xpos[cid])
+
+
+class CameraRenderer:
+    """Offscreen RGB rendering of one camera at its native resolution.
+
+    Args:
+        model: the compiled model (its ``<visual><global offwidth offheight>`` must be at least
+            the camera resolution).
+        name: camera name.
+    """
+
+    def __init__(self, model: mujoco.MjModel, name: str = CAMERA_NAME) -> None:
+        self.camera_id = camera_id(model, name)
+        self.intrinsics = intrinsics(model, name)
+        w, h = self.intrinsics.width, self.intrinsics.height
+        if model.vis.global_.offwidth < w or model.vis.global_.offheight < h:
+            raise ValueError(
+                f"camera {name!r} renders {w}×{h} px but the offscreen buffer is "
+                f"{model.vis.global_.offwidth}×{model.vis.global_.offheight}; raise "
+                "<visual><global offwidth=… offheight=…/> in the model file"
+            )
+        try:
+            self._renderer = mujoco.Renderer(model, height=h, width=w)
+        except Exception as exc:
+            raise RuntimeError(
+                f"offscreen rendering failed ({exc}); install Mesa's EGL (libegl1) or set "
+                "MUJOCO_GL=osmesa, or run with the camera off"
+            ) from exc
+        self._option = mujoco.MjvOption()
+        self._option.sitegroup[:] = 0  # sites are markers for people, not for the camera
+        self._option.tendongroup[:] = 1
+
+    def render(self, data: mujoco.MjData) -> np.ndarray:
+        """Render the camera's view. Returns (H, W, 3) RGB uint8, top row first."""
+        self._renderer.update_scene(data, camera=self.camera_id, scene_option=self._option)
+        return self._renderer.render()
+
+    def close(self) -> None:
+        """Free the GL context."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

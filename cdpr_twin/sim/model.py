@@ -1,0 +1,289 @@
+"""Load the ACROBOT MJCF, apply the robot's truth deviations, read its geometry.
+
+The nominal :class:`~cdpr_twin.geometry.CdprGeometry` (what estimators and controllers believe)
+and the twin's true one come from the same model file: the true one is read after
+:func:`build_model` has moved exit and anchor points, scaled E·S, changed pulley radii and
+re-mounted the camera and tag as a seeded :class:`TruthDeviations` says (the calibration errors
+of one physical robot).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from cdpr_twin.geometry import CdprGeometry
+from cdpr_twin.se3 import matrix_from_quat_wxyz, quat_wxyz_from_matrix, so3_exp
+from cdpr_twin.sim import camera
+
+N_CABLES = 8
+PLATFORM_BODY = "platform"
+TAG_BODY = "tag"
+
+
+class ModelError(ValueError):
+    """A model file is missing, malformed, or lacks an element the twin needs."""
+
+
+def swivel_body(i: int) -> str:
+    """Name of cable i's pulley swivel body (i from 0)."""
+    return f"pulley{i + 1}_swivel"
+
+
+def sheave_geom(i: int) -> str:
+    """Name of cable i's sheave geom (i from 0)."""
+    return f"pulley{i + 1}_sheave"
+
+
+def side_site(i: int) -> str:
+    """Name of cable i's wrap side site (i from 0)."""
+    return f"pulley{i + 1}_side"
+
+
+def anchor_site(i: int) -> str:
+    """Name of cable i's anchor site B_i (i from 0)."""
+    return f"cable{i + 1}_anchor"
+
+
+def tendon_name(i: int) -> str:
+    """Name of cable i's tendon (i from 0)."""
+    return f"cable{i + 1}_tendon"
+
+
+def actuator_name(i: int) -> str:
+    """Name of cable i's winch actuator (i from 0)."""
+    return f"winch{i + 1}_actuator"
+
+
+@dataclass(frozen=True, eq=False)
+class TruthDeviations:
+    """Concrete calibration errors of one simulated robot (all zero: the nominal robot).
+
+    Attributes:
+        exit_offsets: (m, 3) offsets of the exit points A_i in F_b [m].
+        anchor_offsets: (m, 3) offsets of the anchor points B_i in F_p [m].
+        es_scale: (m,) factors on each cable's E·S.
+        pulley_radius_offsets: (m,) offsets of each sheave radius [m].
+        camera_offset: (6,) camera mounting error [δp (m), δθ (rad)] in the platform frame.
+        tag_offset: (6,) tag placement error [δp (m), δθ (rad)] in the base frame.
+    """
+
+    exit_offsets: np.ndarray
+    anchor_offsets: np.ndarray
+    es_scale: np.ndarray
+    pulley_radius_offsets: np.ndarray
+    camera_offset: np.ndarray
+    tag_offset: np.ndarray
+
+    @classmethod
+    def zero(cls, n_cables: int = N_CABLES) -> TruthDeviations:
+        """No deviation: the twin is the nominal robot."""
+        return cls(
+            np.zeros((n_cables, 3)),
+            np.zeros((n_cables, 3)),
+            np.ones(n_cables),
+            np.zeros(n_cables),
+            np.zeros(6),
+            np.zeros(6),
+        )
+
+
+@dataclass(frozen=True)
+class DeviationSpec:
+    """Magnitudes (standard deviations) of the robot's calibration errors, and the robot seed.
+
+    One seed draws one robot: keep it fixed across repeated runs, like one physical robot.
+
+    Attributes:
+        exit_point_std: per-axis std of the exit point offsets [m].
+        anchor_point_std: per-axis std of the anchor point offsets [m].
+        es_scale_std: relative std of each cable's E·S.
+        pulley_radius_std: std of each sheave radius [m].
+        camera_position_std: per-axis std of the camera position [m].
+        camera_rotation_std: per-axis std of the camera orientation [rad].
+        tag_position_std: per-axis std of the tag position [m].
+        tag_rotation_std: per-axis std of the tag orientation [rad].
+        seed: robot seed.
+    """
+
+    exit_point_std: float = 0.0
+    anchor_point_std: float = 0.0
+    es_scale_std: float = 0.0
+    pulley_radius_std: float = 0.0
+    camera_position_std: float = 0.0
+    camera_rotation_std: float = 0.0
+    tag_position_std: float = 0.0
+    tag_rotation_std: float = 0.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name, value in vars(self).items():
+            if name != "seed" and not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"DeviationSpec.{name} must be a finite std ≥ 0, got {value}")
+
+    def draw(self, n_cables: int = N_CABLES) -> TruthDeviations:
+        """Draw the deviations of the robot this spec's seed names (deterministic)."""
+        rng = np.random.default_rng(self.seed)
+        return TruthDeviations(
+            exit_offsets=rng.normal(0.0, self.exit_point_std, (n_cables, 3)),
+            anchor_offsets=rng.normal(0.0, self.anchor_point_std, (n_cables, 3)),
+            es_scale=np.clip(1.0 + rng.normal(0.0, self.es_scale_std, n_cables), 0.2, None),
+            pulley_radius_offsets=rng.normal(0.0, self.pulley_radius_std, n_cables),
+            camera_offset=np.concatenate(
+                [
+                    rng.normal(0.0, self.camera_position_std, 3),
+                    rng.normal(0.0, self.camera_rotation_std, 3),
+                ]
+            ),
+            tag_offset=np.concatenate(
+                [
+                    rng.normal(0.0, self.tag_position_std, 3),
+                    rng.normal(0.0, self.tag_rotation_std, 3),
+                ]
+            ),
+        )
+
+
+def _load_spec(path: Path) -> mujoco.MjSpec:
+    path = Path(path)
+    if not path.is_file():
+        raise ModelError(
+            f"model file {path} not found; pass the path of an MJCF file such as "
+            "models/acrobot/scene.xml"
+        )
+    try:
+        return mujoco.MjSpec.from_file(str(path))
+    except ValueError as exc:
+        raise ModelError(f"model file {path} is malformed: {exc}".strip()) from exc
+
+
+def _element(getter, name: str, kind: str, path: Path):
+    element = getter(name)
+    if element is None:
+        raise ModelError(
+            f"model file {path} has no {kind} named {name!r}, which the ACROBOT "
+            "twin needs (see models/acrobot/acrobot.xml)"
+        )
+    return element
+
+
+def _perturb(quat_wxyz: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
+    return quat_wxyz_from_matrix(matrix_from_quat_wxyz(quat_wxyz) @ so3_exp(dtheta))
+
+
+def build_model(path: str | Path, deviations: TruthDeviations | None = None) -> mujoco.MjModel:
+    """Compile a model file, with the robot's truth deviations applied (through MjSpec).
+
+    Args:
+        path: MJCF file (``models/acrobot/scene.xml`` or a file that includes acrobot.xml).
+        deviations: calibration errors of the simulated robot; ``None`` for the nominal robot.
+
+    Returns:
+        The compiled model.
+
+    Raises:
+        ModelError: when the file is missing, malformed or lacks a needed element, or when the
+            deviations make it invalid (e.g. a negative pulley radius).
+    """
+    path = Path(path)
+    spec = _load_spec(path)
+    if deviations is not None:
+        _apply(spec, deviations, path)
+    try:
+        model = spec.compile()
+    except ValueError as exc:
+        raise ModelError(f"model file {path} does not compile: {exc}") from exc
+    for i in range(N_CABLES):  # fail early and clearly on a model that is not ACROBOT-shaped
+        for objtype, name in (
+            (mujoco.mjtObj.mjOBJ_BODY, swivel_body(i)),
+            (mujoco.mjtObj.mjOBJ_GEOM, sheave_geom(i)),
+            (mujoco.mjtObj.mjOBJ_SITE, anchor_site(i)),
+            (mujoco.mjtObj.mjOBJ_TENDON, tendon_name(i)),
+            (mujoco.mjtObj.mjOBJ_ACTUATOR, actuator_name(i)),
+        ):
+            if mujoco.mj_name2id(model, objtype, name) < 0:
+                raise ModelError(
+                    f"model file {path} has no {objtype.name[6:].lower()} named "
+                    f"{name!r}, which the ACROBOT twin needs"
+                )
+    return model
+
+
+def _apply(spec: mujoco.MjSpec, dev: TruthDeviations, path: Path) -> None:
+    es = _element(spec.numeric, "cable_es", "numeric", path)
+    es.data = list(np.asarray(es.data) * dev.es_scale)
+    for i in range(N_CABLES):
+        body = _element(spec.body, swivel_body(i), "body", path)
+        body.pos = np.asarray(body.pos) + dev.exit_offsets[i]
+        site = _element(spec.site, anchor_site(i), "site", path)
+        site.pos = np.asarray(site.pos) + dev.anchor_offsets[i]
+        sheave = _element(spec.geom, sheave_geom(i), "geom", path)
+        r = float(sheave.size[0]) + float(dev.pulley_radius_offsets[i])
+        if r <= 0:
+            raise ModelError(
+                f"pulley radius deviation makes sheave {i + 1}'s radius {r} m ≤ 0; "
+                "lower pulley_radius_std"
+            )
+        sheave.size = [r, sheave.size[1], sheave.size[2]]
+        sheave.pos = [r, 0.0, 0.0]
+        side = _element(spec.site, side_site(i), "site", path)
+        side.pos = [r, 0.0, -2.0 * r]
+    cam = _element(spec.camera, camera.CAMERA_NAME, "camera", path)
+    cam.pos = np.asarray(cam.pos) + dev.camera_offset[:3]
+    cam.quat = _perturb(np.asarray(cam.quat), dev.camera_offset[3:])
+    tag = spec.body(TAG_BODY)
+    if tag is not None:
+        tag.pos = np.asarray(tag.pos) + dev.tag_offset[:3]
+        R = matrix_from_quat_wxyz(np.asarray(tag.quat))
+        tag.quat = quat_wxyz_from_matrix(so3_exp(dev.tag_offset[3:]) @ R)
+
+
+def numeric(model: mujoco.MjModel, name: str) -> np.ndarray:
+    """Data of a ``<custom><numeric>`` element, with an error naming a missing one."""
+    nid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, name)
+    if nid < 0:
+        raise ModelError(
+            f"the model has no <numeric name={name!r}> in <custom>; see models/acrobot/acrobot.xml"
+        )
+    adr, size = model.numeric_adr[nid], model.numeric_size[nid]
+    return np.array(model.numeric_data[adr : adr + size])
+
+
+def read_geometry(model: mujoco.MjModel) -> CdprGeometry:
+    """The CDPR geometry a compiled model describes.
+
+    Args:
+        model: a model from :func:`build_model` (nominal or deviated).
+
+    Returns:
+        The :class:`CdprGeometry`: exit points from the swivel bodies, anchor points from the
+        anchor sites, radii from the sheaves, E·S from ``<numeric name="cable_es">``, mass and
+        centre of mass from the platform body, the OpenCV camera mounting from
+        ``platform_cam``, the workspace from ``frame_min``/``frame_max``.
+    """
+
+    def ids(objtype: mujoco.mjtObj, names: list[str]) -> np.ndarray:
+        return np.array([mujoco.mj_name2id(model, objtype, n) for n in names])
+
+    bodies = ids(mujoco.mjtObj.mjOBJ_BODY, [swivel_body(i) for i in range(N_CABLES)])
+    sites = ids(mujoco.mjtObj.mjOBJ_SITE, [anchor_site(i) for i in range(N_CABLES)])
+    sheaves = ids(mujoco.mjtObj.mjOBJ_GEOM, [sheave_geom(i) for i in range(N_CABLES)])
+    platform = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, PLATFORM_BODY)
+    if platform < 0 or np.any(model.site_bodyid[sites] != platform):
+        raise ModelError("the model's anchor sites must sit on a body named 'platform'")
+    es = numeric(model, "cable_es")
+    return CdprGeometry(
+        a_base=model.body_pos[bodies],
+        b_platform=model.site_pos[sites],
+        pulley_radius=model.geom_size[sheaves, 0],
+        es=np.broadcast_to(es, (N_CABLES,)),
+        mass=float(model.body_mass[platform]),
+        com_platform=model.body_ipos[platform],
+        gravity=model.opt.gravity,
+        T_platform_cam=camera.T_body_cam(model),
+        frame_min=numeric(model, "frame_min"),
+        frame_max=numeric(model, "frame_max"),
+    )

@@ -1,0 +1,261 @@
+"""AprilTag detection → ``T_cam_tag`` (pupil-apriltags for detection, OpenCV for the pose).
+
+Frames: ``cam`` is the OpenCV camera frame (x right, y down, z forward); ``tag`` is the
+pupil-apriltags object frame (origin at the tag centre, x right and y down on the printed tag,
+z into it). Pixel coordinates follow OpenCV: the centre of the top-left pixel is (0, 0).
+AprilTag reports corners with that centre at (0.5, 0.5) (AprilRobotics/apriltag#121), so the
+detector shifts them by −0.5 px before solving the pose with the same intrinsics K that
+:mod:`cdpr_twin.sim.camera` derives from the rendering camera.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from pupil_apriltags import Detector
+
+from cdpr_twin.se3 import transform
+
+APRILTAG_PIXEL_OFFSET = 0.5
+"""AprilTag's pixel-centre coordinate minus OpenCV's [px]."""
+
+
+@dataclass(frozen=True)
+class CameraIntrinsics:
+    """Pinhole intrinsics in the OpenCV convention.
+
+    Attributes:
+        width: image width [px].
+        height: image height [px].
+        fx: focal length along x [px].
+        fy: focal length along y [px].
+        cx: principal point x [px] (OpenCV: top-left pixel centre at 0).
+        cy: principal point y [px].
+    """
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    @classmethod
+    def from_fovy(cls, width: int, height: int, fovy: float) -> CameraIntrinsics:
+        """Intrinsics of an ideal symmetric frustum with square pixels (MuJoCo's cameras).
+
+        Args:
+            width: image width [px].
+            height: image height [px].
+            fovy: vertical field of view [rad].
+        """
+        f = 0.5 * height / np.tan(0.5 * fovy)
+        return cls(width, height, f, f, 0.5 * width - 0.5, 0.5 * height - 0.5)
+
+    @property
+    def K(self) -> np.ndarray:
+        """(3, 3) camera matrix."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True, eq=False)
+class TagDetection:
+    """One detected AprilTag.
+
+    Attributes:
+        tag_id: the tag's id in its family.
+        corners: (4, 2) corners [px, OpenCV convention] in pupil-apriltags' order: the tag
+            frame's (−s/2, s/2), (s/2, s/2), (s/2, −s/2), (−s/2, −s/2) (counter-clockwise in the
+            image, starting bottom-left of the upright tag).
+        T_cam_tag: (4, 4) tag pose in the camera frame.
+        decision_margin: pupil-apriltags' decoding margin (higher is more certain).
+        reprojection_error: RMS corner reprojection error of ``T_cam_tag`` [px].
+    """
+
+    tag_id: int
+    corners: np.ndarray
+    T_cam_tag: np.ndarray
+    decision_margin: float
+    reprojection_error: float
+
+
+def tag_corners_object(tag_size: float) -> np.ndarray:
+    """Tag corners in the tag frame, in the order of :attr:`TagDetection.corners`. (4, 3) [m]."""
+    h = 0.5 * tag_size
+    return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+
+
+def project_points(
+    intrinsics: CameraIntrinsics, T_cam_obj: np.ndarray, points_obj: np.ndarray
+) -> np.ndarray:
+    """Pinhole projection of points given in an object frame.
+
+    Args:
+        intrinsics: camera intrinsics.
+        T_cam_obj: (4, 4) object pose in the camera frame.
+        points_obj: (n, 3) points [m].
+
+    Returns:
+        (n, 2) pixel coordinates (OpenCV convention).
+    """
+    p = points_obj @ T_cam_obj[:3, :3].T + T_cam_obj[:3, 3]
+    uv = p[:, :2] / p[:, 2:3]
+    return uv * [intrinsics.fx, intrinsics.fy] + [intrinsics.cx, intrinsics.cy]
+
+
+def refine_quad(gray: np.ndarray, corners: np.ndarray, half_width: float = 3.0) -> np.ndarray:
+    """Sub-pixel refinement of a dark quad's corners on a light background.
+
+    Along each edge, the intensity profile across the edge is sampled (bilinear) at points
+    between 15 % and 85 % of its length; the mid-level crossing of each profile is an edge point
+    (exact for an area-sampled step edge). A line fitted to each edge's points (total least
+    squares) is intersected with its neighbours'.
+
+    Args:
+        gray: (H, W) uint8 image.
+        corners: (4, 2) corners in order around the quad [px, OpenCV convention].
+        half_width: half-length of the profiles [px]; capped at 30 % of the shortest edge
+            divided by 8 (one AprilTag border cell is 1/8 of the edge).
+
+    Returns:
+        (4, 2) refined corners, or the input corners when refinement is not possible.
+    """
+    c = np.asarray(corners, dtype=float)
+    edge_len = np.linalg.norm(np.roll(c, -1, axis=0) - c, axis=1)
+    hw = min(half_width, 0.3 * edge_len.min() / 8.0)
+    if hw < 1.0:
+        return c
+    centre = c.mean(axis=0)
+    steps = np.linspace(-hw, hw, int(round(8 * hw)) + 1)
+    img = gray.astype(np.float32)
+    lines = []
+    for j in range(4):
+        p0, p1 = c[j], c[(j + 1) % 4]
+        d = (p1 - p0) / edge_len[j]
+        n = np.array([-d[1], d[0]])
+        if n @ ((p0 + p1) / 2 - centre) < 0:
+            n = -n  # outward normal: dark inside, light outside
+        ts = np.linspace(0.15, 0.85, max(8, int(edge_len[j] / 2)))
+        base = p0 + ts[:, None] * (p1 - p0)
+        pts = base[:, None, :] + steps[None, :, None] * n  # (k, s, 2)
+        prof = cv2.remap(
+            img,
+            pts[..., 0].astype(np.float32),
+            pts[..., 1].astype(np.float32),
+            cv2.INTER_LINEAR,
+            borderMode=cv2.BORDER_REPLICATE,
+        )
+        lo, hi = prof.min(axis=1, keepdims=True), prof.max(axis=1, keepdims=True)
+        ok = (hi - lo).ravel() > 20.0
+        f = prof - 0.5 * (lo + hi)  # rising from dark (inside) to light (outside)
+        found = []
+        for k in np.flatnonzero(ok):
+            idx = np.flatnonzero((f[k, :-1] < 0) & (f[k, 1:] >= 0))
+            if idx.size != 1:
+                continue
+            i = idx[0]
+            t = steps[i] + (steps[i + 1] - steps[i]) * f[k, i] / (f[k, i] - f[k, i + 1])
+            found.append(base[k] + t * n)
+        if len(found) < 4:
+            return c
+        q = np.array(found)
+        mean = q.mean(axis=0)
+        direction = np.linalg.svd(q - mean)[2][0]
+        lines.append((mean, direction))
+    out = np.empty((4, 2))
+    for j in range(4):  # corner j is the meeting point of edges j-1 and j
+        (m0, d0), (m1, d1) = lines[j - 1], lines[j]
+        A = np.column_stack([d0, -d1])
+        if abs(np.linalg.det(A)) < 1e-6:
+            return c
+        s = np.linalg.solve(A, m1 - m0)
+        out[j] = m0 + s[0] * d0
+    if np.max(np.abs(out - c)) > 2.0:  # refinement wandered off: keep the detector's corners
+        return c
+    return out
+
+
+class TagDetector:
+    """Detect one AprilTag and estimate its pose in the camera frame.
+
+    Args:
+        intrinsics: camera intrinsics of the images to come.
+        tag_size: edge of the tag's black square [m].
+        tag_id: the id to look for; other ids are ignored.
+        family: AprilTag family.
+        quad_decimate: pupil-apriltags' decimation (1.0 = full resolution, most accurate).
+        nthreads: detector threads.
+        refine_corners: refine pupil-apriltags' corners with :func:`refine_quad` (its quad fit
+            is biased by up to 0.3 px on edges aligned with the pixel grid).
+    """
+
+    def __init__(
+        self,
+        intrinsics: CameraIntrinsics,
+        tag_size: float = 0.04,
+        tag_id: int = 0,
+        family: str = "tag36h11",
+        quad_decimate: float = 1.0,
+        nthreads: int = 1,
+        refine_corners: bool = True,
+    ) -> None:
+        if not tag_size > 0:
+            raise ValueError(f"tag_size must be > 0 m, got {tag_size}")
+        self.intrinsics = intrinsics
+        self.tag_size = float(tag_size)
+        self.tag_id = int(tag_id)
+        self._detector = Detector(
+            families=family, nthreads=nthreads, quad_decimate=quad_decimate, refine_edges=True
+        )
+        self._object_points = tag_corners_object(self.tag_size)
+        self.refine_corners = bool(refine_corners)
+
+    def detect(self, image: np.ndarray) -> TagDetection | None:
+        """Find the tag in an image.
+
+        Args:
+            image: (H, W, 3) RGB uint8 or (H, W) grayscale uint8.
+
+        Returns:
+            The detection, or ``None`` when the tag is not found (lost, occluded, out of view).
+        """
+        img = np.asarray(image)
+        if img.dtype != np.uint8 or img.ndim not in (2, 3):
+            raise ValueError(
+                f"image must be (H, W) or (H, W, 3) uint8, got {img.shape} {img.dtype}"
+            )
+        gray = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 else img
+        K = self.intrinsics
+        params = (K.fx, K.fy, K.cx + APRILTAG_PIXEL_OFFSET, K.cy + APRILTAG_PIXEL_OFFSET)
+        found = [
+            d
+            for d in self._detector.detect(np.ascontiguousarray(gray), True, params, self.tag_size)
+            if d.tag_id == self.tag_id
+        ]
+        if not found:
+            return None
+        det = max(found, key=lambda d: d.decision_margin)
+        corners = np.asarray(det.corners, dtype=float) - APRILTAG_PIXEL_OFFSET
+        if self.refine_corners:
+            corners = refine_quad(gray, corners)
+        # Start from pupil-apriltags' own pose (robust; IPPE can flip at fronto-parallel views),
+        # then minimise the reprojection error of the OpenCV-convention corners with K.
+        T0 = transform(np.asarray(det.pose_R), np.asarray(det.pose_t).ravel())
+        rvec0 = cv2.Rodrigues(T0[:3, :3])[0]
+        tvec0 = T0[:3, 3].reshape(3, 1).copy()  # OpenCV needs (3, 1) here, or returns garbage
+        rvec, tvec = cv2.solvePnPRefineLM(
+            self._object_points, corners, self.intrinsics.K, None, rvec0, tvec0
+        )
+        T = transform(cv2.Rodrigues(rvec)[0], tvec.ravel())
+        if T[2, 3] <= 0 or not np.all(np.isfinite(T)):
+            return None
+        err = project_points(self.intrinsics, T, self._object_points) - corners
+        return TagDetection(
+            tag_id=int(det.tag_id),
+            corners=corners,
+            T_cam_tag=T,
+            decision_margin=float(det.decision_margin),
+            reprojection_error=float(np.sqrt(np.mean(np.sum(err**2, axis=1)))),
+        )
