@@ -128,7 +128,7 @@ def refine_quad(gray: np.ndarray, corners: np.ndarray, half_width: float = 3.0) 
     if hw < 1.0:
         return c
     centre = c.mean(axis=0)
-    steps = np.linspace(-hw, hw, int(round(8 * hw)) + 1)
+    steps = np.linspace(-hw, hw, round(8 * hw) + 1)
     img = gray.astype(np.float32)
     lines = []
     for j in range(4):

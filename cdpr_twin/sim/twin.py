@@ -281,7 +281,7 @@ class Twin:
         mujoco.mj_kinematics(m, d)
         self._align()
         mujoco.mj_forward(m, d)
-        self._step(int(round(settle_time / self.timestep)))
+        self._step(round(settle_time / self.timestep))
         self.settle_error = pose_distance(T, self.T_base_platform)
         d.time = 0.0
 
