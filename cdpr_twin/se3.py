@@ -11,6 +11,9 @@ from __future__ import annotations
 import numpy as np
 
 _SMALL = 1e-8
+_SERIES = 1e-4
+"""Below this θ², coefficients with cancellation (1 − cos θ, θ − sin θ…) use Taylor series,
+accurate there to round-off (the next term is below θ⁶/5e6)."""
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -70,9 +73,9 @@ def so3_exp(theta_u: np.ndarray) -> np.ndarray:
     theta_u = np.asarray(theta_u, dtype=float)
     theta2 = float(theta_u @ theta_u)
     K = skew(theta_u)
-    if theta2 < _SMALL:
-        a = 1.0 - theta2 / 6.0
-        b = 0.5 - theta2 / 24.0
+    if theta2 < _SERIES:
+        a = 1.0 - theta2 / 6.0 + theta2 * theta2 / 120.0
+        b = 0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0
     else:
         theta = np.sqrt(theta2)
         a = np.sin(theta) / theta
@@ -161,8 +164,9 @@ def so3_log(R: np.ndarray) -> np.ndarray:
 
 def _left_jacobian_terms(theta2: float) -> tuple[float, float]:
     """Coefficients (b, c) of V = I + b[ω]× + c[ω]×² for θ² = |ω|²."""
-    if theta2 < _SMALL:
-        return 0.5 - theta2 / 24.0, 1.0 / 6.0 - theta2 / 120.0
+    if theta2 < _SERIES:
+        t4 = theta2 * theta2
+        return 0.5 - theta2 / 24.0 + t4 / 720.0, 1.0 / 6.0 - theta2 / 120.0 + t4 / 5040.0
     theta = np.sqrt(theta2)
     return (1.0 - np.cos(theta)) / theta2, (theta - np.sin(theta)) / (theta2 * theta)
 
@@ -196,8 +200,8 @@ def se3_log(T: np.ndarray) -> np.ndarray:
     w = so3_log(T[:3, :3])
     theta2 = float(w @ w)
     K = skew(w)
-    if theta2 < _SMALL:
-        d = 1.0 / 12.0 + theta2 / 720.0
+    if theta2 < _SERIES:
+        d = 1.0 / 12.0 + theta2 / 720.0 + theta2 * theta2 / 30240.0
     else:
         theta = np.sqrt(theta2)
         d = (1.0 - theta * np.sin(theta) / (2.0 * (1.0 - np.cos(theta)))) / theta2

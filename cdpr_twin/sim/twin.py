@@ -153,6 +153,7 @@ class Twin:
         self._cam = cam_mod.camera_id(m)
         self.intrinsics = cam_mod.intrinsics(m)
         self.settle_error: tuple[float, float] = (math.nan, math.nan)
+        self._was_reset = False
 
     # ------------------------------------------------------------------ lifecycle
     def close(self) -> None:
@@ -197,7 +198,7 @@ class Twin:
     @property
     def tensions(self) -> np.ndarray:
         """Noise-free cable tensions (m,) [N]."""
-        return -self.data.actuator_force[self._actuators]
+        return 0.0 - self.data.actuator_force[self._actuators]  # 0.0 -: no "-0.0" when slack
 
     @property
     def T_base_cam(self) -> np.ndarray:
@@ -227,7 +228,8 @@ class Twin:
         quat[:, 0] = np.cos(half)
         quat[:, 3] = np.sin(half)
         d.mocap_quat[self._mocap] = quat
-        k = self._es / d.act[self._actuators]
+        l0 = d.act[self._actuators]
+        k = np.divide(self._es, l0, out=np.zeros(N_CABLES), where=l0 > 0)  # 0 before reset()
         m.actuator_gainprm[self._actuators, 0] = k
         m.actuator_biasprm[self._actuators, 0] = k * self._entry
         m.actuator_biasprm[self._actuators, 1] = -k
@@ -250,6 +252,25 @@ class Twin:
                 " lower the timestep or the commanded cable rates"
             )
 
+    def place(self, T_base_platform: np.ndarray) -> None:
+        """Put the platform at a pose kinematically (no dynamics, winches untouched).
+
+        Swivels are aligned and positions, tendon lengths and Jacobians recomputed, so that
+        MuJoCo's own cable geometry can be inspected at any pose. Velocities are zeroed.
+
+        Args:
+            T_base_platform: (4, 4) platform pose.
+        """
+        T = np.asarray(T_base_platform, dtype=float)
+        self.true_geometry.check_pose_inside(T, "placed pose")
+        d, m = self.data, self.model
+        d.qpos[self._qpos : self._qpos + 3] = T[:3, 3]
+        d.qpos[self._qpos + 3 : self._qpos + 7] = quat_wxyz_from_matrix(T[:3, :3])
+        d.qvel[:] = 0.0
+        mujoco.mj_kinematics(m, d)
+        self._align()
+        mujoco.mj_forward(m, d)
+
     def reset(self, T_base_platform: np.ndarray, settle_time: float = 0.3) -> None:
         """Place the platform at a pose, all cables taut, and let it settle.
 
@@ -271,19 +292,15 @@ class Twin:
         tau = tension_distribution(geom, T, self.tau_min, self.tau_max, model="pulley")
         lengths = cable_lengths(geom, T, "pulley")
         l0 = self._es * lengths / (self._es + tau)  # τ = E·S/l0 (L − l0)
-        d, m = self.data, self.model
-        mujoco.mj_resetData(m, d)
-        d.qpos[self._qpos : self._qpos + 3] = T[:3, 3]
-        d.qpos[self._qpos + 3 : self._qpos + 7] = quat_wxyz_from_matrix(T[:3, :3])
-        d.act[self._actuators] = l0
+        mujoco.mj_resetData(self.model, self.data)
+        self.data.act[self._actuators] = l0
         self._rates = np.zeros(N_CABLES)
         self._twist = None
-        mujoco.mj_kinematics(m, d)
-        self._align()
-        mujoco.mj_forward(m, d)
+        self.place(T)
+        self._was_reset = True
         self._step(round(settle_time / self.timestep))
         self.settle_error = pose_distance(T, self.T_base_platform)
-        d.time = 0.0
+        self.data.time = 0.0
 
     def advance(
         self,
@@ -304,6 +321,11 @@ class Twin:
                 of steps, or rates that would run a winch past its range.
             SimulationError: when the simulation diverges.
         """
+        if not self._was_reset:
+            raise SimulationError(
+                "call Twin.reset(T_base_platform) before advance(): the "
+                "winches have paid out no cable yet"
+            )
         rates = np.asarray(cable_rates, dtype=float)
         if rates.shape != (N_CABLES,):
             raise ValueError(f"cable_rates must have shape ({N_CABLES},), got {rates.shape}")

@@ -1,0 +1,51 @@
+"""Shared fixtures: the paper's poses and twins of the nominal robot."""
+
+import numpy as np
+import pytest
+
+from cdpr_twin import se3
+
+PAPER_POSES = {
+    "p0": [0.112, -0.032, 0.301, -12.0, -10.0, 0.0],
+    "p1": [0.284, -0.197, 0.08, 0.0, 0.0, 0.0],
+    "p2": [0.284, -0.197, 0.25, 0.0, 0.0, 0.0],
+}
+
+
+def paper_pose(name: str) -> np.ndarray:
+    return se3.pose_from_vector(PAPER_POSES[name])
+
+
+def random_workspace_poses(n: int, seed: int = 0) -> list[np.ndarray]:
+    """Poses spread over ACROBOT's workspace (positions and ±15° tilts, ±20° yaw)."""
+    rng = np.random.default_rng(seed)
+    poses = []
+    for _ in range(n):
+        p = [
+            rng.uniform(-0.3, 0.3),
+            rng.uniform(-0.3, 0.3),
+            rng.uniform(0.08, 0.6),
+            rng.uniform(-15, 15),
+            rng.uniform(-15, 15),
+            rng.uniform(-20, 20),
+        ]
+        poses.append(se3.pose_from_vector(p))
+    return poses
+
+
+@pytest.fixture(scope="module")
+def twin():
+    """Nominal robot, noise off, camera off."""
+    from cdpr_twin.sim import Twin
+
+    with Twin(camera=False, tension_noise_std=0.0) as t:
+        yield t
+
+
+@pytest.fixture(scope="module")
+def camera_twin():
+    """Nominal robot, noise off, camera on."""
+    from cdpr_twin.sim import Twin
+
+    with Twin(camera=True, tension_noise_std=0.0) as t:
+        yield t

@@ -1,0 +1,60 @@
+"""Bad input gets a clear error naming the problem."""
+
+import numpy as np
+import pytest
+from conftest import paper_pose
+
+from cdpr_twin import se3
+from cdpr_twin.sim import ModelError, SimulationError, Twin
+from cdpr_twin.statics import InfeasibleTensionError
+
+
+def test_missing_model_file(tmp_path):
+    with pytest.raises(ModelError, match="not found"):
+        Twin(model_path=tmp_path / "nope.xml", camera=False)
+
+
+def test_malformed_model_file(tmp_path):
+    bad = tmp_path / "bad.xml"
+    bad.write_text("<mujoco><worldbody><bodyy/></worldbody></mujoco>")
+    with pytest.raises(ModelError, match="bad.xml is malformed"):
+        Twin(model_path=bad, camera=False)
+
+
+def test_model_that_is_not_acrobot(tmp_path):
+    other = tmp_path / "other.xml"
+    other.write_text(
+        "<mujoco><worldbody><body><freejoint/><geom size='0.1'/></body></worldbody></mujoco>"
+    )
+    with pytest.raises(ModelError, match="pulley1_swivel"):
+        Twin(model_path=other, camera=False)
+
+
+def test_pose_outside_the_frame(twin):
+    with pytest.raises(ValueError, match="outside the frame"):
+        twin.reset(se3.pose_from_vector([0.7, 0.0, 0.3, 0, 0, 0]))
+
+
+def test_pose_without_feasible_tension_distribution(twin):
+    with pytest.raises(InfeasibleTensionError, match="no tension distribution"):
+        twin.reset(se3.pose_from_vector([0.45, 0.45, 0.1, 0, 0, 0]))
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_cable_rate(twin, bad):
+    twin.reset(paper_pose("p1"))
+    rates = np.zeros(8)
+    rates[3] = bad
+    with pytest.raises(ValueError, match="finite"):
+        twin.advance(0.04, rates)
+
+
+def test_duration_not_a_whole_number_of_steps(twin):
+    twin.reset(paper_pose("p1"))
+    with pytest.raises(ValueError, match="whole number of physics steps"):
+        twin.advance(0.04 + 1e-5, np.zeros(8))
+
+
+def test_advance_before_reset():
+    with Twin(camera=False) as t, pytest.raises(SimulationError, match="reset"):
+        t.advance(0.04, np.zeros(8))

@@ -1,0 +1,156 @@
+"""The twin's cable physics against independent truths: MuJoCo's own tendon geometry and
+Jacobians, the paper's pulley equations, force balance, the elastic law and stiffness."""
+
+import numpy as np
+import pytest
+from conftest import paper_pose, random_workspace_poses
+
+from cdpr_twin import kinematics as kin
+from cdpr_twin import se3
+
+
+def _mujoco_pull_directions(twin):
+    """Unit vectors from each B_i toward the point where its cable leaves the sheave, taken
+    from MuJoCo's wrap path (independent of cdpr_twin.kinematics)."""
+    m, d = twin.model, twin.data
+    out = []
+    xpos = np.asarray(d.wrap_xpos).reshape(-1, 3)
+    for t in twin._tendons:
+        pts = xpos[d.ten_wrapadr[t] : d.ten_wrapadr[t] + d.ten_wrapnum[t]]
+        assert m.tendon_num[t] == 3 and len(pts) == 4, "entry, 2 sheave tangent points, anchor"
+        v = pts[-2] - pts[-1]
+        out.append(v / np.linalg.norm(v))
+    return np.array(out)
+
+
+def test_pulley_length_matches_mujoco_wrap(twin):
+    """eq. 15-24 == MuJoCo's wrapped tendon length less the entry segment, over 250 poses."""
+    entry = twin._entry
+    worst, wrap_min = 0.0, np.inf
+    for T in random_workspace_poses(250, seed=1):
+        twin.place(T)
+        mj = twin.data.ten_length[twin._tendons] - entry
+        paper = kin.cable_lengths(twin.true_geometry, T, "pulley")
+        straight = kin.cable_lengths(twin.true_geometry, T, "straight")
+        worst = max(worst, np.max(np.abs(paper - mj)))
+        wrap_min = min(wrap_min, np.min(paper - straight))
+    assert worst < 1e-6
+    # the wrap makes the cable longer than the straight A_i-B_i segment (order r_p)
+    assert 0.0 < wrap_min < twin.true_geometry.pulley_radius.max() * np.pi / 2
+
+
+def test_jacobian_matches_mujoco_tendon_jacobian_and_finite_differences(twin):
+    geom = twin.true_geometry
+    for T in random_workspace_poses(30, seed=2):
+        twin.place(T)
+        J = np.array(twin.data.ten_J).reshape(twin.model.ntendon, twin.model.nv)[twin._tendons]
+        # free joint: qvel = [v of the origin in F_b, ω in F_p]
+        R = T[:3, :3]
+        A_p = kin.jacobian(geom, T, "platform", "pulley")
+        A_b = kin.jacobian(geom, T, "base", "pulley")
+        scale = np.abs(A_p).max()
+        np.testing.assert_allclose(A_p[:, :3] @ R.T, J[:, :3], atol=1e-7 * scale)
+        np.testing.assert_allclose(A_p[:, 3:], J[:, 3:], atol=1e-7 * scale)
+        np.testing.assert_allclose(A_b[:, :3], J[:, :3], atol=1e-7 * scale)
+        # central finite differences of MuJoCo's own lengths under a platform-frame twist
+        h = 1e-6
+        fd = np.zeros((8, 6))
+        for k in range(6):
+            xi = np.zeros(6)
+            xi[k] = h
+            twin.place(T @ se3.se3_exp(xi))
+            lp = twin.cable_lengths.copy()
+            twin.place(T @ se3.se3_exp(-xi))
+            fd[:, k] = (lp - twin.cable_lengths) / (2 * h)
+        np.testing.assert_allclose(A_p, fd, atol=1e-7 * scale * 10)
+
+
+@pytest.mark.parametrize("name", ["p0", "p1", "p2"])
+def test_reset_is_a_static_equilibrium(twin, name):
+    T = paper_pose(name)
+    twin.reset(T, settle_time=0.5)
+    dt, dr = se3.pose_distance(T, twin.T_base_platform)
+    assert dt < 1e-4 and np.rad2deg(dr) < 0.01
+    assert np.linalg.norm(twin.data.qvel) < 1e-6
+    tau = twin.tensions
+    assert np.all(tau >= twin.tau_min - 1e-6)
+    # force balance with MuJoCo's own cable directions: Σ τ_i ũ_i + m g = 0, moments about
+    # the centre of mass likewise
+    u = _mujoco_pull_directions(twin)
+    b = twin.data.site_xpos[twin._anchors]
+    com = twin.data.xipos[twin._platform]
+    mass = twin.model.body_mass[twin._platform]
+    f = (tau[:, None] * u).sum(axis=0) + mass * twin.model.opt.gravity
+    mom = np.cross(b - com, tau[:, None] * u).sum(axis=0)
+    assert np.linalg.norm(f) < 1e-3
+    assert np.linalg.norm(mom) < 1e-3
+    # the elastic law, with MuJoCo's tendon length
+    l0 = twin.rest_lengths
+    law = twin.true_geometry.es / l0 * (twin.cable_lengths - l0)
+    np.testing.assert_allclose(tau, law, rtol=1e-6)
+
+
+def test_stiffness_matches_analytic(twin):
+    """A 2 N downward load moves the platform by K⁻¹ δw, K = Aᵀ diag(E·S/l0) A."""
+    T = paper_pose("p0")
+    twin.reset(T, settle_time=0.2)
+    K = kin.stiffness_matrix(twin.true_geometry, T, twin.rest_lengths, "pulley")
+    dw = np.array([0.0, 0.0, -2.0, 0.0, 0.0, 0.0])
+    predicted = np.linalg.solve(K, dw)
+    twin.data.xfrc_applied[twin._platform] = dw
+    try:
+        twin.advance(1.0, np.zeros(8))
+    finally:
+        twin.data.xfrc_applied[twin._platform] = 0.0
+    T1 = twin.T_base_platform
+    moved = np.concatenate([T1[:3, 3] - T[:3, 3], se3.so3_log(T1[:3, :3] @ T[:3, :3].T)])
+    assert np.linalg.norm(moved[:3] - predicted[:3]) < 0.05 * np.linalg.norm(predicted[:3])
+    assert np.linalg.norm(moved[3:] - predicted[3:]) < 0.05 * np.linalg.norm(predicted[3:]) + 1e-9
+    assert 1e-6 < np.linalg.norm(predicted[:3]) < 1e-3  # sanity: a stiff but finite response
+
+
+def test_paying_out_a_cable_slackens_it_and_reeling_in_restores_it(twin):
+    T = paper_pose("p0")
+    twin.reset(T, settle_time=0.2)
+    tau0 = twin.tensions.copy()
+    j = int(np.argmin(tau0))
+    rates = np.zeros(8)
+    rates[j] = 0.01
+    twin.advance(0.5, rates)  # 5 mm out
+    twin.advance(1.0, np.zeros(8))
+    tau = twin.tensions
+    assert tau[j] == 0.0  # exactly: a cable never pushes
+    assert twin.cable_lengths[j] < twin.rest_lengths[j]  # geometrically slack
+    assert np.sum(tau > 0.5) >= 6  # the others hold the platform
+    dt, _ = se3.pose_distance(T, twin.T_base_platform)
+    assert dt < 2e-3 and np.linalg.norm(twin.data.qvel) < 1e-4  # still up, at rest
+    twin.advance(0.5, -rates)
+    twin.advance(1.0, np.zeros(8))
+    np.testing.assert_allclose(twin.tensions, tau0, atol=1e-3)
+    dt, dr = se3.pose_distance(T, twin.T_base_platform)
+    assert dt < 1e-6 and dr < 1e-5
+
+
+def test_all_cables_slack_platform_rests_on_floor(twin):
+    """Documented safe behaviour: with every cable paid out, the platform lands on the floor."""
+    twin.reset(paper_pose("p1"), settle_time=0.1)
+    twin.advance(1.0, np.full(8, 0.2))
+    twin.advance(1.0, np.zeros(8))
+    assert np.all(twin.tensions == 0.0)
+    z_floor = twin.model.geom_pos[twin.model.geom("floor").id][2]
+    half_height = twin.model.geom_size[twin.model.geom("platform_box").id][2]
+    assert abs(twin.T_base_platform[2, 3] - half_height - z_floor) < 2e-3
+
+
+def test_model_files_step_without_warnings():
+    from cdpr_twin import MODELS_DIR
+    from cdpr_twin.sim import Twin
+
+    for path in sorted((MODELS_DIR / "acrobot").glob("*.xml")):
+        with Twin(model_path=path, camera=False, tension_noise_std=0.0) as t:
+            t.reset(paper_pose("p1"))
+            A = kin.jacobian(t.nominal_geometry, paper_pose("p1"), "base", "pulley")
+            t.advance(1.0, A @ [0.0, 0.0, 0.01, 0.0, 0.0, 0.0])
+            t.advance(1.0, np.zeros(8))
+            assert all(w.number == 0 for w in t.data.warning), path.name
+            assert np.all(np.isfinite(t.data.qpos))
