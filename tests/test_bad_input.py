@@ -17,7 +17,7 @@ def test_missing_model_file(tmp_path):
 def test_malformed_model_file(tmp_path):
     bad = tmp_path / "bad.xml"
     bad.write_text("<mujoco><worldbody><bodyy/></worldbody></mujoco>")
-    with pytest.raises(ModelError, match="bad.xml is malformed"):
+    with pytest.raises(ModelError, match=r"bad\.xml is malformed"):
         Twin(model_path=bad, camera=False)
 
 
