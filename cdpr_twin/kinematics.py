@@ -49,25 +49,17 @@ class PulleyState:
         return self.free_length + self.wrap_length
 
 
-def pulley_state(geom: CdprGeometry, T_base_platform: np.ndarray) -> PulleyState:
-    """Pulley kinematics (eq. 15-24) of every cable at a platform pose.
+def _pulley(a: np.ndarray, r: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Eq. 15-24 on arrays: exit points a (k, 3), radii r (k,), anchor points b (k, 3) in F_b.
 
-    Args:
-        geom: CDPR geometry.
-        T_base_platform: (4, 4) platform pose.
-
-    Returns:
-        The :class:`PulleyState`.
+    Returns (phi, centre, tangent, free_length, wrap_length, u).
     """
-    a = geom.a_base
-    r = geom.pulley_radius
-    b = anchor_points_base(geom, T_base_platform)
     l_vec = b - a
     phi = np.arctan2(l_vec[:, 1], l_vec[:, 0])  # eq. 20
     x_i = np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], axis=1)
     n = a + r[:, None] * x_i  # eq. 21
     m = b - n  # eq. 23
-    m_norm = np.linalg.norm(m, axis=1)
+    m_norm = np.sqrt(np.einsum("ij,ij->i", m, m))
     free = np.sqrt(np.maximum(m_norm**2 - r**2, 0.0))  # eq. 24
     beta = -np.arctan2(free, r)  # eq. 18
     gamma = np.arcsin(np.clip((a[:, 2] - b[:, 2]) / m_norm, -1.0, 1.0))  # eq. 19
@@ -84,7 +76,54 @@ def pulley_state(geom: CdprGeometry, T_base_platform: np.ndarray) -> PulleyState
     tangent[:, 2] += c_z
     with np.errstate(invalid="ignore", divide="ignore"):
         u = (b - tangent) / free[:, None]
+    return phi, n, tangent, free, wrap, u
+
+
+def pulley_state(geom: CdprGeometry, T_base_platform: np.ndarray) -> PulleyState:
+    """Pulley kinematics (eq. 15-24) of every cable at a platform pose.
+
+    Args:
+        geom: CDPR geometry.
+        T_base_platform: (4, 4) platform pose.
+
+    Returns:
+        The :class:`PulleyState`.
+    """
+    b = anchor_points_base(geom, T_base_platform)
+    phi, n, tangent, free, wrap, u = _pulley(geom.a_base, geom.pulley_radius, b)
     return PulleyState(phi=phi, center=n, tangent=tangent, free_length=free, wrap_length=wrap, u=u)
+
+
+def lengths_and_jacobian(
+    a_base: np.ndarray,
+    b_platform: np.ndarray,
+    pulley_radius: np.ndarray | None,
+    T_base_platform: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Cable lengths and platform-frame Jacobian in one pass, for any subset of cables.
+
+    The hot path of the model-based estimators: arrays in, no validation.
+
+    Args:
+        a_base: (k, 3) exit points in F_b [m].
+        b_platform: (k, 3) anchor points in F_p [m].
+        pulley_radius: (k,) sheave radii [m], or ``None`` for straight cables.
+        T_base_platform: (4, 4) platform pose.
+
+    Returns:
+        ``(lengths, A)``: (k,) lengths [m] and (k, 6) Jacobian for ᵖv_p (eq. 6).
+    """
+    R = T_base_platform[:3, :3]
+    b = b_platform @ R.T + T_base_platform[:3, 3]
+    if pulley_radius is None:
+        l_vec = b - a_base
+        lengths = np.sqrt(np.einsum("ij,ij->i", l_vec, l_vec))
+        u = l_vec / lengths[:, None]
+    else:
+        _, _, _, free, wrap, u = _pulley(a_base, pulley_radius, b)
+        lengths = free + wrap
+    u_p = u @ R
+    return lengths, np.hstack([u_p, np.cross(b_platform, u_p)])
 
 
 def cable_vectors(
@@ -189,6 +228,8 @@ def elastic_elongation(
 ) -> np.ndarray:
     """Cable elongation δl_i = (τ_i − τ_i(0)) l_i / (E·S) (eq. 14).
 
+    A hot path of the elastic estimators: pass numpy arrays, no conversion is made.
+
     Args:
         lengths: (m,) cable lengths l_i [m] (the encoders' unstretched lengths).
         tensions: (m,) measured tensions τ_i [N].
@@ -198,4 +239,4 @@ def elastic_elongation(
     Returns:
         (m,) elongations [m].
     """
-    return (np.asarray(tensions) - tensions0) * np.asarray(lengths) / np.asarray(es)
+    return (tensions - tensions0) * lengths / es

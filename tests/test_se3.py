@@ -51,13 +51,18 @@ def unit_vectors(draw: st.DrawFn) -> np.ndarray:
     return v / n
 
 
-# θ over [0, π − 1e-6] with the delicate regions (0, tiny, the small-angle switch near 1e-4,
-# and just below π) drawn on purpose.
+# Angles on both sides of the switches between Taylor series and closed forms (θ = 1e-4 and
+# θ = 1e-2 in the versions of se3.py seen so far), where cancellation in 1 − cos θ shows.
+SMALL_ANGLES = [1e-5, 9.99e-5, 1.0001e-4, 1.01e-4, 2e-4, 1e-3, 9.99e-3, 1.0001e-2, 2e-2, 5e-2]
+
+# θ over [0, π − 1e-6] with the delicate regions (0, tiny, the small-angle switches, just
+# below π) drawn on purpose.
 angles = st.one_of(
     _finite(0.0, ANGLE_MAX),
     _finite(1e-12, 1e-3),
     _finite(math.pi - 1e-3, ANGLE_MAX),
-    st.sampled_from([0.0, 1e-10, 1e-8, 1e-6, 1e-4, 1.01e-4, 1e-3, math.pi / 2, ANGLE_MAX]),
+    _finite(1e-3, 3e-2),
+    st.sampled_from([*SMALL_ANGLES, 0.0, 1e-10, 1e-8, 1e-6, math.pi / 2, ANGLE_MAX]),
 )
 vectors3 = st.tuples(_finite(-1, 1), _finite(-1, 1), _finite(-1, 1)).map(np.array)
 
@@ -187,13 +192,18 @@ def test_se3_log_inverts_se3_exp(twist: np.ndarray) -> None:
     np.testing.assert_allclose(se3_exp(se3_log(T)), T, rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("theta", [1.0001e-4, 1.01e-4, 1.5e-4, 2e-4, 3e-4])
-def test_se3_log_accurate_just_above_small_angle_switch(theta: float) -> None:
-    # se3_log switches to its Taylor series at θ² < 1e-8; just above it the closed form of
-    # d = (1 − θ sinθ / (2(1 − cosθ))) / θ² must still be accurate.
+@pytest.mark.parametrize("theta", SMALL_ANGLES)
+def test_small_angle_accuracy(theta: float) -> None:
+    # Below and above each switch to a Taylor series, exp and log must stay accurate to
+    # round-off; a closed form such as d = (1 − θ sinθ / (2(1 − cosθ))) / θ² used too close to
+    # θ = 0 loses ~1e-16/θ² of relative accuracy (the bug of se3.py before commit 8854549).
     w = theta * np.array([0.0, 0.6, 0.8])
     twist = np.concatenate([[0.3, -0.7, 0.9], w])
-    np.testing.assert_allclose(se3_log(expm(hat(twist))), twist, rtol=0, atol=1e-10)
+    T = expm(hat(twist))
+    np.testing.assert_allclose(se3_exp(twist), T, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(se3_log(T), twist, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(so3_exp(w), T[:3, :3], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(so3_log(T[:3, :3]), w, rtol=0, atol=1e-15)
 
 
 @given(rigid_transforms(), twists())
