@@ -16,7 +16,7 @@ paper's pose p1 before every repeat so that cable lengths never run away):
     pulley Jacobian at p1), the largest difference of the tendon lengths (``twin.cable_lengths``),
     platform pose and tensions from the ``align_every=1`` run.
 
-Run from the repository root (about 15 s; well under 2 min):
+Run from the repository root (about 6 s on a 2-core machine; well under 2 min):
 
     /work/venv/bin/python benchmarks/bench_twin.py [--repeats 7] [--steps 4000]
 

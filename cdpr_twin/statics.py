@@ -70,7 +70,12 @@ def tension_distribution(
         method="SLSQP",
         options={"ftol": 1e-14, "maxiter": 200},
     )
-    tau = x0 + N @ res.x if res.success else x0
+    # SLSQP may stop at the optimum yet report failure (status 8, "positive directional
+    # derivative"): keep its answer whenever it is feasible and better than the LP vertex.
+    tau = x0 + N @ res.x
+    feasible = np.all(tau >= tau_min - 1e-9) and np.all(tau <= tau_max + 1e-9)
+    if not (np.all(np.isfinite(tau)) and feasible and tau @ tau <= x0 @ x0):
+        tau = x0
     tau = np.clip(tau, tau_min, tau_max)
     # Project back onto W τ = rhs (removes the SLSQP/clip residue, stays inside the bounds
     # to within round-off because the correction is tiny).

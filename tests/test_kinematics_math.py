@@ -320,12 +320,12 @@ def min_norm_tensions_reference(W: np.ndarray, rhs: np.ndarray, lo: float, hi: f
         M = np.array([n1, n2])
         if abs(np.linalg.det(M)) > 1e-12:
             candidates.append(np.linalg.solve(M, [c1, c2]))
-    feasible = [
-        lam
-        for lam in candidates
-        if np.all(np.abs(np.clip(tau_p + N @ lam, lo, hi) - (tau_p + N @ lam)) < 1e-9)
-    ]
-    return tau_p + N @ min(feasible, key=lambda lam: float(lam @ lam))
+
+    def feasible(lam: np.ndarray) -> bool:
+        tau = tau_p + N @ lam
+        return bool(np.all(tau >= lo - 1e-9) and np.all(tau <= hi + 1e-9))
+
+    return tau_p + N @ min(filter(feasible, candidates), key=lambda lam: float(lam @ lam))
 
 
 # Poses at which SLSQP stops with "Positive directional derivative for linesearch" (status 8)

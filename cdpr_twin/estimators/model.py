@@ -217,10 +217,12 @@ def solve_scipy(
     pulley_radius: np.ndarray | None,
     targets: np.ndarray,
     T0: np.ndarray,
+    x0: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float, int]:
     """The paper's Algorithm 1 with ``scipy.optimize.least_squares`` (7 unknowns, 7 equations).
 
-    Arguments and return value as :func:`solve_fast`.
+    Arguments and return value as :func:`solve_fast`; ``x0`` optionally gives the initial
+    unknowns [x, y, z, q1, q2, q3, q4] (q scalar first, any sign or norm) instead of ``T0``.
     """
 
     def residuals(x: np.ndarray) -> np.ndarray:
@@ -229,7 +231,8 @@ def solve_scipy(
         lengths, _ = lengths_and_jacobian(a_base, b_platform, pulley_radius, T)
         return np.append(lengths - targets, q @ q - 1.0)  # f1…f6, f7
 
-    x0 = np.concatenate([T0[:3, 3], quat_wxyz_from_matrix(T0[:3, :3])])
+    if x0 is None:
+        x0 = np.concatenate([T0[:3, 3], quat_wxyz_from_matrix(T0[:3, :3])])
     sol = least_squares(residuals, x0, method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15)
     T = transform(matrix_from_quat_wxyz(sol.x[3:]), sol.x[:3])
     return T, float(np.max(np.abs(sol.fun[:N_USED]))), int(sol.nfev)
