@@ -240,17 +240,35 @@ class TagDetector:
         corners = np.asarray(det.corners, dtype=float) - APRILTAG_PIXEL_OFFSET
         if self.refine_corners:
             corners = refine_quad(gray, corners)
-        # Start from pupil-apriltags' own pose (robust; IPPE can flip at fronto-parallel views),
-        # then minimise the reprojection error of the OpenCV-convention corners with K.
-        T0 = transform(np.asarray(det.pose_R), np.asarray(det.pose_t).ravel())
-        rvec0 = cv2.Rodrigues(T0[:3, :3])[0]
-        tvec0 = T0[:3, 3].reshape(3, 1).copy()  # OpenCV needs (3, 1) here, or returns garbage
-        rvec, tvec = cv2.solvePnPRefineLM(
-            self._object_points, corners, self.intrinsics.K, None, rvec0, tvec0
+        # Planar targets have two nearly equally good poses when seen face-on from afar. Refine
+        # pupil-apriltags' pose and both IPPE solutions with LM on the OpenCV-convention corners
+        # and keep the one that reprojects best.
+        seeds = [(cv2.Rodrigues(np.asarray(det.pose_R))[0], np.asarray(det.pose_t).reshape(3, 1))]
+        n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
+            self._object_points, corners, self.intrinsics.K, None, flags=cv2.SOLVEPNP_IPPE_SQUARE
         )
-        T = transform(cv2.Rodrigues(rvec)[0], tvec.ravel())
-        if T[2, 3] <= 0 or not np.all(np.isfinite(T)):
+        seeds += list(zip(rvecs[:n], tvecs[:n], strict=True))
+        best, best_err = None, np.inf
+        for rvec0, tvec0 in seeds:
+            # OpenCV needs (3, 1) float64 arrays here, or returns garbage
+            rvec, tvec = cv2.solvePnPRefineLM(
+                self._object_points,
+                corners,
+                self.intrinsics.K,
+                None,
+                np.array(rvec0, dtype=float).reshape(3, 1),
+                np.array(tvec0, dtype=float).reshape(3, 1),
+            )
+            T_try = transform(cv2.Rodrigues(rvec)[0], tvec.ravel())
+            if T_try[2, 3] <= 0 or not np.all(np.isfinite(T_try)):
+                continue
+            e = project_points(self.intrinsics, T_try, self._object_points) - corners
+            err = float(np.sum(e**2))
+            if err < best_err:
+                best, best_err = T_try, err
+        if best is None:
             return None
+        T = best
         err = project_points(self.intrinsics, T, self._object_points) - corners
         return TagDetection(
             tag_id=int(det.tag_id),

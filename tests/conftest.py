@@ -1,5 +1,9 @@
 """Shared fixtures: the paper's poses and twins of the nominal robot."""
 
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # before any test module imports mujoco
+
 import numpy as np
 import pytest
 

@@ -27,6 +27,9 @@ class ImageEstimator(Estimator):
         reference: ``"previous"`` — t0 = t − Δt, successive detections (the paper's choice);
             ``"first"`` — t0 is the first detection after :meth:`reset`.
 
+    The first detection after :meth:`reset` anchors the tag in F_b at the reset pose (eq. 10):
+    feed the measurement taken at that pose first.
+
     Tag lost (or no image): the estimate is held and flagged. With ``"first"`` the next
     detection resumes against the first one, so nothing is lost. With ``"previous"`` the next
     detection has no predecessor at t − Δt: the estimator re-anchors there at the held estimate

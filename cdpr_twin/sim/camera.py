@@ -6,6 +6,8 @@ differ by a rotation of π about x, applied here and nowhere else.
 
 from __future__ import annotations
 
+import os
+
 import mujoco
 import numpy as np
 
@@ -71,8 +73,10 @@ class CameraRenderer:
             self._renderer = mujoco.Renderer(model, height=h, width=w)
         except Exception as exc:
             raise RuntimeError(
-                f"offscreen rendering failed ({exc}); install Mesa's EGL (libegl1) or set "
-                "MUJOCO_GL=osmesa, or run with the camera off"
+                f"offscreen rendering failed ({exc}). MuJoCo chose its GL backend from "
+                f"MUJOCO_GL={os.environ.get('MUJOCO_GL')!r} when it was first imported: import "
+                "cdpr_twin before mujoco (or export MUJOCO_GL=egl), make sure Mesa's EGL "
+                "(libegl1) is installed, or run with the camera off"
             ) from exc
         self._option = mujoco.MjvOption()
         self._option.sitegroup[:] = 0  # sites are markers for people, not for the camera

@@ -18,7 +18,7 @@ import numpy as np
 TAG_ID = 0
 CODE_CELLS = 8  # black border + 6 × 6 data bits
 PLATE_CELLS = 14  # 3 white cells each side: 14 × 5 mm = 7 cm plate
-CELL_PX = 64
+CELL_PX = 8  # texels per cell: the texture stays magnified (see below)
 
 
 def main() -> None:

@@ -1,0 +1,181 @@
+"""Control-based (Est. 1) and image-based (Est. 2) estimators against the twin."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from conftest import paper_pose
+
+from cdpr_twin import kinematics as kin
+from cdpr_twin import se3
+from cdpr_twin.estimators import make_estimator
+from cdpr_twin.estimators.base import NO_CAMERA, NO_TWIST, NON_FINITE_INPUT, REANCHORED, TAG_LOST
+from cdpr_twin.measurement import Measurement
+
+DT = 0.04  # 25 Hz
+
+
+def _drive(twin, twists_base, record=True):
+    """Move the twin tick by tick at base-frame twists (rates from the exact Jacobian at the
+    true pose); returns the measurements after each tick."""
+    out = []
+    for twist in twists_base:
+        rates = kin.jacobian(twin.true_geometry, twin.T_base_platform, "base", "pulley") @ twist
+        twin.advance(DT, rates)
+        out.append(twin.sense() if record else None)
+    return out
+
+
+# ------------------------------------------------------------------ control
+
+
+def test_control_integrates_a_constant_body_twist_in_closed_form(twin):
+    est = make_estimator("control", twin.nominal_geometry)
+    T0 = paper_pose("p0")
+    est.reset(T0)
+    xi = np.array([0.01, -0.02, 0.005, 0.1, -0.05, 0.2])
+    for k in range(1, 101):
+        m = Measurement(k * DT, np.ones(8), np.ones(8), np.zeros(8), xi, np.eye(4))
+        e = est.update(m)
+    expected = T0 @ se3.se3_exp(xi * 100 * DT)
+    np.testing.assert_allclose(e.T_base_platform, expected, atol=1e-12)
+
+
+def test_control_drift_when_the_twin_executes_the_commanded_rates(twin):
+    """No model error: 10 s of a smooth commanded motion, rates l̇ = A ᵖv_p with A at the
+    mid-tick pose the estimate predicts. The estimate must follow the truth."""
+    T0 = paper_pose("p0")
+    twin.reset(T0)
+    est = make_estimator("control", twin.nominal_geometry)
+    est.reset(T0)
+    worst_t = worst_r = 0.0
+    for k in range(250):
+        t = k * DT
+        w = 2 * np.pi / 10
+        xi = np.array(
+            [
+                0.02 * np.cos(w * t),
+                0.02 * np.sin(w * t),
+                0.01 * np.sin(2 * w * t),
+                0.02 * np.sin(w * t),
+                0.0,
+                0.03 * np.cos(w * t),
+            ]
+        )
+        T_mid = est.T_base_platform @ se3.se3_exp(xi * DT / 2)
+        rates = kin.jacobian(twin.nominal_geometry, T_mid, "platform", "pulley") @ xi
+        twin.advance(DT, rates, twist_platform=xi)
+        e = est.update(twin.sense())
+        dt, dr = se3.pose_distance(e.T_base_platform, twin.T_base_platform)
+        worst_t, worst_r = max(worst_t, dt), max(worst_r, dr)
+    moved, _ = se3.pose_distance(T0, twin.T_base_platform)
+    assert worst_t < 1e-3 and np.rad2deg(worst_r) < 0.1
+    assert se3.pose_distance(T0, paper_pose("p0"))[0] == 0.0 and moved < 0.05
+
+
+def test_control_flags_missing_or_non_finite_twists(twin):
+    est = make_estimator("control", twin.nominal_geometry)
+    est.reset(np.eye(4))
+    base = Measurement(DT, np.ones(8), np.ones(8), np.zeros(8), None, np.eye(4))
+    e = est.update(base)
+    assert not e.valid and NO_TWIST in e.flags
+    for bad in (np.nan, np.inf):
+        xi = np.zeros(6)
+        xi[4] = bad
+        e = est.update(dataclasses.replace(base, time=2 * DT, twist_platform=xi))
+        assert not e.valid and NON_FINITE_INPUT in e.flags
+        np.testing.assert_array_equal(e.T_base_platform, np.eye(4))
+    with pytest.raises(ValueError, match="time order"):
+        est.update(dataclasses.replace(base, time=0.0))
+
+
+# ------------------------------------------------------------------ image
+
+
+def test_image_static_platform_stays_within_detection_noise(camera_twin):
+    T = paper_pose("p1")
+    camera_twin.reset(T)
+    est = make_estimator("image", camera_twin.nominal_geometry)
+    est.reset(T)
+    for _ in range(10):
+        camera_twin.advance(DT, np.zeros(8))
+        e = est.update(camera_twin.sense())
+        assert e.valid
+        dt, dr = se3.pose_distance(e.T_base_platform, camera_twin.T_base_platform)
+        assert dt < 5e-4 and np.rad2deg(dr) < 0.2
+
+
+def test_image_tracks_a_known_motion_near_the_tag(camera_twin):
+    """From p1 (9 cm above the tag) up 15 cm and 3 cm sideways: tracked within 5 mm."""
+    T = paper_pose("p1")
+    camera_twin.reset(T)
+    est = make_estimator("image", camera_twin.nominal_geometry)
+    est.reset(T)
+    est.update(camera_twin.sense())
+    twists = [np.array([0.006, 0.0, 0.03, 0.0, 0.0, 0.0])] * 125  # 5 s
+    worst = 0.0
+    for m in _drive(camera_twin, twists):
+        e = est.update(m)
+        assert e.valid
+        worst = max(worst, se3.pose_distance(e.T_base_platform, m.T_base_platform_true)[0])
+        distance = np.linalg.norm(camera_twin.T_cam_tag[:3, 3])
+    assert 0.2 < distance < 0.3
+    assert worst < 5e-3
+
+
+def test_image_first_has_no_drift_on_a_closed_path_previous_drifts_after_lost_frames(camera_twin):
+    T = paper_pose("p1")
+    camera_twin.reset(T)
+    up = [np.array([0.0, 0.01, 0.04, 0.0, 0.0, 0.0])] * 50
+    # the first measurement is the one at the reset pose: it anchors the tag in F_b
+    ms = [camera_twin.sense(), *_drive(camera_twin, up), *_drive(camera_twin, [-x for x in up])]
+    assert se3.pose_distance(camera_twin.T_base_platform, T)[0] < 5e-4  # closed path
+    # telescoping: with every frame detected, successive composition equals composition
+    # against the first detection
+    first = make_estimator("image", camera_twin.nominal_geometry, reference="first")
+    prev = make_estimator("image", camera_twin.nominal_geometry, reference="previous")
+    for est in (first, prev):
+        est.reset(T)
+    for m in ms:
+        a, b = first.update(m), prev.update(m)
+        np.testing.assert_allclose(a.T_base_platform, b.T_base_platform, atol=1e-12)
+    # occlusions on the way up (every 5th frame): 'previous' loses those ticks' motion for
+    # good, 'first' recovers at the next detection
+    lossy = [
+        dataclasses.replace(m, tag=None) if (1 <= k <= 50 and k % 5 == 4) else m
+        for k, m in enumerate(ms)
+    ]
+    for est in (first, prev):
+        est.reset(T)
+    flags = set()
+    for m in lossy:
+        a, b = first.update(m), prev.update(m)
+        flags |= b.flags
+    end_first = se3.pose_distance(a.T_base_platform, camera_twin.T_base_platform)[0]
+    end_prev = se3.pose_distance(b.T_base_platform, camera_twin.T_base_platform)[0]
+    lost_motion = 10 * 2 * DT * np.linalg.norm(up[0][:3])  # 10 occluded ticks × 2 ticks each
+    assert REANCHORED in flags and TAG_LOST in flags
+    assert end_first < 1e-3
+    assert abs(end_prev - lost_motion) < 0.25 * lost_motion
+
+
+def test_image_tag_lost_is_held_flagged_and_resumed(camera_twin):
+    T = paper_pose("p1")
+    camera_twin.reset(T)
+    est = make_estimator("image", camera_twin.nominal_geometry)
+    est.reset(T)
+    ms = _drive(camera_twin, [np.array([0.0, 0.0, 0.02, 0.0, 0.0, 0.0])] * 6)
+    est.update(ms[0])
+    held = est.update(dataclasses.replace(ms[1], tag=None))
+    assert not held.valid and TAG_LOST in held.flags
+    np.testing.assert_array_equal(
+        held.T_base_platform, est.update(dataclasses.replace(ms[2], tag=None)).T_base_platform
+    )
+    nocam = est.update(dataclasses.replace(ms[3], tag=None, image=None))
+    assert NO_CAMERA in nocam.flags
+    resumed = est.update(ms[4])
+    assert resumed.valid
+    e = est.update(ms[5])
+    assert e.valid and np.isfinite(e.T_base_platform).all()
+    with pytest.raises(ValueError, match="reference"):
+        make_estimator("image", camera_twin.nominal_geometry, reference="last")
