@@ -20,6 +20,7 @@ import mujoco
 import numpy as np
 
 from cdpr_twin import DEFAULT_SCENE
+from cdpr_twin.deviations import N_CABLES, DeviationSpec, TruthDeviations
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import cable_lengths
 from cdpr_twin.measurement import Measurement
@@ -32,11 +33,8 @@ from cdpr_twin.se3 import (
 )
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim.model import (
-    N_CABLES,
     PLATFORM_BODY,
-    DeviationSpec,
     ModelError,
-    TruthDeviations,
     actuator_name,
     anchor_site,
     build_model,

@@ -1,0 +1,139 @@
+"""Open-loop quintic trajectory velocity controller (paper §IV-B, eq. 26-30)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from cdpr_twin.controllers.base import Command, Controller
+from cdpr_twin.estimators.base import PoseEstimate
+from cdpr_twin.geometry import CdprGeometry
+from cdpr_twin.kinematics import CableModel, jacobian
+from cdpr_twin.measurement import Measurement
+from cdpr_twin.se3 import so3_exp, so3_log, transform
+
+
+def quintic(tau: float) -> tuple[float, float]:
+    """s(τ) and ds/dτ of eq. 26 with s(0) = ṡ(0) = s̈(0) = 0, s(1) = 1, ṡ(1) = s̈(1) = 0.
+
+    Args:
+        tau: normalised time in [0, 1] (clipped).
+
+    Returns:
+        ``(s, ds/dτ)``.
+    """
+    x = min(max(tau, 0.0), 1.0)
+    return x**3 * (10.0 - 15.0 * x + 6.0 * x * x), 30.0 * x * x * (1.0 - x) ** 2
+
+
+class Segment:
+    """One straight-line quintic segment p_s → p_f over a duration (eq. 26-29).
+
+    Args:
+        T_start: (4, 4) start pose p_s.
+        T_end: (4, 4) end pose p_f.
+        duration: segment duration [s] (> 0).
+    """
+
+    def __init__(self, T_start: np.ndarray, T_end: np.ndarray, duration: float) -> None:
+        if not duration > 0:
+            raise ValueError(f"segment duration must be > 0 s, got {duration}")
+        self.T_start, self.T_end, self.duration = T_start, T_end, float(duration)
+        self.dt = T_end[:3, 3] - T_start[:3, 3]
+        self.theta_u = so3_log(T_start[:3, :3].T @ T_end[:3, :3])  # θ_p u_p of ᵖˢR_pf
+
+    def pose(self, t: float) -> np.ndarray:
+        """Planned pose at time t from the segment start (eq. 27a, 28). Returns (4, 4)."""
+        s, _ = quintic(t / self.duration)
+        R = self.T_start[:3, :3] @ so3_exp(self.theta_u * s)
+        return transform(R, self.T_start[:3, 3] + self.dt * s)
+
+    def twist_base(self, t: float) -> np.ndarray:
+        """Planned twist ᵇv_p = [v, ω] in F_b at time t (eq. 27b, 29). Returns (6,).
+
+        ω = R_s θu ṡ: θu is expressed in F_ps, so it is rotated into F_b (the paper's eq. 29
+        writes θu ṡ, which is the same only when R_s = I).
+        """
+        _, ds = quintic(t / self.duration)
+        sdot = ds / self.duration
+        return np.concatenate([self.dt * sdot, self.T_start[:3, :3] @ self.theta_u * sdot])
+
+
+class OpenLoopController(Controller):
+    """Follow straight quintic segments through waypoints with l̇ = Â ᵇv_p (eq. 30).
+
+    Â is evaluated at the *planned* pose; the estimate is not used. Over each control period
+    the twist and Jacobian are sampled at the period's midpoint (the natural discretisation
+    of eq. 30 under a zero-order hold).
+
+    Args:
+        geometry: nominal geometry.
+        waypoints: (k, 4, 4) poses the trajectory passes through, after the start pose.
+        durations: (k,) segment durations [s].
+        jacobian_model: cable model of Â (``"straight"``: eq. 6, as in the paper).
+    """
+
+    name = "open_loop"
+
+    def __init__(
+        self,
+        geometry: CdprGeometry,
+        waypoints: Sequence[np.ndarray],
+        durations: Sequence[float],
+        jacobian_model: CableModel = "straight",
+    ) -> None:
+        super().__init__(geometry)
+        if len(waypoints) == 0 or len(waypoints) != len(durations):
+            raise ValueError(f"open_loop needs as many durations as waypoints (≥ 1), got "
+                             f"{len(waypoints)} waypoints and {len(durations)} durations")
+        self.waypoints = [np.asarray(w, dtype=float) for w in waypoints]
+        self.durations = [float(d) for d in durations]
+        for i, w in enumerate(self.waypoints):
+            geometry.check_pose_inside(w, f"waypoint {i + 1}")
+        self.jacobian_model = jacobian_model
+        self.segments: list[Segment] = []
+        self._starts = np.zeros(0)
+
+    @property
+    def total_duration(self) -> float:
+        """Duration of the whole trajectory [s]."""
+        return float(sum(self.durations))
+
+    def reset(self, T_base_platform0: np.ndarray) -> None:
+        """Plan the segments from the start pose through the waypoints."""
+        poses = [np.asarray(T_base_platform0, dtype=float), *self.waypoints]
+        self.segments = [Segment(a, b, d) for a, b, d in
+                         zip(poses[:-1], poses[1:], self.durations, strict=True)]
+        self._starts = np.concatenate([[0.0], np.cumsum(self.durations)])
+
+    def _locate(self, t: float) -> tuple[Segment, float]:
+        k = int(np.searchsorted(self._starts, t, side="right")) - 1
+        k = min(max(k, 0), len(self.segments) - 1)
+        return self.segments[k], t - self._starts[k]
+
+    def planned_pose(self, t: float) -> np.ndarray:
+        """Planned pose at time t (the last waypoint after the end)."""
+        seg, tau = self._locate(min(t, self.total_duration))
+        return seg.pose(tau)
+
+    def planned_twist_base(self, t: float) -> np.ndarray:
+        """Planned twist ᵇv_p at time t (zero outside the trajectory)."""
+        if t < 0 or t > self.total_duration:
+            return np.zeros(6)
+        seg, tau = self._locate(t)
+        return seg.twist_base(tau)
+
+    def command(self, t: float, period: float, estimate: PoseEstimate, measurement: Measurement
+                ) -> Command:
+        """l̇ = Â(planned pose) ᵇv_p at the midpoint of [t, t + period] (eq. 30)."""
+        if not self.segments:
+            raise RuntimeError("open_loop: call reset(T_base_platform0) before command()")
+        mid = t + 0.5 * period
+        T = self.planned_pose(mid)
+        twist_base = self.planned_twist_base(mid)
+        rates = jacobian(self.geometry, T, "base", self.jacobian_model) @ twist_base
+        R = T[:3, :3]
+        twist_platform = np.concatenate([R.T @ twist_base[:3], R.T @ twist_base[3:]])
+        done = t + period >= self.total_duration - 1e-9
+        return Command(rates, twist_platform, done=done, status="done" if done else "tracking")
