@@ -17,6 +17,7 @@ P0 = (0.112, -0.032, 0.301, -12.0, -10.0, 0.0)
 def _demo(args: argparse.Namespace) -> int:
     from cdpr_twin.sim import ModelError, Twin
     from cdpr_twin.statics import InfeasibleTensionError
+    from cdpr_twin.vision import T_TAGPUPIL_TAGVISP
 
     pose = np.array(args.pose, dtype=float)
     try:
@@ -31,7 +32,7 @@ def _demo(args: argparse.Namespace) -> int:
             print("cable   rest length l0 [m]   tension [N]")
             for i, (l0, tau) in enumerate(zip(m.cable_lengths, m.tensions, strict=True), 1):
                 print(f"  {i}       {l0:.6f}          {tau:7.3f}")
-            visp = se3.transform(se3.rot_x(np.pi), np.zeros(3))
+            visp = T_TAGPUPIL_TAGVISP
             truth = se3.vector_from_pose(t.T_cam_tag @ visp)
             print("tag pose in the camera, ViSP frame [x y z (m), rx ry rz (deg)]:")
             print("  true     ", np.array2string(truth, precision=4, suppress_small=True))

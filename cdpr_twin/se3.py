@@ -8,6 +8,8 @@ R = Rx(rx)·Ry(ry)·Rz(rz) (intrinsic XYZ). Everything here imports numpy only.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 _SMALL = 1e-8
@@ -92,31 +94,24 @@ def quat_wxyz_from_matrix(R: np.ndarray) -> np.ndarray:
     Returns:
         (4,) ``quat_wxyz``.
     """
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    diag = (R[0, 0], R[1, 1], R[2, 2])
-    k = int(np.argmax((tr, *diag)))
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
+    tr = r00 + r11 + r22
+    k = max(range(4), key=(tr, r00, r11, r22).__getitem__)
     if k == 0:
-        s = 2.0 * np.sqrt(1.0 + tr)
-        q = np.array(
-            [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
-        )
+        s = 2.0 * math.sqrt(1.0 + tr)
+        q = (0.25 * s, (r21 - r12) / s, (r02 - r20) / s, (r10 - r01) / s)
     elif k == 1:
-        s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
-        q = np.array(
-            [(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s]
-        )
+        s = 2.0 * math.sqrt(1.0 + r00 - r11 - r22)
+        q = ((r21 - r12) / s, 0.25 * s, (r01 + r10) / s, (r02 + r20) / s)
     elif k == 2:
-        s = 2.0 * np.sqrt(1.0 - R[0, 0] + R[1, 1] - R[2, 2])
-        q = np.array(
-            [(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s]
-        )
+        s = 2.0 * math.sqrt(1.0 - r00 + r11 - r22)
+        q = ((r02 - r20) / s, (r01 + r10) / s, 0.25 * s, (r12 + r21) / s)
     else:
-        s = 2.0 * np.sqrt(1.0 - R[0, 0] - R[1, 1] + R[2, 2])
-        q = np.array(
-            [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
-        )
-    q /= np.linalg.norm(q)
-    return -q if q[0] < 0.0 else q
+        s = 2.0 * math.sqrt(1.0 - r00 - r11 + r22)
+        q = ((r10 - r01) / s, (r02 + r20) / s, (r12 + r21) / s, 0.25 * s)
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    sign = -1.0 if q[0] < 0.0 else 1.0
+    return np.array(q) * (sign / n)
 
 
 def matrix_from_quat_wxyz(quat_wxyz: np.ndarray) -> np.ndarray:
@@ -269,6 +264,9 @@ def pose_distance(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
 
     The rotational distance is the angle θ of the axis-angle form of ``R_aᵀ R_b``.
     """
-    dt = float(np.linalg.norm(T_a[:3, 3] - T_b[:3, 3]))
-    dr = float(np.linalg.norm(so3_log(T_a[:3, :3].T @ T_b[:3, :3])))
-    return dt, dr
+    d = T_a[:3, 3] - T_b[:3, 3]
+    R = T_a[:3, :3].T @ T_b[:3, :3]
+    # θ = atan2(sin θ, cos θ): accurate at every angle, unlike arccos near 0 and arcsin near π
+    sin2 = math.hypot(R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1])
+    cos2 = R[0, 0] + R[1, 1] + R[2, 2] - 1.0
+    return math.sqrt(float(d @ d)), math.atan2(sin2, cos2)

@@ -16,10 +16,15 @@ import cv2
 import numpy as np
 from pupil_apriltags import Detector
 
-from cdpr_twin.se3 import transform
+from cdpr_twin.se3 import rot_x, transform
 
 APRILTAG_PIXEL_OFFSET = 0.5
 """AprilTag's pixel-centre coordinate minus OpenCV's [px]."""
+
+T_TAGPUPIL_TAGVISP = transform(rot_x(np.pi), np.zeros(3))
+"""ViSP's tag frame (z out of the tag, y up; the paper's ᶜp_o) in pupil-apriltags' tag frame
+(z into the tag, y down): ``T_cam_tagViSP = T_cam_tagPupil @ T_TAGPUPIL_TAGVISP``. A rotation by
+π about x, its own inverse: ``T_cam_tagPupil = T_cam_tagViSP @ T_TAGPUPIL_TAGVISP`` as well."""
 
 
 @dataclass(frozen=True)
@@ -79,6 +84,29 @@ class TagDetection:
     T_cam_tag: np.ndarray
     decision_margin: float
     reprojection_error: float
+
+
+class _Detector(Detector):
+    """pupil-apriltags' Detector with its destructor's use-after-free fixed.
+
+    Upstream ``Detector.__del__`` destroys the tag families before the C detector, whose
+    destruction still reads them (``apriltag_detector_clear_families`` → ``quick_decode_uninit``):
+    an intermittent segfault at garbage collection (pupil-labs/apriltags#46; fixed the same way
+    in duckietown/lib-dt-apriltags#26). Here the detector goes first, as in AprilTag's examples.
+    """
+
+    def __del__(self) -> None:
+        ptr = getattr(self, "tag_detector_ptr", None)
+        if ptr is None:
+            return
+        self.tag_detector_ptr = None
+        self.libc.apriltag_detector_destroy.restype = None
+        self.libc.apriltag_detector_destroy(ptr)
+        families, self.tag_families = self.tag_families, {}
+        for family, tf in families.items():
+            destroy = getattr(self.libc, f"{family}_destroy")
+            destroy.restype = None
+            destroy(tf)
 
 
 def tag_corners_object(tag_size: float) -> np.ndarray:
@@ -206,7 +234,7 @@ class TagDetector:
         self.intrinsics = intrinsics
         self.tag_size = float(tag_size)
         self.tag_id = int(tag_id)
-        self._detector = Detector(
+        self._detector = _Detector(
             families=family, nthreads=nthreads, quad_decimate=quad_decimate, refine_edges=True
         )
         self._object_points = tag_corners_object(self.tag_size)

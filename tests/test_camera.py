@@ -50,7 +50,7 @@ def test_camera_frame_conventions(camera_twin):
 def test_goal_pose_at_p1_and_paper_view_at_p0(camera_twin):
     """DESIGN §4: the tag is placed so that cp_o1 (ViSP frame) holds at p1; at p0 the camera
     sees it within a few cm of the paper's cp_o0."""
-    visp = se3.transform(se3.rot_x(np.pi), np.zeros(3))  # T_tagPupil_tagViSP
+    visp = vision.T_TAGPUPIL_TAGVISP
     camera_twin.reset(paper_pose("p1"))
     goal = se3.pose_from_vector([0, 0, 0.09, 180, 0, 180])
     # camera 0.5 mm lower than the platform underside: the goal holds to that offset

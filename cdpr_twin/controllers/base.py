@@ -50,8 +50,9 @@ class Controller(ABC):
         """Start a task from a known platform pose."""
 
     @abstractmethod
-    def command(self, t: float, period: float, estimate: PoseEstimate, measurement: Measurement
-                ) -> Command:
+    def command(
+        self, t: float, period: float, estimate: PoseEstimate, measurement: Measurement
+    ) -> Command:
         """The command for the control period [t, t + period].
 
         Args:

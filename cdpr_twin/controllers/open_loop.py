@@ -85,8 +85,10 @@ class OpenLoopController(Controller):
     ) -> None:
         super().__init__(geometry)
         if len(waypoints) == 0 or len(waypoints) != len(durations):
-            raise ValueError(f"open_loop needs as many durations as waypoints (≥ 1), got "
-                             f"{len(waypoints)} waypoints and {len(durations)} durations")
+            raise ValueError(
+                f"open_loop needs as many durations as waypoints (≥ 1), got "
+                f"{len(waypoints)} waypoints and {len(durations)} durations"
+            )
         self.waypoints = [np.asarray(w, dtype=float) for w in waypoints]
         self.durations = [float(d) for d in durations]
         for i, w in enumerate(self.waypoints):
@@ -103,8 +105,9 @@ class OpenLoopController(Controller):
     def reset(self, T_base_platform0: np.ndarray) -> None:
         """Plan the segments from the start pose through the waypoints."""
         poses = [np.asarray(T_base_platform0, dtype=float), *self.waypoints]
-        self.segments = [Segment(a, b, d) for a, b, d in
-                         zip(poses[:-1], poses[1:], self.durations, strict=True)]
+        self.segments = [
+            Segment(a, b, d) for a, b, d in zip(poses[:-1], poses[1:], self.durations, strict=True)
+        ]
         self._starts = np.concatenate([[0.0], np.cumsum(self.durations)])
 
     def _locate(self, t: float) -> tuple[Segment, float]:
@@ -124,8 +127,9 @@ class OpenLoopController(Controller):
         seg, tau = self._locate(t)
         return seg.twist_base(tau)
 
-    def command(self, t: float, period: float, estimate: PoseEstimate, measurement: Measurement
-                ) -> Command:
+    def command(
+        self, t: float, period: float, estimate: PoseEstimate, measurement: Measurement
+    ) -> Command:
         """l̇ = Â(planned pose) ᵇv_p at the midpoint of [t, t + period] (eq. 30)."""
         if not self.segments:
             raise RuntimeError("open_loop: call reset(T_base_platform0) before command()")

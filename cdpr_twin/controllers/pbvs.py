@@ -71,12 +71,16 @@ class PbvsController(Controller):
         super().__init__(geometry)
         goal = np.asarray(goal_T_cam_tag, dtype=float)
         if goal.shape != (4, 4) or not np.all(np.isfinite(goal)) or goal[2, 3] <= 0:
-            raise ValueError("pbvs: goal_T_cam_tag must be a finite 4×4 pose in front of the "
-                             "camera (z > 0)")
-        for name, value in (("gain", gain), ("max_linear_speed", max_linear_speed),
-                            ("max_angular_speed", max_angular_speed),
-                            ("converged_translation", converged_translation),
-                            ("converged_rotation", converged_rotation)):
+            raise ValueError(
+                "pbvs: goal_T_cam_tag must be a finite 4×4 pose in front of the camera (z > 0)"
+            )
+        for name, value in (
+            ("gain", gain),
+            ("max_linear_speed", max_linear_speed),
+            ("max_angular_speed", max_angular_speed),
+            ("converged_translation", converged_translation),
+            ("converged_rotation", converged_rotation),
+        ):
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"pbvs: {name} must be > 0, got {value}")
         self.goal = goal
@@ -96,20 +100,26 @@ class PbvsController(Controller):
         R_goal_cur = self.goal[:3, :3] @ T_cam_tag[:3, :3].T  # ᶜ*R_c = ᶜ*R_o ᶜR_oᵀ
         return np.concatenate([T_cam_tag[:3, 3] - self.goal[:3, 3], so3_log(R_goal_cur)])
 
-    def command(self, t: float, period: float, estimate: PoseEstimate, measurement: Measurement
-                ) -> Command:
+    def command(
+        self, t: float, period: float, estimate: PoseEstimate, measurement: Measurement
+    ) -> Command:
         """One PBVS step; zero velocity while the tag is not detected."""
         zero8, zero6 = np.zeros(self.geometry.n_cables), np.zeros(6)
         if measurement.tag is None:
             return Command(zero8, zero6, status="tag_lost")
         T_co = measurement.tag.T_cam_tag
         e = self.error(T_co)
-        if (np.linalg.norm(e[:3]) < self.converged_translation
-                and np.linalg.norm(e[3:]) < self.converged_rotation):
+        if (
+            np.linalg.norm(e[:3]) < self.converged_translation
+            and np.linalg.norm(e[3:]) < self.converged_rotation
+        ):
             return Command(zero8, zero6, done=True, status="converged", error=e)
         v_cam = -self.gain * np.linalg.pinv(interaction_matrix(T_co[:3, 3], e[3:])) @ e
-        scale = max(1.0, np.linalg.norm(v_cam[:3]) / self.max_linear_speed,
-                    np.linalg.norm(v_cam[3:]) / self.max_angular_speed)
+        scale = max(
+            1.0,
+            np.linalg.norm(v_cam[:3]) / self.max_linear_speed,
+            np.linalg.norm(v_cam[3:]) / self.max_angular_speed,
+        )
         v_cam = v_cam / scale
         twist_platform = self._Ad @ v_cam  # eq. 3-4
         A = jacobian(self.geometry, estimate.T_base_platform, "platform", self.jacobian_model)

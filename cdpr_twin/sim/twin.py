@@ -34,6 +34,7 @@ from cdpr_twin.se3 import (
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim.model import (
     PLATFORM_BODY,
+    TAG_BODY,
     ModelError,
     actuator_name,
     anchor_site,
@@ -97,6 +98,13 @@ class Twin:
         self.model_path = Path(model_path)
         nominal = build_model(self.model_path)
         self.nominal_geometry: CdprGeometry = read_geometry(nominal)
+        tag = mujoco.mj_name2id(nominal, mujoco.mjtObj.mjOBJ_BODY, TAG_BODY)
+        self.nominal_T_base_tag: np.ndarray | None = None
+        """Tag pose the model file states (pupil frame), before deviations; ``None`` if none."""
+        if tag >= 0 and nominal.body_parentid[tag] == 0:
+            self.nominal_T_base_tag = transform(
+                matrix_from_quat_wxyz(nominal.body_quat[tag]), nominal.body_pos[tag]
+            )
         if isinstance(deviations, DeviationSpec):
             deviations = deviations.draw(N_CABLES)
         self.deviations = deviations if deviations is not None else TruthDeviations.zero()
@@ -146,8 +154,7 @@ class Twin:
         self._detector: TagDetector | None = None
         if camera:
             self._renderer = cam_mod.CameraRenderer(m)
-            tag_size = float(numeric(m, "tag_size")[0])
-            self._detector = TagDetector(self._renderer.intrinsics, tag_size=tag_size)
+            self._detector = TagDetector(self._renderer.intrinsics, tag_size=self.tag_size)
         self._cam = cam_mod.camera_id(m)
         self.intrinsics = cam_mod.intrinsics(m)
         self.settle_error: tuple[float, float] = (math.nan, math.nan)
@@ -210,6 +217,17 @@ class Twin:
             raise ModelError(f"{self.model_path} has no site {TAG_SITE!r}; use scene.xml")
         d = self.data
         return transform(d.site_xmat[self._tag_site].reshape(3, 3), d.site_xpos[self._tag_site])
+
+    @property
+    def tag_size(self) -> float:
+        """Edge of the tag's black square [m] (``<numeric name="tag_size">``)."""
+        return float(numeric(self.model, "tag_size")[0])
+
+    @property
+    def platform_half_size(self) -> np.ndarray:
+        """Half-sizes of the platform box geom (3,) [m]."""
+        geom = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_GEOM, "platform_box")
+        return self.model.geom_size[geom].copy()
 
     @property
     def T_cam_tag(self) -> np.ndarray:

@@ -1,0 +1,384 @@
+"""Run outputs: ``timeseries.csv``, ``recording.rrd`` (Rerun) and ``summary.json``.
+
+Each file is written as ``<name>.partial`` and renamed when complete, so a file under its final
+name is never half-written; ``summary.json`` says whether the run completed or was interrupted.
+
+Rerun entity paths (they follow the frame tree, DESIGN §9):
+
+| path | content |
+|---|---|
+| ``world/frame`` | the 1.2 m frame's edges (static) |
+| ``world/exit_points`` | the true exit points A_i (static) |
+| ``world/tag`` | the true tag pose and plate (static) |
+| ``world/cables`` | cable segments A_i → B_i, coloured by tension, slack ones grey and thin |
+| ``world/platform`` | ground-truth platform pose and box |
+| ``world/platform/cam`` | the camera mounting and pinhole (OpenCV convention) |
+| ``world/platform/cam/image`` | the rendered frame (JPEG) |
+| ``world/platform/cam/image/tag`` | detected tag outline (image pixels) |
+| ``world/estimates/<name>`` | each estimator's pose, as axes |
+| ``world/plan`` | the open-loop plan's current pose, as axes |
+| ``deviation/translation_mm`` | ‖t_est − t_true‖ per estimator [mm] (one series each) |
+| ``deviation/rotation_deg`` | angle of R_estᵀ R_true per estimator [deg] |
+| ``tension`` | measured tensions, one series per cable [N] |
+| ``length`` | encoder (rest) lengths, one series per cable [m] |
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cdpr_twin.controllers.base import Command
+from cdpr_twin.estimators.base import PoseEstimate
+from cdpr_twin.measurement import Measurement
+from cdpr_twin.se3 import quat_wxyz_from_matrix
+from cdpr_twin.vision import CameraIntrinsics
+
+SLACK_TENSION = 0.5
+"""Below this measured tension [N] a cable is drawn as slack."""
+
+
+@dataclass(frozen=True, eq=False)
+class SceneInfo:
+    """The static scene, as the recorder draws it (true robot geometry).
+
+    Attributes:
+        a_base: (m, 3) exit points [m].
+        b_platform: (m, 3) anchor points [m].
+        platform_half_size: (3,) platform box half-sizes [m].
+        T_platform_cam: (4, 4) camera mounting (OpenCV frame).
+        intrinsics: camera intrinsics.
+        T_base_tag: (4, 4) tag pose (pupil frame), or ``None``.
+        tag_size: tag edge [m].
+        frame_min: (3,) frame lower corner [m].
+        frame_max: (3,) frame upper corner [m].
+    """
+
+    a_base: np.ndarray
+    b_platform: np.ndarray
+    platform_half_size: np.ndarray
+    T_platform_cam: np.ndarray
+    intrinsics: CameraIntrinsics
+    T_base_tag: np.ndarray | None
+    tag_size: float
+    frame_min: np.ndarray
+    frame_max: np.ndarray
+
+
+def _pose_columns(prefix: str) -> list[str]:
+    return [f"{prefix}_{k}" for k in ("x", "y", "z", "qw", "qx", "qy", "qz")]
+
+
+def _pose_values(T: np.ndarray) -> list[float]:
+    return [*T[:3, 3].tolist(), *quat_wxyz_from_matrix(T[:3, :3]).tolist()]
+
+
+def write_json_atomic(path: Path, data: dict) -> None:
+    """Write JSON through a temporary file and rename: never a half-written file."""
+    tmp = path.with_name(path.name + ".partial")
+    tmp.write_text(json.dumps(data, indent=2, sort_keys=False) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+
+
+class CsvRecorder:
+    """One row per control tick: time, truth, every estimate, sensors, commands, tag pose."""
+
+    def __init__(self, path: Path, estimators: tuple[str, ...], n_cables: int) -> None:
+        self.path = path
+        self._partial = path.with_name(path.name + ".partial")
+        self._file = self._partial.open("w", newline="", encoding="utf-8")
+        self.estimators = estimators
+        header = ["t", *_pose_columns("true")]
+        for name in estimators:
+            header += [*_pose_columns(name), f"{name}_valid"]
+        header += [f"tension_{i + 1}" for i in range(n_cables)]
+        header += [f"length_{i + 1}" for i in range(n_cables)]
+        header += [f"rate_{i + 1}" for i in range(n_cables)]
+        header += [*_pose_columns("plan"), *_pose_columns("tag"), "status"]
+        self._file.write(",".join(header) + "\n")
+        self.rows = 0
+
+    def tick(
+        self,
+        m: Measurement,
+        estimates: dict[str, PoseEstimate],
+        command: Command | None,
+        plan: np.ndarray | None,
+    ) -> None:
+        """Write one row (floats in their shortest exact form) and flush it."""
+        row: list = [m.time, *_pose_values(m.T_base_platform_true)]
+        for name in self.estimators:
+            e = estimates[name]
+            row += [*_pose_values(e.T_base_platform), int(e.valid)]
+        row += [*m.tensions.tolist(), *m.cable_lengths.tolist(), *m.cable_rates.tolist()]
+        row += _pose_values(plan) if plan is not None else [""] * 7
+        row += _pose_values(m.tag.T_cam_tag) if m.tag is not None else [""] * 7
+        row.append(command.status if command is not None else "start")
+        self._file.write(",".join(map(str, row)) + "\n")  # str(float) is its exact repr
+        self._file.flush()
+        self.rows += 1
+
+    def close(self) -> None:
+        """Flush, close and give the file its final name."""
+        if not self._file.closed:
+            self._file.close()
+            os.replace(self._partial, self.path)
+
+
+class RerunRecorder:
+    """Logs the run to a ``.rrd`` file (and optionally a live viewer)."""
+
+    def __init__(
+        self,
+        path: Path,
+        scene: SceneInfo,
+        estimators: tuple[str, ...],
+        application_id: str,
+        recording_id: str,
+        spawn: bool = False,
+        jpeg_quality: int = 80,
+        flush_every: int = 25,
+    ) -> None:
+        import rerun as rr
+
+        self.rr = rr
+        self.path = path
+        self._partial = path.with_name(path.name + ".partial")
+        self.scene, self.estimators, self.jpeg_quality = scene, estimators, jpeg_quality
+        self.flush_every = flush_every
+        self._buf = self._new_buffer()
+        self.rec = rr.RecordingStream(
+            application_id, recording_id=recording_id, send_properties=False
+        )
+        blueprint = self.blueprint()
+        self.spawned = False
+        if spawn:
+            try:
+                self.rec.spawn(connect=False)
+                self.rec.set_sinks(
+                    rr.FileSink(str(self._partial)), rr.GrpcSink(), default_blueprint=blueprint
+                )
+                self.spawned = True
+            except Exception:  # no viewer binary or no display: keep the file only
+                self.spawned = False
+        if not self.spawned:
+            self.rec.save(str(self._partial), default_blueprint=blueprint)
+        self._log_static()
+
+    def blueprint(self):
+        """The default layout: 3D scene, camera image, deviations and tensions over time."""
+        import rerun.blueprint as rrb
+
+        return rrb.Blueprint(
+            rrb.Horizontal(
+                rrb.Spatial3DView(origin="world", name="ACROBOT"),
+                rrb.Vertical(
+                    rrb.Spatial2DView(origin="world/platform/cam", name="onboard camera"),
+                    rrb.TimeSeriesView(origin="deviation", name="estimate − truth"),
+                    rrb.TimeSeriesView(origin="tension", name="tensions [N]"),
+                ),
+                column_shares=[3, 2],
+            ),
+            collapse_panels=True,
+        )
+
+    def _log_static(self) -> None:
+        rr, rec, s = self.rr, self.rec, self.scene
+        rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        lo, hi = s.frame_min, s.frame_max
+        corners = np.array(
+            [[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])]
+        )
+        edges = [
+            (0, 1),
+            (2, 3),
+            (4, 5),
+            (6, 7),
+            (0, 2),
+            (1, 3),
+            (4, 6),
+            (5, 7),
+            (0, 4),
+            (1, 5),
+            (2, 6),
+            (3, 7),
+        ]
+        rec.log(
+            "world/frame",
+            rr.LineStrips3D([corners[list(e)] for e in edges], colors=[150, 150, 160]),
+            static=True,
+        )
+        rec.log(
+            "world/exit_points",
+            rr.Points3D(s.a_base, radii=0.008, colors=[230, 140, 30]),
+            static=True,
+        )
+        if s.T_base_tag is not None:
+            rec.log(
+                "world/tag",
+                rr.Transform3D(translation=s.T_base_tag[:3, 3], mat3x3=s.T_base_tag[:3, :3]),
+                static=True,
+            )
+            rec.log(
+                "world/tag/plate",
+                rr.Boxes3D(
+                    half_sizes=[s.tag_size / 2, s.tag_size / 2, 0.0005], colors=[20, 20, 20]
+                ),
+                static=True,
+            )
+        rec.log(
+            "world/platform/box",
+            rr.Boxes3D(half_sizes=s.platform_half_size, colors=[70, 90, 130]),
+            static=True,
+        )
+        T = s.T_platform_cam
+        rec.log(
+            "world/platform/cam",
+            rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]),
+            static=True,
+        )
+        K = s.intrinsics
+        rec.log(
+            "world/platform/cam",
+            rr.Pinhole(
+                image_from_camera=K.K,
+                resolution=[K.width, K.height],
+                camera_xyz=rr.ViewCoordinates.RDF,
+                image_plane_distance=0.05,
+            ),
+            static=True,
+        )
+        for name in self.estimators:
+            rec.log(f"world/estimates/{name}", rr.TransformAxes3D(0.06), static=True)
+        rec.log("world/plan", rr.TransformAxes3D(0.04), static=True)
+        cables = [f"cable {i + 1}" for i in range(len(s.a_base))]
+        rec.log("tension", rr.SeriesLines(names=cables), static=True)
+        rec.log("length", rr.SeriesLines(names=cables), static=True)
+        for kind in ("translation_mm", "rotation_deg"):
+            rec.log(f"deviation/{kind}", rr.SeriesLines(names=list(self.estimators)), static=True)
+
+    def tick(
+        self,
+        m: Measurement,
+        estimates: dict[str, PoseEstimate],
+        deviations: dict[str, tuple[float, float]],
+        plan: np.ndarray | None,
+    ) -> None:
+        """Buffer one tick (sent column-wise every ``flush_every`` ticks); log the image now."""
+        b, s = self._buf, self.scene
+        T = m.T_base_platform_true
+        tau = np.asarray(m.tensions, dtype=float)
+        b["time"].append(m.time)
+        b["platform"].append(T)
+        b["anchors"].append(s.b_platform @ T[:3, :3].T + T[:3, 3])
+        b["tension"].append(tau)
+        b["length"].append(np.asarray(m.cable_lengths, dtype=float))
+        for name in self.estimators:
+            b[f"est/{name}"].append(estimates[name].T_base_platform)
+        b["deviation"].append([deviations[name] for name in self.estimators])
+        if plan is not None:
+            b["plan_time"].append(m.time)
+            b["plan"].append(plan)
+        if m.image is not None:
+            rr, rec = self.rr, self.rec
+            rec.set_time("sim_time", duration=m.time)
+            rec.log(
+                "world/platform/cam/image",
+                rr.Image(m.image).compress(jpeg_quality=self.jpeg_quality),
+            )
+            if m.tag is not None:
+                c = np.vstack([m.tag.corners, m.tag.corners[:1]])
+                rec.log("world/platform/cam/image/tag", rr.LineStrips2D([c], colors=[0, 255, 0]))
+            else:
+                rec.log("world/platform/cam/image/tag", rr.Clear(recursive=False))
+        if len(b["time"]) >= self.flush_every:
+            self._flush()
+
+    def _new_buffer(self) -> dict[str, list]:
+        keys = [
+            "time",
+            "platform",
+            "anchors",
+            "tension",
+            "length",
+            "deviation",
+            "plan_time",
+            "plan",
+            *(f"est/{n}" for n in self.estimators),
+        ]
+        return {k: [] for k in keys}
+
+    def _flush(self) -> None:
+        """Send the buffered ticks column-wise (one call per entity)."""
+        rr, rec, b = self.rr, self.rec, self._buf
+        n = len(b["time"])
+        if n == 0:
+            return
+        index = [rr.TimeColumn("sim_time", duration=np.array(b["time"]))]
+
+        def transforms(path: str, Ts: list[np.ndarray], idx=index) -> None:
+            A = np.array(Ts)
+            rec.send_columns(
+                path,
+                indexes=idx,
+                columns=rr.Transform3D.columns(translation=A[:, :3, 3], mat3x3=A[:, :3, :3]),
+            )
+
+        transforms("world/platform", b["platform"])
+        for name in self.estimators:
+            transforms(f"world/estimates/{name}", b[f"est/{name}"])
+        if b["plan"]:
+            transforms(
+                "world/plan",
+                b["plan"],
+                [rr.TimeColumn("sim_time", duration=np.array(b["plan_time"]))],
+            )
+        tau = np.array(b["tension"])
+        m = tau.shape[1]
+        strips = np.stack(
+            [np.broadcast_to(self.scene.a_base, (n, m, 3)), np.array(b["anchors"])], axis=2
+        ).reshape(n * m, 2, 3)
+        taut = (tau > SLACK_TENSION).ravel()
+        level = np.clip(tau.ravel() / 30.0, 0.0, 1.0)
+        colors = np.where(
+            taut[:, None],
+            np.column_stack([40 + 215 * level, 200 - 150 * level, 255 - 215 * level]),
+            [[120, 120, 120]],
+        ).astype(np.uint8)
+        rec.send_columns(
+            "world/cables",
+            indexes=index,
+            columns=rr.LineStrips3D.columns(
+                strips=strips, colors=colors, radii=np.where(taut, 0.003, 0.001)
+            ).partition(lengths=[m] * n),
+        )
+        rec.send_columns("tension", indexes=index, columns=rr.Scalars.columns(scalars=tau))
+        rec.send_columns(
+            "length", indexes=index, columns=rr.Scalars.columns(scalars=np.array(b["length"]))
+        )
+        dev = np.array(b["deviation"])  # (n, estimators, 2)
+        rec.send_columns(
+            "deviation/translation_mm",
+            indexes=index,
+            columns=rr.Scalars.columns(scalars=dev[:, :, 0] * 1e3),
+        )
+        rec.send_columns(
+            "deviation/rotation_deg",
+            indexes=index,
+            columns=rr.Scalars.columns(scalars=np.degrees(dev[:, :, 1])),
+        )
+        self._buf = self._new_buffer()
+
+    def close(self) -> None:
+        """Send what is buffered, flush, and give the file its final name."""
+        self._flush()
+        with contextlib.suppress(Exception):
+            self.rec.flush()
+        self.rec.disconnect()
+        if self._partial.exists():
+            os.replace(self._partial, self.path)
