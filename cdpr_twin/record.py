@@ -78,6 +78,40 @@ def _pose_values(T: np.ndarray) -> list[float]:
     return [*T[:3, 3].tolist(), *quat_wxyz_from_matrix(T[:3, :3]).tolist()]
 
 
+def quat_xyzw_from_matrices(R: np.ndarray) -> np.ndarray:
+    """Unit quaternions (x, y, z, w) of a stack of rotation matrices (n, 3, 3), vectorised.
+
+    Shepperd's method, branch by branch on the largest of (trace, R00, R11, R22).
+    """
+    tr = R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2]
+    k = np.argmax(np.stack([tr, R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]], axis=1), axis=1)
+    q = np.empty((len(R), 4))  # w, x, y, z
+    for case in range(4):
+        m = k == case
+        r = R[m]
+        if case == 0:
+            s = 2.0 * np.sqrt(1.0 + tr[m])
+            q[m] = np.column_stack(
+                [
+                    0.25 * s,
+                    (r[:, 2, 1] - r[:, 1, 2]) / s,
+                    (r[:, 0, 2] - r[:, 2, 0]) / s,
+                    (r[:, 1, 0] - r[:, 0, 1]) / s,
+                ]
+            )
+        else:
+            i, j, k2 = (case - 1, case % 3, (case + 1) % 3)
+            s = 2.0 * np.sqrt(1.0 + r[:, i, i] - r[:, j, j] - r[:, k2, k2])
+            v = np.empty((len(r), 4))
+            v[:, 0] = (r[:, k2, j] - r[:, j, k2]) / s
+            v[:, 1 + i] = 0.25 * s
+            v[:, 1 + j] = (r[:, j, i] + r[:, i, j]) / s
+            v[:, 1 + k2] = (r[:, k2, i] + r[:, i, k2]) / s
+            q[m] = v
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    return q[:, [1, 2, 3, 0]]
+
+
 def write_json_atomic(path: Path, data: dict) -> None:
     """Write JSON through a temporary file and rename: never a half-written file."""
     tmp = path.with_name(path.name + ".partial")
@@ -150,7 +184,9 @@ class RerunRecorder:
         self.path = path
         self._partial = path.with_name(path.name + ".partial")
         self.scene, self.estimators, self.jpeg_quality = scene, estimators, jpeg_quality
-        self.flush_every = flush_every
+        # column-wise sending costs ~0.5 ms per entity and call: batch 4 s of a file run, but
+        # only 0.4 s when a live viewer watches
+        self.flush_every = flush_every or (10 if spawn else 100)
         self._buf = self._new_buffer()
         self.rec = rr.RecordingStream(
             application_id, recording_id=recording_id, send_properties=False
@@ -270,14 +306,11 @@ class RerunRecorder:
         plan: np.ndarray | None,
     ) -> None:
         """Buffer one tick (sent column-wise every ``flush_every`` ticks); log the image now."""
-        b, s = self._buf, self.scene
-        T = m.T_base_platform_true
-        tau = np.asarray(m.tensions, dtype=float)
+        b = self._buf
         b["time"].append(m.time)
-        b["platform"].append(T)
-        b["anchors"].append(s.b_platform @ T[:3, :3].T + T[:3, 3])
-        b["tension"].append(tau)
-        b["length"].append(np.asarray(m.cable_lengths, dtype=float))
+        b["platform"].append(m.T_base_platform_true)
+        b["tension"].append(m.tensions)
+        b["length"].append(m.cable_lengths)
         for name in self.estimators:
             b[f"est/{name}"].append(estimates[name].T_base_platform)
         b["deviation"].append([deviations[name] for name in self.estimators])
@@ -303,7 +336,6 @@ class RerunRecorder:
         keys = [
             "time",
             "platform",
-            "anchors",
             "tension",
             "length",
             "deviation",
@@ -326,9 +358,12 @@ class RerunRecorder:
             rec.send_columns(
                 path,
                 indexes=idx,
-                columns=rr.Transform3D.columns(translation=A[:, :3, 3], mat3x3=A[:, :3, :3]),
+                columns=rr.Transform3D.columns(
+                    translation=A[:, :3, 3], quaternion=quat_xyzw_from_matrices(A[:, :3, :3])
+                ),
             )
 
+        platform = np.array(b["platform"])
         transforms("world/platform", b["platform"])
         for name in self.estimators:
             transforms(f"world/estimates/{name}", b[f"est/{name}"])
@@ -340,9 +375,12 @@ class RerunRecorder:
             )
         tau = np.array(b["tension"])
         m = tau.shape[1]
-        strips = np.stack(
-            [np.broadcast_to(self.scene.a_base, (n, m, 3)), np.array(b["anchors"])], axis=2
-        ).reshape(n * m, 2, 3)
+        # B_i in F_b for every buffered tick, (n, m, 3)
+        anchors = np.einsum("nij,kj->nki", platform[:, :3, :3], self.scene.b_platform)
+        anchors += platform[:, None, :3, 3]
+        strips = np.stack([np.broadcast_to(self.scene.a_base, (n, m, 3)), anchors], axis=2).reshape(
+            n * m, 2, 3
+        )
         taut = (tau > SLACK_TENSION).ravel()
         level = np.clip(tau.ravel() / 30.0, 0.0, 1.0)
         colors = np.where(

@@ -63,6 +63,38 @@ def inverse(T: np.ndarray) -> np.ndarray:
     return transform(R.T, -R.T @ T[:3, 3])
 
 
+def exp_coefficients(theta2: float) -> tuple[float, float, float]:
+    """Coefficients of Rodrigues' formula and of its left Jacobian for θ² = |ω|².
+
+    ``exp([ω]×) = I + a[ω]× + b[ω]×²`` and ``V = I + b[ω]× + c[ω]×²`` with a = sin θ/θ,
+    b = (1 − cos θ)/θ², c = (θ − sin θ)/θ³; Taylor series below θ = 1e-2, where the closed
+    forms lose digits to cancellation.
+
+    Returns:
+        ``(a, b, c)``.
+    """
+    if theta2 < _SERIES:
+        t4 = theta2 * theta2
+        return (
+            1.0 - theta2 / 6.0 + t4 / 120.0,
+            0.5 - theta2 / 24.0 + t4 / 720.0,
+            1.0 / 6.0 - theta2 / 120.0 + t4 / 5040.0,
+        )
+    theta = math.sqrt(theta2)
+    s = math.sin(theta)
+    return s / theta, (1.0 - math.cos(theta)) / theta2, (theta - s) / (theta2 * theta)
+
+
+def _rodrigues(wx: float, wy: float, wz: float, a: float, b: float) -> list[list[float]]:
+    """I + a[ω]× + b[ω]×² as nested lists ([ω]×² = ωωᵀ − θ² I)."""
+    th2 = wx * wx + wy * wy + wz * wz
+    return [
+        [1.0 + b * (wx * wx - th2), b * wx * wy - a * wz, b * wx * wz + a * wy],
+        [b * wx * wy + a * wz, 1.0 + b * (wy * wy - th2), b * wy * wz - a * wx],
+        [b * wx * wz - a * wy, b * wy * wz + a * wx, 1.0 + b * (wz * wz - th2)],
+    ]
+
+
 def so3_exp(theta_u: np.ndarray) -> np.ndarray:
     """Rotation matrix of the rotation vector θu (Rodrigues).
 
@@ -72,17 +104,9 @@ def so3_exp(theta_u: np.ndarray) -> np.ndarray:
     Returns:
         (3, 3) rotation matrix.
     """
-    theta_u = np.asarray(theta_u, dtype=float)
-    theta2 = float(theta_u @ theta_u)
-    K = skew(theta_u)
-    if theta2 < _SERIES:
-        a = 1.0 - theta2 / 6.0 + theta2 * theta2 / 120.0
-        b = 0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0
-    else:
-        theta = np.sqrt(theta2)
-        a = np.sin(theta) / theta
-        b = (1.0 - np.cos(theta)) / theta2
-    return np.eye(3) + a * K + b * (K @ K)
+    wx, wy, wz = (float(v) for v in theta_u)
+    a, b, _ = exp_coefficients(wx * wx + wy * wy + wz * wz)
+    return np.array(_rodrigues(wx, wy, wz, a, b))
 
 
 def quat_wxyz_from_matrix(R: np.ndarray) -> np.ndarray:
@@ -157,15 +181,6 @@ def so3_log(R: np.ndarray) -> np.ndarray:
     return theta * v / s
 
 
-def _left_jacobian_terms(theta2: float) -> tuple[float, float]:
-    """Coefficients (b, c) of V = I + b[ω]× + c[ω]×² for θ² = |ω|²."""
-    if theta2 < _SERIES:
-        t4 = theta2 * theta2
-        return 0.5 - theta2 / 24.0 + t4 / 720.0, 1.0 / 6.0 - theta2 / 120.0 + t4 / 5040.0
-    theta = np.sqrt(theta2)
-    return (1.0 - np.cos(theta)) / theta2, (theta - np.sin(theta)) / (theta2 * theta)
-
-
 def se3_exp(twist: np.ndarray) -> np.ndarray:
     """Exponential map of a twist ``[v, ω]`` (the motion of eq. 9 over unit time).
 
@@ -175,12 +190,12 @@ def se3_exp(twist: np.ndarray) -> np.ndarray:
     Returns:
         (4, 4) rigid transform.
     """
-    twist = np.asarray(twist, dtype=float)
-    v, w = twist[:3], twist[3:]
-    b, c = _left_jacobian_terms(float(w @ w))
-    K = skew(w)
-    V = np.eye(3) + b * K + c * (K @ K)
-    return transform(so3_exp(w), V @ v)
+    vx, vy, vz, wx, wy, wz = (float(x) for x in twist)
+    a, b, c = exp_coefficients(wx * wx + wy * wy + wz * wz)
+    R = _rodrigues(wx, wy, wz, a, b)
+    V = _rodrigues(wx, wy, wz, b, c)
+    t = [V[i][0] * vx + V[i][1] * vy + V[i][2] * vz for i in range(3)]
+    return np.array([[*R[0], t[0]], [*R[1], t[1]], [*R[2], t[2]], [0.0, 0.0, 0.0, 1.0]])
 
 
 def se3_log(T: np.ndarray) -> np.ndarray:

@@ -53,7 +53,8 @@ class PoseEstimate:
         T = np.array(self.T_base_platform, dtype=float)
         T.flags.writeable = False
         object.__setattr__(self, "T_base_platform", T)
-        object.__setattr__(self, "flags", frozenset(self.flags))
+        if not isinstance(self.flags, frozenset):
+            object.__setattr__(self, "flags", frozenset(self.flags))
 
 
 class Estimator(ABC):
@@ -69,6 +70,7 @@ class Estimator(ABC):
         self.geometry = geometry
         self._T = np.full((4, 4), np.nan)
         self._time = np.nan
+        self._ready = False
 
     def reset(self, T_base_platform0: np.ndarray, time: float = 0.0) -> None:
         """Start from a known platform pose ᵇp_p0 at a given time.
@@ -82,6 +84,7 @@ class Estimator(ABC):
             raise ValueError(f"{self.name}: initial pose must be a finite 4×4 transform")
         self._T = T.copy()
         self._time = float(time)
+        self._ready = True
 
     @property
     def T_base_platform(self) -> np.ndarray:
@@ -89,7 +92,7 @@ class Estimator(ABC):
         return self._T.copy()
 
     def _check_reset(self) -> None:
-        if not np.all(np.isfinite(self._T)):
+        if not self._ready:
             raise RuntimeError(f"{self.name}: call reset(T_base_platform0) before update()")
 
     def _held(self, m: Measurement, *flags: str, **extra) -> PoseEstimate:

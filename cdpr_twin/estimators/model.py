@@ -34,7 +34,7 @@ from cdpr_twin.estimators.base import (
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import elastic_elongation, lengths_and_jacobian
 from cdpr_twin.measurement import Measurement
-from cdpr_twin.se3 import matrix_from_quat_wxyz, quat_wxyz_from_matrix, transform
+from cdpr_twin.se3 import exp_coefficients, matrix_from_quat_wxyz, quat_wxyz_from_matrix, transform
 
 Backend = Literal["fast", "scipy"]
 N_USED = 6
@@ -42,6 +42,7 @@ N_USED = 6
 
 Pose = tuple[float, ...]
 """A pose as 12 floats: R row-major (9), then t (3)."""
+_POSE_IDX = (0, 1, 2, 4, 5, 6, 8, 9, 10, 3, 7, 11)  # from the first 3 rows of T, row-major
 
 
 def _kernel(
@@ -100,14 +101,7 @@ def _compose_exp(pose: Pose, d: list[float]) -> Pose:
     """
     vx, vy, vz, wx, wy, wz = d
     th2 = wx * wx + wy * wy + wz * wz
-    if th2 < 1e-4:  # Taylor series, accurate to round-off below θ = 1e-2
-        t4 = th2 * th2
-        a = 1.0 - th2 / 6.0 + t4 / 120.0
-        b = 0.5 - th2 / 24.0 + t4 / 720.0
-        c = 1.0 / 6.0 - th2 / 120.0 + t4 / 5040.0
-    else:
-        th = math.sqrt(th2)
-        a, b, c = math.sin(th) / th, (1.0 - math.cos(th)) / th2, (th - math.sin(th)) / (th2 * th)
+    a, b, c = exp_coefficients(th2)
     # dR = I + a[ω]× + b[ω]×², V = I + b[ω]× + c[ω]×², with [ω]×² = ωωᵀ − θ² I
     xx, yy, zz, xy, xz, yz = wx * wx, wy * wy, wz * wz, wx * wy, wx * wz, wy * wz
     d00, d11, d22 = 1.0 + b * (xx - th2), 1.0 + b * (yy - th2), 1.0 + b * (zz - th2)
@@ -179,8 +173,8 @@ def _newton(
     max_iterations: int = 30,
     tol: float = 1e-12,
 ) -> tuple[np.ndarray, float, int]:
-    pose: Pose = tuple(T0[:3, :3].ravel().tolist() + T0[:3, 3].tolist())
-    target = goal.tolist()
+    pose: Pose = tuple(T0[:3].ravel().tolist()[i] for i in _POSE_IDX)
+    target = goal.tolist() if isinstance(goal, np.ndarray) else goal
     lengths, rows = _kernel(cables, pulley, pose)
     r = [x - y for x, y in zip(lengths, target, strict=True)]
     cost = sum(x * x for x in r)
@@ -205,9 +199,15 @@ def _newton(
         else:
             break
         pose, rows, r, cost = pose_new, rows_new, r_new, cost_new
-    T = np.eye(4)
-    T[:3, :3] = np.reshape(pose[:9], (3, 3))
-    T[:3, 3] = pose[9:]
+    p = pose
+    T = np.array(
+        [
+            [p[0], p[1], p[2], p[9]],
+            [p[3], p[4], p[5], p[10]],
+            [p[6], p[7], p[8], p[11]],
+            [0.0, 0.0, 0.0, 1.0],
+        ]
+    )
     return T, max(map(abs, r)), it
 
 
@@ -277,14 +277,15 @@ class ModelEstimator(Estimator):
             return lengths
         return lengths + elastic_elongation(lengths, tensions, self.geometry.es, self.tension0)
 
-    def solve(self, targets: np.ndarray, cables: np.ndarray, T0: np.ndarray):
-        """Solve for the pose matching ``targets`` on ``cables`` from ``T0``.
+    def solve(self, targets: np.ndarray, cables: list[int], T0: np.ndarray):
+        """Solve for the pose matching ``targets`` on ``cables`` (indices from 0) from ``T0``.
 
         Returns:
             ``(T, residual, iterations)``.
         """
         if self.backend == "fast":
-            return _newton([self._cables[i] for i in cables], self.pulley, targets[cables], T0)
+            goal = [targets[i] for i in cables] if isinstance(targets, list) else targets[cables]
+            return _newton([self._cables[i] for i in cables], self.pulley, goal, T0)
         cables = np.asarray(cables)
         g = self.geometry
         r = g.pulley_radius[cables] if self.pulley else None
@@ -304,8 +305,8 @@ class ModelEstimator(Estimator):
         if sum(t > self.taut_threshold for t in tl) < N_USED:
             return self._held(m, FEW_TAUT_CABLES, cables=used)
         targets = self.corrected_lengths(lengths, tensions)
-        T, residual, iterations = self.solve(targets, np.array(cables), self._T)
-        if not (residual <= self.max_residual and np.all(np.isfinite(T))):
+        T, residual, iterations = self.solve(targets, cables, self._T)
+        if not (residual <= self.max_residual and math.isfinite(T.sum())):
             return self._held(
                 m, NOT_CONVERGED, cables=used, residual=residual, iterations=iterations
             )

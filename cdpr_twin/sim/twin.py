@@ -55,6 +55,14 @@ _BAD_WARNINGS = (
 )
 
 
+def _as_slice(ids: np.ndarray) -> slice | np.ndarray:
+    """A slice when ids are consecutive (assignments through it are views), else the ids."""
+    ids = np.asarray(ids)
+    if ids.size and np.all(np.diff(ids) == 1):
+        return slice(int(ids[0]), int(ids[-1]) + 1)
+    return ids
+
+
 class SimulationError(RuntimeError):
     """The simulation diverged or was asked for something it cannot do."""
 
@@ -148,6 +156,20 @@ class Twin:
         self._a = self.true_geometry.a_base.copy()
         self._rates = np.zeros(N_CABLES)
         self._twist: np.ndarray | None = None
+        self._anchors = _as_slice(self._anchors)
+        self._mocap = _as_slice(self._mocap)
+        self._actuators = _as_slice(self._actuators)
+        self._quat_buf = np.zeros((N_CABLES, 4))
+        self._gain = m.actuator_gainprm[self._actuators]  # views when the ids are contiguous
+        self._bias = m.actuator_biasprm[self._actuators]
+        if not (
+            np.shares_memory(self._gain, m.actuator_gainprm)
+            and np.shares_memory(self._bias, m.actuator_biasprm)
+        ):
+            raise ModelError(f"{self.model_path}: the winch actuators must be declared together")
+        # force = k·l0 + k·h − k·L − η·k·L̇: the bias per unit stiffness
+        self._bias_unit = np.array([self._entry, -1.0, -self._damping_time])
+        self._ctrl_lo, self._ctrl_hi = m.actuator_ctrlrange[self._actuators].T.copy()
         self._tag_site = name2id(m, mujoco.mjtObj.mjOBJ_SITE, TAG_SITE)
 
         self._renderer: cam_mod.CameraRenderer | None = None
@@ -236,20 +258,22 @@ class Twin:
 
     # ------------------------------------------------------------------ physics
     def _align(self) -> None:
-        """Point each swivel at its B_i (eq. 20) and set the cable stiffness E·S/l0."""
-        d, m = self.data, self.model
+        """Point each swivel at its B_i (eq. 20) and set the cable stiffness E·S/l0.
+
+        Called every ``align_every`` physics steps: the hot path of the twin (index arrays
+        are slices wherever the model's ids are contiguous, so the assignments are views).
+        """
+        d = self.data
         lvec = d.site_xpos[self._anchors] - self._a
         half = 0.5 * np.arctan2(lvec[:, 1], lvec[:, 0])
-        quat = np.zeros((N_CABLES, 4))
+        quat = self._quat_buf
         quat[:, 0] = np.cos(half)
         quat[:, 3] = np.sin(half)
         d.mocap_quat[self._mocap] = quat
         l0 = d.act[self._actuators]
         k = np.divide(self._es, l0, out=np.zeros(N_CABLES), where=l0 > 0)  # 0 before reset()
-        m.actuator_gainprm[self._actuators, 0] = k
-        m.actuator_biasprm[self._actuators, 0] = k * self._entry
-        m.actuator_biasprm[self._actuators, 1] = -k
-        m.actuator_biasprm[self._actuators, 2] = -self._damping_time * k
+        self._gain[:, 0] = k
+        self._bias[:, :3] = k[:, None] * self._bias_unit
 
     def _step(self, n: int) -> None:
         while n > 0:
@@ -262,7 +286,7 @@ class Twin:
     def _check_state(self) -> None:
         d = self.data
         bad = [mujoco.mjtWarning(w).name for w in _BAD_WARNINGS if d.warning[w].number > 0]
-        if bad or not np.all(np.isfinite(d.qpos)) or not np.all(np.isfinite(d.qvel)):
+        if bad or not math.isfinite(d.qpos.sum() + d.qvel.sum()):
             raise SimulationError(
                 f"the simulation diverged at t = {d.time:.4f} s (MuJoCo warnings: {bad or 'none'});"
                 " lower the timestep or the commanded cable rates"
@@ -342,23 +366,23 @@ class Twin:
                 "call Twin.reset(T_base_platform) before advance(): the "
                 "winches have paid out no cable yet"
             )
-        rates = np.asarray(cable_rates, dtype=float)
+        rates = np.array(cable_rates, dtype=float)
         if rates.shape != (N_CABLES,):
             raise ValueError(f"cable_rates must have shape ({N_CABLES},), got {rates.shape}")
-        if not np.all(np.isfinite(rates)):
+        if not math.isfinite(rates.sum()):
             raise ValueError(
                 f"cable_rates must be finite, got {rates.tolist()} (NaN or inf "
                 "from the controller?)"
             )
-        lo, hi = self.model.actuator_ctrlrange[self._actuators].T
-        if np.any(rates < lo) or np.any(rates > hi):
+        lo, hi = self._ctrl_lo, self._ctrl_hi
+        if (rates < lo).any() or (rates > hi).any():
             raise ValueError(
                 f"cable rates {np.round(rates, 4).tolist()} m/s exceed the winches' "
                 f"range [{lo.min()}, {hi.max()}] m/s"
             )
         if twist_platform is not None:
-            twist_platform = np.asarray(twist_platform, dtype=float)
-            if twist_platform.shape != (6,) or not np.all(np.isfinite(twist_platform)):
+            twist_platform = np.array(twist_platform, dtype=float)
+            if twist_platform.shape != (6,) or not math.isfinite(twist_platform.sum()):
                 raise ValueError(f"twist_platform must be 6 finite numbers, got {twist_platform}")
         n = round(duration / self.timestep)
         if n < 0 or not math.isclose(n * self.timestep, duration, rel_tol=1e-9, abs_tol=1e-12):
@@ -371,8 +395,8 @@ class Twin:
                 f"these rates would run winch lengths to {np.round(l0_end, 4)} m, "
                 f"outside the winch range {self._act_range[0].tolist()} m"
             )
-        self._rates = rates.copy()
-        self._twist = None if twist_platform is None else twist_platform.copy()
+        self._rates = rates
+        self._twist = twist_platform
         self.data.ctrl[self._actuators] = rates
         self._step(n)
 
