@@ -24,9 +24,19 @@ class DeviationTrack:
     invalid_updates: int = 0
     flags: Counter = field(default_factory=Counter)
 
-    def add(self, estimate: PoseEstimate, T_true: np.ndarray) -> tuple[float, float]:
-        """Account one estimate; returns its (translation [m], rotation [rad]) deviation."""
-        dt, dr = pose_distance(estimate.T_base_platform, T_true)
+    def add(
+        self,
+        estimate: PoseEstimate,
+        T_true: np.ndarray,
+        distance: tuple[float, float] | None = None,
+    ) -> tuple[float, float]:
+        """Account one estimate; returns its (translation [m], rotation [rad]) deviation.
+
+        ``distance`` may pass the deviation when it was computed already (vectorised).
+        """
+        dt, dr = (
+            distance if distance is not None else pose_distance(estimate.T_base_platform, T_true)
+        )
         if dt > self.max_translation:
             self.max_translation, self.max_translation_time = dt, estimate.time
         if dr > self.max_rotation:
@@ -49,6 +59,24 @@ class DeviationTrack:
             "invalid_updates": self.invalid_updates,
             "flags": dict(sorted(self.flags.items())),
         }
+
+
+def pose_distances(T_a: np.ndarray, T_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vectorised :func:`cdpr_twin.se3.pose_distance` over stacks of poses (n, 4, 4).
+
+    Returns:
+        ``(translations [m], rotations [rad])``, each (n,).
+    """
+    d = T_a[:, :3, 3] - T_b[:, :3, 3]
+    R = np.einsum("nji,njk->nik", T_a[:, :3, :3], T_b[:, :3, :3])  # R_aᵀ R_b
+    sin2 = np.linalg.norm(
+        np.stack(
+            [R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=1
+        ),
+        axis=1,
+    )
+    cos2 = R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2] - 1.0
+    return np.linalg.norm(d, axis=1), np.arctan2(sin2, cos2)
 
 
 def pose_error(T_a: np.ndarray, T_b: np.ndarray) -> dict:

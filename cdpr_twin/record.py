@@ -36,7 +36,6 @@ import numpy as np
 from cdpr_twin.controllers.base import Command
 from cdpr_twin.estimators.base import PoseEstimate
 from cdpr_twin.measurement import Measurement
-from cdpr_twin.se3 import quat_wxyz_from_matrix
 from cdpr_twin.vision import CameraIntrinsics
 
 SLACK_TENSION = 0.5
@@ -72,10 +71,6 @@ class SceneInfo:
 
 def _pose_columns(prefix: str) -> list[str]:
     return [f"{prefix}_{k}" for k in ("x", "y", "z", "qw", "qx", "qy", "qz")]
-
-
-def _pose_values(T: np.ndarray) -> list[float]:
-    return [*T[:3, 3].tolist(), *quat_wxyz_from_matrix(T[:3, :3]).tolist()]
 
 
 def quat_xyzw_from_matrices(R: np.ndarray) -> np.ndarray:
@@ -120,13 +115,20 @@ def write_json_atomic(path: Path, data: dict) -> None:
 
 
 class CsvRecorder:
-    """One row per control tick: time, truth, every estimate, sensors, commands, tag pose."""
+    """One row per control tick: time, truth, every estimate, sensors, commands, tag pose.
 
-    def __init__(self, path: Path, estimators: tuple[str, ...], n_cables: int) -> None:
+    Rows are buffered and written (and flushed) every ``flush_every`` ticks and at
+    :meth:`close`, with quaternions converted for the whole batch at once.
+    """
+
+    def __init__(
+        self, path: Path, estimators: tuple[str, ...], n_cables: int, flush_every: int = 25
+    ) -> None:
         self.path = path
         self._partial = path.with_name(path.name + ".partial")
         self._file = self._partial.open("w", newline="", encoding="utf-8")
         self.estimators = estimators
+        self.flush_every = flush_every
         header = ["t", *_pose_columns("true")]
         for name in estimators:
             header += [*_pose_columns(name), f"{name}_valid"]
@@ -135,6 +137,7 @@ class CsvRecorder:
         header += [f"rate_{i + 1}" for i in range(n_cables)]
         header += [*_pose_columns("plan"), *_pose_columns("tag"), "status"]
         self._file.write(",".join(header) + "\n")
+        self._rows: list[tuple] = []
         self.rows = 0
 
     def tick(
@@ -144,22 +147,55 @@ class CsvRecorder:
         command: Command | None,
         plan: np.ndarray | None,
     ) -> None:
-        """Write one row (floats in their shortest exact form) and flush it."""
-        row: list = [m.time, *_pose_values(m.T_base_platform_true)]
-        for name in self.estimators:
-            e = estimates[name]
-            row += [*_pose_values(e.T_base_platform), int(e.valid)]
-        row += [*m.tensions.tolist(), *m.cable_lengths.tolist(), *m.cable_rates.tolist()]
-        row += _pose_values(plan) if plan is not None else [""] * 7
-        row += _pose_values(m.tag.T_cam_tag) if m.tag is not None else [""] * 7
-        row.append(command.status if command is not None else "start")
-        self._file.write(",".join(map(str, row)) + "\n")  # str(float) is its exact repr
+        """Buffer one row."""
+        poses = [
+            m.T_base_platform_true,
+            *(estimates[n].T_base_platform for n in self.estimators),
+            plan,
+            None if m.tag is None else m.tag.T_cam_tag,
+        ]
+        valid = [int(estimates[n].valid) for n in self.estimators]
+        sensors = [*m.tensions.tolist(), *m.cable_lengths.tolist(), *m.cable_rates.tolist()]
+        status = command.status if command is not None else "start"
+        self._rows.append((m.time, poses, valid, sensors, status))
+        if len(self._rows) >= self.flush_every:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the buffered rows (floats in their shortest exact form) and flush the file."""
+        if not self._rows:
+            return
+        n_poses = len(self._rows[0][1])
+        T = np.tile(np.eye(4), (len(self._rows), n_poses, 1, 1))
+        present = np.ones((len(self._rows), n_poses), dtype=bool)
+        for i, (_, poses, *_) in enumerate(self._rows):
+            for j, P in enumerate(poses):
+                if P is None:
+                    present[i, j] = False
+                else:
+                    T[i, j] = P
+        q = quat_xyzw_from_matrices(T[:, :, :3, :3].reshape(-1, 3, 3)).reshape(*present.shape, 4)
+        pose7 = np.concatenate([T[:, :, :3, 3], q[..., [3, 0, 1, 2]]], axis=2).tolist()
+        lines = []
+        k = len(self.estimators)
+        for i, (t, _, valid, sensors, status) in enumerate(self._rows):
+            cells = [repr(t), *map(repr, pose7[i][0])]
+            for j in range(k):
+                cells += [*map(repr, pose7[i][1 + j]), str(valid[j])]
+            cells += map(repr, sensors)
+            for j in (k + 1, k + 2):  # plan, tag: empty when absent
+                cells += map(repr, pose7[i][j]) if present[i, j] else [""] * 7
+            cells.append(status)
+            lines.append(",".join(cells))
+        self._file.write("\n".join(lines) + "\n")
         self._file.flush()
-        self.rows += 1
+        self.rows += len(self._rows)
+        self._rows = []
 
     def close(self) -> None:
-        """Flush, close and give the file its final name."""
+        """Write what is buffered, close, and give the file its final name."""
         if not self._file.closed:
+            self.flush()
             self._file.close()
             os.replace(self._partial, self.path)
 
@@ -176,7 +212,7 @@ class RerunRecorder:
         recording_id: str,
         spawn: bool = False,
         jpeg_quality: int = 80,
-        flush_every: int = 25,
+        flush_every: int | None = None,
     ) -> None:
         import rerun as rr
 

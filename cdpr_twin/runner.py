@@ -11,7 +11,7 @@ import numpy as np
 
 from cdpr_twin.controllers import Command, Controller, make_controller
 from cdpr_twin.estimators import Estimator, PoseEstimate, make_estimator
-from cdpr_twin.metrics import DeviationTrack, pose_error
+from cdpr_twin.metrics import DeviationTrack, pose_distances, pose_error
 from cdpr_twin.record import CsvRecorder, RerunRecorder, SceneInfo, write_json_atomic
 from cdpr_twin.scenario import Scenario, ScenarioError
 from cdpr_twin.se3 import inverse, pose_distance, vector_from_pose
@@ -175,7 +175,13 @@ def run(
 
     def record(m, estimates: dict[str, PoseEstimate], command: Command | None) -> None:
         plan = controller.planned_pose(m.time)
-        deviations = {n: tracks[n].add(e, m.T_base_platform_true) for n, e in estimates.items()}
+        dts, drs = pose_distances(
+            np.array([e.T_base_platform for e in estimates.values()]), m.T_base_platform_true[None]
+        )
+        deviations = {
+            n: tracks[n].add(e, m.T_base_platform_true, (float(a), float(b)))
+            for (n, e), a, b in zip(estimates.items(), dts, drs, strict=True)
+        }
         if csv_rec is not None:
             csv_rec.tick(m, estimates, command, plan)
         if rrd_rec is not None:
