@@ -53,6 +53,112 @@ def _demo(args: argparse.Namespace) -> int:
     return 0
 
 
+class _Progress:
+    """A one-line progress bar on stderr (a line per 10 % when stderr is not a terminal)."""
+
+    def __init__(self, label: str, stream=sys.stderr) -> None:
+        self.label, self.stream = label, stream
+        self.tty = stream.isatty()
+        self._last = -1
+
+    def __call__(self, fraction: float, t: float) -> None:
+        pct = int(100 * fraction)
+        if self.tty:
+            if pct != self._last:
+                bar = "#" * (pct // 4) + "." * (25 - pct // 4)
+                self.stream.write(f"\r{self.label} [{bar}] {pct:3d}%  t = {t:6.2f} s")
+                self.stream.flush()
+        elif pct // 10 != self._last // 10:
+            self.stream.write(f"{self.label}: {pct}% (t = {t:.2f} s)\n")
+        self._last = pct
+
+    def done(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
+
+
+def _table(summary: dict) -> str:
+    """The end-of-run table: deviations of every estimator from ground truth (Fig. 5b/7b)."""
+    lines = [
+        f"{'estimator':22s} {'max Δt [mm]':>11s} {'at [s]':>7s} {'max Δθ [°]':>10s} "
+        f"{'final Δt [mm]':>13s} {'final Δθ [°]':>12s} {'invalid':>7s}"
+    ]
+    for name, e in summary["estimators"].items():
+        mark = " (in loop)" if name == summary["in_loop"] else ""
+        lines.append(
+            f"{name + mark:22s} {e['max_translation_m'] * 1e3:11.3f} "
+            f"{e['max_translation_time_s']:7.2f} {e['max_rotation_deg']:10.3f} "
+            f"{e['final_translation_m'] * 1e3:13.3f} {e['final_rotation_deg']:12.3f} "
+            f"{e['invalid_updates']:7d}"
+        )
+    return "\n".join(lines)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from cdpr_twin.runner import run
+    from cdpr_twin.scenario import ScenarioError, load_scenario
+    from cdpr_twin.sim import SimulationError
+
+    try:
+        scenario = load_scenario(args.scenario).with_overrides(
+            seed=args.seed,
+            in_loop=args.in_loop,
+            duration=args.duration,
+            camera=False if args.no_camera else None,
+        )
+    except ScenarioError as exc:
+        print(f"cdpr-twin: error: {exc}", file=sys.stderr)
+        return 2
+    out = args.out if args.out is not None else Path("runs") / scenario.name
+    progress = _Progress(scenario.name)
+    try:
+        result = run(scenario, out, progress=progress, spawn=args.spawn)
+    except ScenarioError as exc:
+        print(f"cdpr-twin: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        progress.done()
+        print(
+            f'cdpr-twin: interrupted; partial outputs (flushed, marked "interrupted") in {out}',
+            file=sys.stderr,
+        )
+        return 130
+    except (SimulationError, ValueError) as exc:
+        progress.done()
+        print(
+            f"cdpr-twin: the run failed: {exc}\n(outputs up to the failure are in {out})",
+            file=sys.stderr,
+        )
+        return 1
+    progress.done()
+    s = result.summary
+    print(
+        f"{scenario.name}: {s['status']} after {s['simulated_time_s']:.2f} s simulated in "
+        f"{result.wall_time:.1f} s ({result.real_time_factor:.1f}× real time)"
+    )
+    print(_table(s))
+    if s["final_error_vs_goal"] is not None:
+        err = s["final_error_vs_goal"]
+        print(
+            f"platform ended {err['translation_m'] * 1e3:.2f} mm / {err['rotation_deg']:.3f}° "
+            f"from its goal {np.round(s['goal_pose'], 4).tolist()}"
+        )
+    for end in s["segment_ends"]:
+        err = end["truth_vs_waypoint"]
+        print(
+            f"  t = {end['time_s']:5.2f} s: {err['translation_m'] * 1e3:7.2f} mm / "
+            f"{err['rotation_deg']:.3f}° from waypoint {np.round(end['waypoint'], 4).tolist()}"
+        )
+    if "pbvs" in s and s["pbvs"]["final_tag_error"] is not None:
+        e = s["pbvs"]["final_tag_error"]
+        print(
+            f"final tag pose error (detected): {e['translation_m'] * 1e3:.2f} mm / "
+            f"{e['rotation_deg']:.3f}°"
+        )
+    print(f"outputs: {out}/recording.rrd, timeseries.csv, summary.json")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``cdpr-twin`` command."""
     parser = argparse.ArgumentParser(prog="cdpr-twin", description=__doc__)
@@ -70,6 +176,17 @@ def main(argv: list[str] | None = None) -> int:
     demo.add_argument("--noise", type=float, default=0.24, help="tension noise std [N]")
     demo.add_argument("--seed", type=int, default=0, help="sensor noise seed")
     demo.set_defaults(func=_demo)
+    runp = sub.add_parser("run", help="run a scenario headless and write its outputs")
+    runp.add_argument("scenario", type=Path, help="scenario file (scenarios/*.toml)")
+    runp.add_argument(
+        "--out", type=Path, default=None, help="output directory (default: runs/<scenario name>)"
+    )
+    runp.add_argument("--seed", type=int, default=None, help="run seed (sensor noise)")
+    runp.add_argument("--in-loop", default=None, help="estimator closing the loop")
+    runp.add_argument("--duration", type=float, default=None, help="run length [s]")
+    runp.add_argument("--no-camera", action="store_true", help="no rendering (drops 'image')")
+    runp.add_argument("--spawn", action="store_true", help="also stream to a live Rerun viewer")
+    runp.set_defaults(func=_run)
     args = parser.parse_args(argv)
     return args.func(args)
 

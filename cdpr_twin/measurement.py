@@ -15,7 +15,8 @@ class Measurement:
 
     Attributes:
         time: simulation time [s].
-        cable_lengths: (m,) encoder readings: each winch's unstretched paid-out length l0_i [m].
+        cable_lengths: (m,) encoder readings: each winch's unstretched paid-out length l0_i,
+            homed at the start pose to the nominal model's value there [m].
         tensions: (m,) tension-sensor readings at B_i, noise included [N].
         cable_rates: (m,) last commanded winch rates dl0/dt [m/s].
         twist_platform: (6,) last commanded platform twist ᵖv_p = [v, ω] in F_p [m/s, rad/s],

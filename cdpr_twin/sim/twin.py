@@ -82,6 +82,11 @@ class Twin:
         tau_min: lowest tension of the distribution used by :meth:`reset` [N].
         tau_max: highest tension of that distribution [N].
         timestep: physics step [s]; ``None`` keeps the model file's.
+        home_encoders: at :meth:`reset`, zero the encoders the way a real robot is homed at a
+            known pose: they then read the rest lengths the *nominal* model predicts there (with
+            the measured tensions), plus whatever the winches pay out afterwards. Without
+            homing they read the true rest lengths, which a deviated robot's nominal model
+            cannot match even at the start.
 
     Raises:
         ModelError: when the model file is missing, malformed or not ACROBOT-shaped.
@@ -98,6 +103,7 @@ class Twin:
         tau_min: float = 2.0,
         tau_max: float = 75.0,
         timestep: float | None = None,
+        home_encoders: bool = True,
     ) -> None:
         if not (np.isfinite(tension_noise_std) and tension_noise_std >= 0):
             raise ValueError(f"tension_noise_std must be ≥ 0 N, got {tension_noise_std}")
@@ -180,6 +186,8 @@ class Twin:
         self._cam = cam_mod.camera_id(m)
         self.intrinsics = cam_mod.intrinsics(m)
         self.settle_error: tuple[float, float] = (math.nan, math.nan)
+        self.home_encoders = bool(home_encoders)
+        self._encoder_offset = np.zeros(N_CABLES)
         self._was_reset = False
 
     # ------------------------------------------------------------------ lifecycle
@@ -216,6 +224,11 @@ class Twin:
     def rest_lengths(self) -> np.ndarray:
         """Unstretched lengths l0 paid out by the winches (the encoders' values). (m,) [m]."""
         return self.data.act[self._actuators].copy()
+
+    @property
+    def encoder_lengths(self) -> np.ndarray:
+        """What the winch encoders read: rest lengths plus the homing offset. (m,) [m]."""
+        return self.rest_lengths + self._encoder_offset
 
     @property
     def cable_lengths(self) -> np.ndarray:
@@ -341,6 +354,11 @@ class Twin:
         self._step(round(settle_time / self.timestep))
         self.settle_error = pose_distance(T, self.T_base_platform)
         self.data.time = 0.0
+        self._encoder_offset = np.zeros(N_CABLES)
+        if self.home_encoders:
+            g = self.nominal_geometry
+            l0_nominal = g.es * cable_lengths(g, T, "pulley") / (g.es + self.tensions)
+            self._encoder_offset = l0_nominal - self.rest_lengths
 
     def advance(
         self,
@@ -428,7 +446,7 @@ class Twin:
             tag = self._detector.detect(image)
         return Measurement(
             time=self.time,
-            cable_lengths=self.rest_lengths,
+            cable_lengths=self.encoder_lengths,
             tensions=tensions,
             cable_rates=self._rates.copy(),
             twist_platform=None if self._twist is None else self._twist.copy(),
