@@ -138,6 +138,8 @@ class CsvRecorder:
         header += [*_pose_columns("plan"), *_pose_columns("tag"), "status"]
         self._file.write(",".join(header) + "\n")
         self._rows: list[tuple] = []
+        self._formats: dict[tuple[bool, bool], str] = {}
+        self.n_cables = n_cables
         self.rows = 0
 
     def tick(
@@ -161,8 +163,23 @@ class CsvRecorder:
         if len(self._rows) >= self.flush_every:
             self.flush()
 
+    def _row_format(self, has_plan: bool, has_tag: bool) -> str:
+        """The printf format of one row (%.17g round-trips every float exactly)."""
+        key = (has_plan, has_tag)
+        if key not in self._formats:
+            f7, empty7 = ["%.17g"] * 7, [""] * 7
+            cells = ["%.17g", *f7]
+            for _ in self.estimators:
+                cells += [*f7, "%d"]
+            cells += ["%.17g"] * (3 * self.n_cables)
+            cells += f7 if has_plan else empty7
+            cells += f7 if has_tag else empty7
+            cells.append("%s")
+            self._formats[key] = ",".join(cells)
+        return self._formats[key]
+
     def flush(self) -> None:
-        """Write the buffered rows (floats in their shortest exact form) and flush the file."""
+        """Write the buffered rows (floats exactly, to 17 digits) and flush the file."""
         if not self._rows:
             return
         n_poses = len(self._rows[0][1])
@@ -175,18 +192,21 @@ class CsvRecorder:
                 else:
                     T[i, j] = P
         q = quat_xyzw_from_matrices(T[:, :, :3, :3].reshape(-1, 3, 3)).reshape(*present.shape, 4)
-        pose7 = np.concatenate([T[:, :, :3, 3], q[..., [3, 0, 1, 2]]], axis=2).tolist()
-        lines = []
+        pose7 = np.concatenate([T[:, :, :3, 3], q[..., [3, 0, 1, 2]]], axis=2)
         k = len(self.estimators)
+        lines = []
         for i, (t, _, valid, sensors, status) in enumerate(self._rows):
-            cells = [repr(t), *map(repr, pose7[i][0])]
+            has_plan, has_tag = bool(present[i, k + 1]), bool(present[i, k + 2])
+            values = [t, *pose7[i, 0].tolist()]
             for j in range(k):
-                cells += [*map(repr, pose7[i][1 + j]), str(valid[j])]
-            cells += map(repr, sensors)
-            for j in (k + 1, k + 2):  # plan, tag: empty when absent
-                cells += map(repr, pose7[i][j]) if present[i, j] else [""] * 7
-            cells.append(status)
-            lines.append(",".join(cells))
+                values += [*pose7[i, 1 + j].tolist(), valid[j]]
+            values += sensors
+            if has_plan:
+                values += pose7[i, k + 1].tolist()
+            if has_tag:
+                values += pose7[i, k + 2].tolist()
+            values.append(status)
+            lines.append(self._row_format(has_plan, has_tag) % tuple(values))
         self._file.write("\n".join(lines) + "\n")
         self._file.flush()
         self.rows += len(self._rows)

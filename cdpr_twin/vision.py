@@ -225,7 +225,7 @@ class TagDetector:
         tag_size: float = 0.04,
         tag_id: int = 0,
         family: str = "tag36h11",
-        quad_decimate: float = 1.0,
+        quad_decimate: float = 2.0,
         nthreads: int = 1,
         refine_corners: bool = True,
     ) -> None:

@@ -111,7 +111,7 @@ def short_run(tmp_path_factory):
 
 
 def test_timeseries_has_one_row_per_tick(short_run):
-    out, result, s = short_run
+    out, _result, s = short_run
     lines = (out / "timeseries.csv").read_text().splitlines()
     ticks = round(s.duration * s.model.control_rate)
     assert len(lines) == 1 + ticks + 1  # header, the start, one row per tick

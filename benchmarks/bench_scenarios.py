@@ -1,0 +1,83 @@
+"""Real-time factors of the paper's scenarios, against a physics-only baseline.
+
+Run: ``python benchmarks/bench_scenarios.py [--repeats N]``.
+
+For each case it runs the full pipeline (sense → six estimators → controller → step → CSV and
+Rerun recording) and reports simulated seconds per wall-clock second. The baseline, measured in
+the same run, is the twin alone stepping the same duration at zero rates with the camera off:
+the ratio says what the rest of the loop costs on top of physics. Bars (issue 4): ≥ 20× real
+time without camera, ≥ 1× with camera, on a 2-core machine; aims 100× and 3×.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import cdpr_twin  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
+from cdpr_twin.runner import run
+from cdpr_twin.scenario import load_scenario
+from cdpr_twin.sim import Twin
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def physics_only(seconds: float) -> float:
+    """Real-time factor of the twin alone (camera off, zero rates)."""
+    s = load_scenario(ROOT / "scenarios" / "paper_open_loop.toml")
+    with Twin(
+        s.model.file,
+        deviations=s.truth,
+        camera=False,
+        align_every=s.model.align_every,
+        timestep=s.model.timestep,
+    ) as twin:
+        twin.reset(s.start_pose)
+        ticks = round(seconds * s.model.control_rate)
+        t0 = time.perf_counter()
+        for _ in range(ticks):
+            twin.advance(s.model.control_period, np.zeros(8))
+            twin.sense()
+        return seconds / (time.perf_counter() - t0)
+
+
+def scenario_rtf(path: Path, camera: bool, out: Path, **overrides) -> tuple[float, dict]:
+    s = load_scenario(path).with_overrides(camera=camera, **overrides)
+    result = run(s, out)
+    return result.real_time_factor, result.summary
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    cases = [
+        ("paper_open_loop, no camera", ROOT / "scenarios/paper_open_loop.toml", False, 20.0, 100),
+        ("paper_open_loop, camera", ROOT / "scenarios/paper_open_loop.toml", True, 1.0, 3),
+        ("paper_pbvs (control in loop), camera", ROOT / "scenarios/paper_pbvs.toml", True, 1.0, 3),
+    ]
+    base = statistics.median(physics_only(10.0) for _ in range(args.repeats))
+    print(f"cdpr-twin scenario benchmark — median of {args.repeats} runs, outputs written")
+    print(f"baseline: twin physics alone (camera off) {base:.1f}× real time\n")
+    print(f"{'case':40s} {'sim [s]':>8s} {'RTF':>7s} {'bar':>5s} {'aim':>5s} {'vs physics':>10s}")
+    with tempfile.TemporaryDirectory() as tmp:
+        for label, path, camera, bar, aim in cases:
+            rtfs, summary = [], {}
+            for k in range(args.repeats):
+                rtf, summary = scenario_rtf(path, camera, Path(tmp) / f"{label[:8]}{k}")
+                rtfs.append(rtf)
+            rtf = statistics.median(rtfs)
+            print(
+                f"{label:40s} {summary['simulated_time_s']:8.2f} {rtf:6.1f}× "
+                f"{'PASS' if rtf >= bar else 'FAIL':>5s} {'yes' if rtf >= aim else 'no':>5s} "
+                f"{rtf / base:9.2f}×"
+            )
+
+
+if __name__ == "__main__":
+    main()
