@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+import multiprocessing
 import os
 import shutil
 import subprocess
@@ -80,7 +81,11 @@ def _pbvs(in_loop: str) -> dict:
 
 @pytest.mark.slow
 def test_pbvs_converges_with_every_estimator_in_the_loop(open_loop_deviated):
-    with ProcessPoolExecutor(max_workers=2) as pool:
+    # spawn, not fork: this process already runs Rerun and EGL threads, and a forked child
+    # inherits their locks held (it deadlocks)
+    with ProcessPoolExecutor(
+        max_workers=2, mp_context=multiprocessing.get_context("spawn")
+    ) as pool:
         summaries = dict(zip(ESTIMATORS, pool.map(_pbvs, ESTIMATORS), strict=True))
     open_loop_miss = open_loop_deviated["segment_ends"][0]["truth_vs_waypoint"]
     for name, s in summaries.items():
