@@ -159,6 +159,39 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _reproduce(args: argparse.Namespace) -> int:
+    from cdpr_twin.reproduce import reproduce
+
+    if args.workers is not None and args.workers < 1:
+        print("cdpr-twin: error: --workers must be ≥ 1", file=sys.stderr)
+        return 2
+    failed = []
+
+    def progress(done: int, total: int, record: dict) -> None:
+        mark = "ok" if record["ok"] else "FAILED"
+        if not record["ok"]:
+            failed.append(record)
+        print(f"[{done:3d}/{total}] {record['name']}: {mark} ({record['status']})", file=sys.stderr)
+
+    try:
+        rep = reproduce(args.out, args.workers, args.runs_scale, args.duration, progress)
+    except ValueError as exc:
+        print(f"cdpr-twin: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"cdpr-twin: interrupted; finished runs are in {args.out}/runs", file=sys.stderr)
+        return 130
+    print(
+        f"{rep['runs']['ok']}/{rep['runs']['total']} runs in {rep['wall_time_s'] / 60:.1f} min;"
+        f" report: {args.out}/report.md"
+    )
+    for f in rep["findings"]:
+        print(f"  [{f['verdict']:>9s}] {f['finding']}: {f['twin']}")
+    for r in failed:
+        print(f"failed: {r['name']}: {r['status']}", file=sys.stderr)
+    return 0 if not failed else 1
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``cdpr-twin`` command."""
     parser = argparse.ArgumentParser(prog="cdpr-twin", description=__doc__)
@@ -187,6 +220,24 @@ def main(argv: list[str] | None = None) -> int:
     runp.add_argument("--no-camera", action="store_true", help="no rendering (drops 'image')")
     runp.add_argument("--spawn", action="store_true", help="also stream to a live Rerun viewer")
     runp.set_defaults(func=_run)
+    rep = sub.add_parser("reproduce", help="run the paper's study: runs, figures, report")
+    rep.add_argument(
+        "--out",
+        type=Path,
+        default=Path("runs") / "reproduce",
+        help="output directory (default: runs/reproduce)",
+    )
+    rep.add_argument("--workers", type=int, default=None, help="parallel runs (default: cores)")
+    rep.add_argument(
+        "--runs-scale",
+        type=float,
+        default=1.0,
+        help="scale the repetition counts (10 open-loop, 5 PBVS per estimator)",
+    )
+    rep.add_argument(
+        "--duration", type=float, default=None, help="cap every run's duration [s] (quick checks)"
+    )
+    rep.set_defaults(func=_reproduce)
     args = parser.parse_args(argv)
     return args.func(args)
 

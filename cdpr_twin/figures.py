@@ -1,0 +1,163 @@
+"""The paper's figures from run outputs (matplotlib, no display needed).
+
+Each function takes loaded results and a path, writes a PNG of ``FIGSIZE`` × ``DPI`` pixels and
+returns the path: Fig. 5a/5b (open loop), Fig. 7a/7b (PBVS), Fig. 8 (accuracy at p1).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from cdpr_twin.results import ESTIMATOR_ORDER, Timeseries
+
+FIGSIZE = (12.0, 6.0)
+"""Figure size [in]."""
+DPI = 100
+"""Resolution: figures are 1200 × 600 px."""
+COLORS = {
+    "true": "#1f3fbf",
+    "plan": "#17becf",
+    "control": "#2ca02c",
+    "image": "#e377c2",
+    "model_simple": "#ff7f0e",
+    "model_elastic": "#d62728",
+    "model_pulley": "#9467bd",
+    "model_elastic_pulley": "#8c564b",
+}
+LABELS = {
+    "true": "measured (ground truth)",
+    "plan": "planned",
+    "control": "Est. 1 control",
+    "image": "Est. 2 image",
+    "model_simple": "Est. 3 simple",
+    "model_elastic": "Est. 4 elastic",
+    "model_pulley": "Est. 5 pulley",
+    "model_elastic_pulley": "Est. 6 elastic+pulley",
+}
+
+
+def _save(fig, path: Path) -> Path:
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+    return path
+
+
+def trajectories_3d(curves: dict[str, np.ndarray], title: str, path: Path) -> Path:
+    """3D platform trajectories (Fig. 5a / 7a).
+
+    Args:
+        curves: label → (n, 3) positions [m] (NaN rows are skipped).
+        title: figure title.
+        path: output PNG.
+    """
+    fig = plt.figure(figsize=FIGSIZE)
+    ax = fig.add_subplot(projection="3d")
+    for label, p in curves.items():
+        ok = np.all(np.isfinite(p), axis=1)
+        key = label.split(" ")[0]
+        ax.plot(
+            *(p[ok] * 100).T,
+            label=LABELS.get(label, label),
+            color=COLORS.get(key),
+            lw=2.0 if key == "true" else 1.2,
+        )
+    ax.set_xlabel("x [cm]")
+    ax.set_ylabel("y [cm]")
+    ax.set_zlabel("z [cm]")
+    ax.set_title(title)
+    ax.legend(loc="upper left", fontsize=8)
+    return _save(fig, path)
+
+
+def deviations(
+    series: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
+    title: str,
+    path: Path,
+    marks: tuple[float, ...] = (),
+) -> Path:
+    """Translational and rotational deviation from ground truth over time (Fig. 5b / 7b).
+
+    Args:
+        series: label → (t [s], translation [m], rotation [rad]).
+        title: figure title.
+        path: output PNG.
+        marks: times to mark with dotted vertical lines (segment ends).
+    """
+    fig, (a, b) = plt.subplots(2, 1, figsize=FIGSIZE, sharex=True)
+    for label, (t, dt, dr) in series.items():
+        key = label.split(" ")[0]
+        a.plot(t, dt * 1e3, label=LABELS.get(label, label), color=COLORS.get(key), lw=1)
+        b.plot(t, np.degrees(dr), color=COLORS.get(key), lw=1)
+    for ax in (a, b):
+        for m in marks:
+            ax.axvline(m, color="k", ls=":", lw=1)
+        ax.grid(alpha=0.3)
+    a.set_ylabel("translation [mm]")
+    b.set_ylabel("rotation [deg]")
+    b.set_xlabel("time [s]")
+    a.set_title(title)
+    a.legend(fontsize=8, ncol=3)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def accuracy_bars(groups: dict[str, dict[str, list[float]]], path: Path) -> Path:
+    """Final accuracy at p1: mean and spread over repetitions (Fig. 8).
+
+    Args:
+        groups: bar label → {"translation_m": [...], "rotation_deg": [...]}.
+        path: output PNG.
+    """
+    fig, (a, b) = plt.subplots(1, 2, figsize=FIGSIZE)
+    labels = list(groups)
+    x = np.arange(len(labels))
+    for ax, key, scale, unit in (
+        (a, "translation_m", 1e3, "translation error [mm]"),
+        (b, "rotation_deg", 1.0, "rotation error [deg]"),
+    ):
+        means = [np.mean(groups[k][key]) * scale if groups[k][key] else np.nan for k in labels]
+        stds = [np.std(groups[k][key]) * scale if groups[k][key] else 0.0 for k in labels]
+        colors = ["#7f7f7f" if k.startswith("open") else "#1f77b4" for k in labels]
+        ax.bar(x, means, yerr=stds, capsize=4, color=colors)
+        for xi, k in zip(x, labels, strict=True):
+            ax.plot([xi] * len(groups[k][key]), np.array(groups[k][key]) * scale, "k.", ms=4)
+        ax.set_xticks(x, labels, rotation=30, ha="right", fontsize=8)
+        ax.set_ylabel(unit)
+        ax.grid(axis="y", alpha=0.3)
+    a.set_title("MP pose accuracy at p1 (mean ± std, dots: runs)")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def open_loop_figures(ts: Timeseries, out: Path, marks: tuple[float, ...]) -> list[Path]:
+    """Fig. 5a and 5b of one open-loop run."""
+    names = [n for n in ESTIMATOR_ORDER if ts.has(n)]
+    curves = {"true": ts.poses("true")[:, :3, 3], "plan": ts.poses("plan")[:, :3, 3]}
+    curves.update({n: ts.poses(n)[:, :3, 3] for n in names})
+    series = {n: (ts.t, *ts.deviation(n)) for n in names}
+    return [
+        trajectories_3d(curves, "Open loop: MP trajectories (Fig. 5a)", out / "fig5a.png"),
+        deviations(
+            series, "Open loop: estimate − C-Track truth (Fig. 5b)", out / "fig5b.png", marks
+        ),
+    ]
+
+
+def pbvs_figures(runs: dict[str, Timeseries], out: Path) -> list[Path]:
+    """Fig. 7a and 7b: one PBVS run per in-loop estimator."""
+    curves = {f"{n} in loop": ts.poses("true")[:, :3, 3] for n, ts in runs.items()}
+    series = {f"{n} in loop": (ts.t, *ts.deviation(n)) for n, ts in runs.items()}
+    return [
+        trajectories_3d(
+            curves,
+            "PBVS: measured MP trajectories, each estimator in the loop (Fig. 7a)",
+            out / "fig7a.png",
+        ),
+        deviations(series, "PBVS: in-loop estimate − truth (Fig. 7b)", out / "fig7b.png"),
+    ]
