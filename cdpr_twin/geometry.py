@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cdpr_twin.se3 import check_rigid
+
 GRAVITY = 9.81
 """Standard gravity used by the model files [m/s²]."""
 
@@ -82,16 +84,20 @@ class CdprGeometry:
         """Number of cables m."""
         return self.a_base.shape[0]
 
-    def check_pose_inside(self, T_base_platform: np.ndarray, what: str = "pose") -> None:
-        """Raise ``ValueError`` when the platform's anchor points leave the frame's inner box.
+    def check_pose_inside(self, T_base_platform: np.ndarray, what: str = "pose") -> np.ndarray:
+        """Check a platform pose: rigid, and every anchor point inside the frame's inner box.
+
+        Returns:
+            The pose as a float (4, 4) array.
+
+        Raises:
+            ValueError: naming the problem and the fix.
 
         Args:
             T_base_platform: (4, 4) platform pose.
             what: how to name the pose in the error message.
         """
-        T = np.asarray(T_base_platform, dtype=float)
-        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-            raise ValueError(f"{what} must be a finite 4×4 transform, got {T!r}")
+        T = check_rigid(T_base_platform, what)
         b = self.b_platform @ T[:3, :3].T + T[:3, 3]
         outside = np.any((b < self.frame_min) | (b > self.frame_max), axis=1)
         if np.any(outside) or T[2, 3] >= self.a_base[:, 2].min():
@@ -101,3 +107,4 @@ class CdprGeometry:
                 f"{np.round(self.frame_min, 3).tolist()}…{np.round(self.frame_max, 3).tolist()} m"
                 " (or above the exit points); choose a pose inside the workspace"
             )
+        return T

@@ -251,3 +251,19 @@ def elastic_elongation(
         (m,) elongations [m].
     """
     return (tensions - tensions0) * lengths / es
+
+
+def rest_lengths(lengths: np.ndarray, tensions: np.ndarray, es: np.ndarray) -> np.ndarray:
+    """Unstretched lengths l0 that stretch to ``lengths`` under ``tensions``.
+
+    The inverse of the elastic law τ = E·S/l0 · (L − l0): l0 = E·S·L / (E·S + τ).
+
+    Args:
+        lengths: (m,) stretched lengths L [m].
+        tensions: (m,) tensions τ ≥ 0 [N].
+        es: (m,) axial stiffness E·S [N].
+
+    Returns:
+        (m,) rest lengths [m].
+    """
+    return es * lengths / (es + tensions)

@@ -61,24 +61,6 @@ class DeviationTrack:
         }
 
 
-def pose_distances(T_a: np.ndarray, T_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Vectorised :func:`cdpr_twin.se3.pose_distance` over stacks of poses (n, 4, 4).
-
-    Returns:
-        ``(translations [m], rotations [rad])``, each (n,).
-    """
-    d = T_a[:, :3, 3] - T_b[:, :3, 3]
-    R = np.einsum("nji,njk->nik", T_a[:, :3, :3], T_b[:, :3, :3])  # R_aᵀ R_b
-    sin2 = np.linalg.norm(
-        np.stack(
-            [R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=1
-        ),
-        axis=1,
-    )
-    cos2 = R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2] - 1.0
-    return np.linalg.norm(d, axis=1), np.arctan2(sin2, cos2)
-
-
 def pose_error(T_a: np.ndarray, T_b: np.ndarray) -> dict:
     """JSON-ready distance between two poses (metres and degrees)."""
     dt, dr = pose_distance(T_a, T_b)

@@ -36,6 +36,7 @@ import numpy as np
 from cdpr_twin.controllers.base import Command
 from cdpr_twin.estimators.base import PoseEstimate
 from cdpr_twin.measurement import Measurement
+from cdpr_twin.se3 import quat_xyzw_from_matrices
 from cdpr_twin.vision import CameraIntrinsics
 
 SLACK_TENSION = 0.5
@@ -71,40 +72,6 @@ class SceneInfo:
 
 def _pose_columns(prefix: str) -> list[str]:
     return [f"{prefix}_{k}" for k in ("x", "y", "z", "qw", "qx", "qy", "qz")]
-
-
-def quat_xyzw_from_matrices(R: np.ndarray) -> np.ndarray:
-    """Unit quaternions (x, y, z, w) of a stack of rotation matrices (n, 3, 3), vectorised.
-
-    Shepperd's method, branch by branch on the largest of (trace, R00, R11, R22).
-    """
-    tr = R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2]
-    k = np.argmax(np.stack([tr, R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]], axis=1), axis=1)
-    q = np.empty((len(R), 4))  # w, x, y, z
-    for case in range(4):
-        m = k == case
-        r = R[m]
-        if case == 0:
-            s = 2.0 * np.sqrt(1.0 + tr[m])
-            q[m] = np.column_stack(
-                [
-                    0.25 * s,
-                    (r[:, 2, 1] - r[:, 1, 2]) / s,
-                    (r[:, 0, 2] - r[:, 2, 0]) / s,
-                    (r[:, 1, 0] - r[:, 0, 1]) / s,
-                ]
-            )
-        else:
-            i, j, k2 = (case - 1, case % 3, (case + 1) % 3)
-            s = 2.0 * np.sqrt(1.0 + r[:, i, i] - r[:, j, j] - r[:, k2, k2])
-            v = np.empty((len(r), 4))
-            v[:, 0] = (r[:, k2, j] - r[:, j, k2]) / s
-            v[:, 1 + i] = 0.25 * s
-            v[:, 1 + j] = (r[:, j, i] + r[:, i, j]) / s
-            v[:, 1 + k2] = (r[:, k2, i] + r[:, i, k2]) / s
-            q[m] = v
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    return q[:, [1, 2, 3, 0]]
 
 
 def write_json_atomic(path: Path, data: dict) -> None:

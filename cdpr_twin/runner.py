@@ -11,10 +11,10 @@ import numpy as np
 
 from cdpr_twin.controllers import Command, Controller, make_controller
 from cdpr_twin.estimators import Estimator, PoseEstimate, make_estimator
-from cdpr_twin.metrics import DeviationTrack, pose_distances, pose_error
+from cdpr_twin.metrics import DeviationTrack, pose_error
 from cdpr_twin.record import CsvRecorder, RerunRecorder, SceneInfo, write_json_atomic
 from cdpr_twin.scenario import Scenario, ScenarioError
-from cdpr_twin.se3 import inverse, pose_distance, vector_from_pose
+from cdpr_twin.se3 import pose_distance, pose_distances, vector_from_pose
 from cdpr_twin.statics import InfeasibleTensionError, tension_distribution
 
 
@@ -104,11 +104,7 @@ def prepare(scenario: Scenario) -> RunSetup:
     if scenario.controller.type == "open_loop":
         goal = params["waypoints"][-1]
     elif twin.nominal_T_base_tag is not None:  # the pose at which the nominal robot sees s*
-        goal = (
-            twin.nominal_T_base_tag
-            @ inverse(params["goal_T_cam_tag"])
-            @ inverse(geom.T_platform_cam)
-        )
+        goal = controller.platform_goal(twin.nominal_T_base_tag)
     return RunSetup(scenario, twin, estimators, controller, goal)
 
 

@@ -152,6 +152,8 @@ class Scenario:
     ) -> Scenario:
         """A copy with command-line overrides applied (and validated)."""
         s, done = self, dict(self.overrides)
+        if seed is not None and (isinstance(seed, bool) or int(seed) != seed or seed < 0):
+            raise ScenarioError(f"--seed must be an integer ≥ 0, got {seed}")
         if seed is not None:
             s = replace(s, seed=int(seed))
             done["seed"] = int(seed)

@@ -57,6 +57,30 @@ def transform(R: np.ndarray, t: np.ndarray) -> np.ndarray:
     return T
 
 
+def check_rigid(T: np.ndarray, what: str = "pose", tol: float = 1e-6) -> np.ndarray:
+    """Return ``T`` as a float (4, 4) array, or raise ``ValueError`` if it is not a rigid transform.
+
+    Args:
+        T: candidate transform.
+        what: how to name it in the error message.
+        tol: tolerance on ‖RᵀR − I‖ and on the last row.
+    """
+    T = np.asarray(T, dtype=float)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise ValueError(f"{what} must be a finite 4×4 transform, got shape {T.shape}")
+    R = T[:3, :3]
+    if (
+        np.abs(R.T @ R - np.eye(3)).max() > tol
+        or np.linalg.det(R) < 0
+        or np.abs(T[3] - [0.0, 0.0, 0.0, 1.0]).max() > tol
+    ):
+        raise ValueError(
+            f"{what} is not a rigid transform (its rotation is not orthonormal with "
+            "det +1, or its last row is not [0, 0, 0, 1])"
+        )
+    return T
+
+
 def inverse(T: np.ndarray) -> np.ndarray:
     """Inverse of a rigid transform (4, 4): ``inverse(T_a_b) == T_b_a``."""
     R = T[:3, :3]
@@ -136,6 +160,40 @@ def quat_wxyz_from_matrix(R: np.ndarray) -> np.ndarray:
     n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     sign = -1.0 if q[0] < 0.0 else 1.0
     return np.array(q) * (sign / n)
+
+
+def quat_xyzw_from_matrices(R: np.ndarray) -> np.ndarray:
+    """Unit quaternions (x, y, z, w) of a stack of rotation matrices (n, 3, 3), vectorised.
+
+    Shepperd's method, branch by branch on the largest of (trace, R00, R11, R22).
+    """
+    tr = R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2]
+    k = np.argmax(np.stack([tr, R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]], axis=1), axis=1)
+    q = np.empty((len(R), 4))  # w, x, y, z
+    for case in range(4):
+        m = k == case
+        r = R[m]
+        if case == 0:
+            s = 2.0 * np.sqrt(1.0 + tr[m])
+            q[m] = np.column_stack(
+                [
+                    0.25 * s,
+                    (r[:, 2, 1] - r[:, 1, 2]) / s,
+                    (r[:, 0, 2] - r[:, 2, 0]) / s,
+                    (r[:, 1, 0] - r[:, 0, 1]) / s,
+                ]
+            )
+        else:
+            i, j, k2 = (case - 1, case % 3, (case + 1) % 3)
+            s = 2.0 * np.sqrt(1.0 + r[:, i, i] - r[:, j, j] - r[:, k2, k2])
+            v = np.empty((len(r), 4))
+            v[:, 0] = (r[:, k2, j] - r[:, j, k2]) / s
+            v[:, 1 + i] = 0.25 * s
+            v[:, 1 + j] = (r[:, j, i] + r[:, i, j]) / s
+            v[:, 1 + k2] = (r[:, k2, i] + r[:, i, k2]) / s
+            q[m] = v
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    return q[:, [1, 2, 3, 0]]
 
 
 def matrix_from_quat_wxyz(quat_wxyz: np.ndarray) -> np.ndarray:
@@ -285,3 +343,21 @@ def pose_distance(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
     sin2 = math.hypot(R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1])
     cos2 = R[0, 0] + R[1, 1] + R[2, 2] - 1.0
     return math.sqrt(float(d @ d)), math.atan2(sin2, cos2)
+
+
+def pose_distances(T_a: np.ndarray, T_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vectorised :func:`cdpr_twin.se3.pose_distance` over stacks of poses (n, 4, 4).
+
+    Returns:
+        ``(translations [m], rotations [rad])``, each (n,).
+    """
+    d = T_a[:, :3, 3] - T_b[:, :3, 3]
+    R = np.einsum("nji,njk->nik", T_a[:, :3, :3], T_b[:, :3, :3])  # R_aᵀ R_b
+    sin2 = np.linalg.norm(
+        np.stack(
+            [R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=1
+        ),
+        axis=1,
+    )
+    cos2 = R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2] - 1.0
+    return np.linalg.norm(d, axis=1), np.arctan2(sin2, cos2)

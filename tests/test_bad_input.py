@@ -58,3 +58,31 @@ def test_duration_not_a_whole_number_of_steps(twin):
 def test_advance_before_reset():
     with Twin(camera=False) as t, pytest.raises(SimulationError, match="reset"):
         t.advance(0.04, np.zeros(8))
+
+
+def test_non_rigid_pose_is_refused(twin):
+    T = paper_pose("p1").copy()
+    T[:3, :3] *= 1.5
+    with pytest.raises(ValueError, match="not a rigid transform"):
+        twin.reset(T)
+    from cdpr_twin.estimators import make_estimator
+
+    with pytest.raises(ValueError, match="not a rigid transform"):
+        make_estimator("control", twin.nominal_geometry).reset(T)
+
+
+@pytest.mark.parametrize("duration", [np.inf, np.nan, -0.04])
+def test_non_finite_or_negative_duration(twin, duration):
+    twin.reset(paper_pose("p1"))
+    with pytest.raises(ValueError, match="duration"):
+        twin.advance(duration, np.zeros(8))
+
+
+@pytest.mark.parametrize(
+    ("option", "value"), [("taut_threshold", np.nan), ("max_residual", -1.0), ("tension0", np.inf)]
+)
+def test_model_estimator_options_are_validated(twin, option, value):
+    from cdpr_twin.estimators import make_estimator
+
+    with pytest.raises(ValueError, match=option):
+        make_estimator("model_simple", twin.nominal_geometry, **{option: value})

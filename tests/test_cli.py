@@ -74,6 +74,20 @@ def test_bad_scenario_is_a_one_line_error_with_exit_code_2(case, tmp_path):
     assert not out.exists()
 
 
+def test_negative_seed_override(tmp_path):
+    proc = _cli(
+        "run",
+        str(ROOT / "scenarios" / "paper_open_loop.toml"),
+        "--seed",
+        "-1",
+        "--out",
+        str(tmp_path / "out"),
+        cwd=tmp_path,
+    )
+    assert proc.returncode == 2 and "--seed" in proc.stderr
+    assert not (tmp_path / "out").exists()
+
+
 def test_missing_and_malformed_scenario_files(tmp_path):
     proc = _cli("run", str(tmp_path / "nope.toml"), cwd=tmp_path)
     assert proc.returncode == 2 and "scenario file not found" in proc.stderr

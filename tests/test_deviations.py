@@ -75,6 +75,39 @@ def test_deviations_change_the_twin_only():
         assert np.max(np.abs(nominal_l - t.cable_lengths)) > 1e-3
 
 
+def test_mounting_errors_are_applied_in_the_frames_they_are_stated_in():
+    """camera_offset is [δp, δθ] in F_p, tag_offset in F_b: a concrete value, not only its norm."""
+    from cdpr_twin.deviations import TruthDeviations
+
+    dev = TruthDeviations.zero()
+    dev = TruthDeviations(
+        dev.exit_offsets,
+        dev.anchor_offsets,
+        dev.es_scale,
+        dev.pulley_radius_offsets,
+        camera_offset=np.array([0.001, -0.002, 0.0005, 0.01, -0.02, 0.03]),
+        tag_offset=np.array([0.002, 0.001, 0.0, -0.01, 0.02, 0.005]),
+    )
+    nominal = read_geometry(build_model(DEFAULT_SCENE))
+    with Twin(deviations=dev, camera=False) as t:
+        T_pc = t.true_geometry.T_platform_cam
+        np.testing.assert_allclose(
+            T_pc[:3, 3] - nominal.T_platform_cam[:3, 3], dev.camera_offset[:3], atol=1e-15
+        )
+        np.testing.assert_allclose(
+            T_pc[:3, :3],
+            se3.so3_exp(dev.camera_offset[3:]) @ nominal.T_platform_cam[:3, :3],
+            atol=1e-12,
+        )
+        T_bt = t.T_base_tag
+        np.testing.assert_allclose(
+            T_bt[:3, 3] - t.nominal_T_base_tag[:3, 3], dev.tag_offset[:3], atol=1e-12
+        )
+        np.testing.assert_allclose(
+            T_bt[:3, :3], se3.so3_exp(dev.tag_offset[3:]) @ t.nominal_T_base_tag[:3, :3], atol=1e-12
+        )
+
+
 def test_zero_spec_is_the_nominal_robot():
     with Twin(deviations=DeviationSpec(seed=5), camera=False) as t:
         for field in ("a_base", "b_platform", "pulley_radius", "es"):

@@ -92,6 +92,42 @@ def test_control_flags_missing_or_non_finite_twists(twin):
 # ------------------------------------------------------------------ image
 
 
+def test_image_composition_with_an_asymmetric_camera_mounting():
+    """Eq. 12 with a mounting that is not its own inverse (the nominal one is): synthetic,
+    exact detections of a motionless tag give back the true motion to round-off."""
+    from conftest import A_BASE, B_PLATFORM
+
+    from cdpr_twin.geometry import CdprGeometry
+    from cdpr_twin.vision import TagDetection
+
+    T_pc = se3.transform(se3.so3_exp([0.3, -0.2, 2.9]), [0.02, -0.01, -0.04])
+    geom = CdprGeometry(
+        np.array(A_BASE), np.array(B_PLATFORM), 0.0045, 3.5e5, 3.5, np.zeros(3), T_platform_cam=T_pc
+    )
+    T_base_tag = se3.transform(se3.rot_x(np.pi), [0.28, -0.2, -0.045])
+    for reference in ("previous", "first"):
+        est = make_estimator("image", geom, reference=reference)
+        T0 = paper_pose("p1")
+        est.reset(T0)
+        for k in range(20):
+            T = T0 @ se3.se3_exp(np.array([0.01, -0.02, 0.03, 0.05, -0.02, 0.1]) * k / 10)
+            T_co = se3.inverse(T @ T_pc) @ T_base_tag
+            tag = TagDetection(0, np.zeros((4, 2)), T_co, 100.0, 0.0)
+            e = est.update(
+                Measurement(
+                    k * DT,
+                    np.ones(8),
+                    np.ones(8),
+                    np.zeros(8),
+                    None,
+                    T,
+                    np.zeros((2, 2, 3), np.uint8),
+                    tag,
+                )
+            )
+            np.testing.assert_allclose(e.T_base_platform, T, atol=1e-12)
+
+
 def test_image_static_platform_stays_within_detection_noise(camera_twin):
     T = paper_pose("p1")
     camera_twin.reset(T)

@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import A_BASE, B_PLATFORM
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from scipy.linalg import null_space
@@ -30,26 +31,6 @@ from cdpr_twin.kinematics import (
 from cdpr_twin.se3 import pose_from_vector, se3_exp, so3_exp, transform
 from cdpr_twin.statics import InfeasibleTensionError, tension_distribution
 
-A_BASE = [
-    (-0.4725, -0.5275, 1.165),
-    (-0.5225, -0.4675, 1.165),
-    (-0.5225, 0.4725, 1.165),
-    (-0.4725, 0.5275, 1.165),
-    (0.4675, 0.5275, 1.165),
-    (0.5175, 0.4725, 1.165),
-    (0.5225, -0.4725, 1.165),
-    (0.4675, -0.5225, 1.165),
-]
-B_PLATFORM = [
-    (0.0774, -0.085, 0.0347),
-    (-0.09, 0.072, -0.0342),
-    (-0.09, -0.073, 0.0347),
-    (0.0752, 0.085, -0.0353),
-    (-0.0829, 0.085, 0.0353),
-    (0.09, -0.073, -0.0347),
-    (0.0895, 0.0744, 0.0347),
-    (-0.0747, -0.085, -0.0347),
-]
 PULLEY_RADIUS = 0.0045
 ES = 111e9 * math.pi * 0.001**2  # E = 111 GPa, S = π (1 mm)²
 MASS = 3.5

@@ -2,32 +2,10 @@
 
 import mujoco
 import numpy as np
-from conftest import paper_pose
+from conftest import A_BASE, B_PLATFORM, paper_pose
 
 from cdpr_twin import DEFAULT_SCENE, se3
 from cdpr_twin.sim import build_model, read_geometry
-
-# DESIGN §4 / paper §IV-A, typed here independently of the model file
-A_BASE = [
-    (-0.4725, -0.5275, 1.165),
-    (-0.5225, -0.4675, 1.165),
-    (-0.5225, 0.4725, 1.165),
-    (-0.4725, 0.5275, 1.165),
-    (0.4675, 0.5275, 1.165),
-    (0.5175, 0.4725, 1.165),
-    (0.5225, -0.4725, 1.165),
-    (0.4675, -0.5225, 1.165),
-]
-B_PLATFORM = [
-    (0.0774, -0.085, 0.0347),
-    (-0.09, 0.072, -0.0342),
-    (-0.09, -0.073, 0.0347),
-    (0.0752, 0.085, -0.0353),
-    (-0.0829, 0.085, 0.0353),
-    (0.09, -0.073, -0.0347),
-    (0.0895, 0.0744, 0.0347),
-    (-0.0747, -0.085, -0.0347),
-]
 
 
 def test_model_numbers_match_their_sources():

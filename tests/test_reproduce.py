@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from cdpr_twin.reproduce import reproduce
+from cdpr_twin.results import ESTIMATOR_ORDER
 
 ROOT = Path(__file__).resolve().parent.parent
 P1 = np.array([0.284, -0.197, 0.08])
@@ -64,14 +65,7 @@ def test_report_numbers_are_recomputed_from_the_run_files(small):
     assert f"{miss * 100:.2f} cm" in report_md
     # accuracy at p1: open loop at t = 10 s, PBVS at the end of each run
     expected = {"open loop": [np.linalg.norm(_xyz(at10, "true") - P1)]}
-    for name in (
-        "control",
-        "image",
-        "model_simple",
-        "model_elastic",
-        "model_pulley",
-        "model_elastic_pulley",
-    ):
+    for name in ESTIMATOR_ORDER:
         run_dir = out / "runs" / f"pbvs_{name}_seed1"
         summary = json.loads((run_dir / "summary.json").read_text())
         if summary["status"] != "converged":

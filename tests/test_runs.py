@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from cdpr_twin.deviations import DeviationSpec
+from cdpr_twin.results import ESTIMATOR_ORDER
 from cdpr_twin.runner import run
 from cdpr_twin.scenario import load_scenario
 
@@ -21,14 +22,7 @@ ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = sorted((ROOT / "scenarios").glob("*.toml"))
 OPEN_LOOP = ROOT / "scenarios" / "paper_open_loop.toml"
 PBVS = ROOT / "scenarios" / "paper_pbvs.toml"
-ESTIMATORS = [
-    "control",
-    "image",
-    "model_simple",
-    "model_elastic",
-    "model_pulley",
-    "model_elastic_pulley",
-]
+ESTIMATORS = list(ESTIMATOR_ORDER)
 # rerun-sdk (a dependency) installs the `rerun` CLI beside the interpreter
 RERUN = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
 
@@ -104,6 +98,8 @@ def test_every_scenario_runs_briefly_and_deterministically(path, tmp_path):
     assert a == b
     text_a = (tmp_path / "a" / "summary.json").read_text()
     assert text_a == (tmp_path / "b" / "summary.json").read_text()
+    csv_a = (tmp_path / "a" / "timeseries.csv").read_bytes()
+    assert csv_a == (tmp_path / "b" / "timeseries.csv").read_bytes()
     assert json.loads(text_a)["status"] in ("time_limit", "done", "converged", "completed")
 
 

@@ -34,7 +34,7 @@ def test_pulley_length_matches_mujoco_wrap(twin):
         straight = kin.cable_lengths(twin.true_geometry, T, "straight")
         worst = max(worst, np.max(np.abs(paper - mj)))
         wrap_min = min(wrap_min, np.min(paper - straight))
-    assert worst < 1e-6
+    assert worst < 1e-12  # measured ≈ 4e-16 m (the issue asks for 1 µm)
     # the wrap makes the cable longer than the straight A_i-B_i segment (order r_p)
     assert 0.0 < wrap_min < twin.true_geometry.pulley_radius.max() * np.pi / 2
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -30,7 +30,6 @@ class Command:
     done: bool = False
     status: str = ""
     error: np.ndarray | None = None
-    extra: dict = field(default_factory=dict)
 
 
 class Controller(ABC):

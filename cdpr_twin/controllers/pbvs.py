@@ -9,13 +9,15 @@ from cdpr_twin.estimators.base import PoseEstimate
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import CableModel, jacobian
 from cdpr_twin.measurement import Measurement
-from cdpr_twin.se3 import adjoint, skew, so3_log
+from cdpr_twin.se3 import adjoint, inverse, skew, so3_log
 
 
 def interaction_matrix(t_cam_tag: np.ndarray, theta_u: np.ndarray) -> np.ndarray:
     """L_s of s = (ᶜt_o, θu), with θu that of ᶜ*R_c (Chaumette & Hutchinson 2006, §IV).
 
-    ṡ = L_s ᶜv_c for the camera twist ᶜv_c = [v, ω] in F_c.
+    ṡ = L_s ᶜv_c for the camera twist ᶜv_c = [v, ω] in F_c (ViSP's ``vpFeatureThetaU`` for
+    ᶜ*R_c: L_θu = I + θ/2 [u]× + (1 − sinc θ / sinc²(θ/2)) [u]×²). θu is an eigenvector of L_θu
+    with eigenvalue 1, so the commanded ω = −λ θu either way.
 
     Args:
         t_cam_tag: (3,) current tag position in the camera frame [m].
@@ -33,7 +35,7 @@ def interaction_matrix(t_cam_tag: np.ndarray, theta_u: np.ndarray) -> np.ndarray
         return L
     u = skew(theta_u / theta)
     coeff = 1.0 - np.sinc(theta / np.pi) / np.sinc(theta / (2 * np.pi)) ** 2
-    L[3:, 3:] = np.eye(3) - 0.5 * theta * u + coeff * (u @ u)
+    L[3:, 3:] = np.eye(3) + 0.5 * theta * u + coeff * (u @ u)  # L_θu of ᶜ*R_c
     return L
 
 
@@ -94,6 +96,13 @@ class PbvsController(Controller):
 
     def reset(self, T_base_platform0: np.ndarray) -> None:
         """Nothing to plan: PBVS reacts to each detection."""
+
+    def platform_goal(self, T_base_tag: np.ndarray) -> np.ndarray:
+        """The platform pose at which the camera sees a tag at ``T_base_tag`` as the goal.
+
+        ᵇT_p* = ᵇT_o · (ᶜ*T_o)⁻¹ · (ᵖT_c)⁻¹, with this controller's (nominal) camera mounting.
+        """
+        return T_base_tag @ inverse(self.goal) @ inverse(self.geometry.T_platform_cam)
 
     def error(self, T_cam_tag: np.ndarray) -> np.ndarray:
         """E = s − s* = (ᶜt_o − ᶜ*t_o, θu of ᶜ*R_c). Returns (6,) [m, rad]."""

@@ -9,6 +9,7 @@ import numpy as np
 
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.measurement import Measurement
+from cdpr_twin.se3 import check_rigid
 
 TAG_LOST = "tag_lost"
 """No tag detection in this measurement: the estimate is held."""
@@ -79,9 +80,7 @@ class Estimator(ABC):
             T_base_platform0: (4, 4) initial pose.
             time: time of that pose [s].
         """
-        T = np.asarray(T_base_platform0, dtype=float)
-        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-            raise ValueError(f"{self.name}: initial pose must be a finite 4×4 transform")
+        T = check_rigid(T_base_platform0, f"{self.name}: initial pose")
         self._T = T.copy()
         self._time = float(time)
         self._ready = True

@@ -265,6 +265,16 @@ class ModelEstimator(Estimator):
         if backend not in ("fast", "scipy"):
             raise ValueError(f"{self.name}: backend must be 'fast' or 'scipy', got {backend!r}")
         self.backend = backend
+        for name, value, low in (
+            ("taut_threshold", taut_threshold, 0.0),
+            ("max_residual", max_residual, 1e-15),
+        ):
+            if not (math.isfinite(value) and value >= low):
+                raise ValueError(
+                    f"{self.name}: {name} must be a finite number ≥ {low}, got {value}"
+                )
+        if not math.isfinite(tension0):
+            raise ValueError(f"{self.name}: tension0 must be finite, got {tension0}")
         self.taut_threshold = float(taut_threshold)
         self.tension0 = float(tension0)
         self.max_residual = float(max_residual)

@@ -80,10 +80,6 @@ def _element(getter, name: str, kind: str, path: Path):
     return element
 
 
-def _perturb(quat_wxyz: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
-    return quat_wxyz_from_matrix(matrix_from_quat_wxyz(quat_wxyz) @ so3_exp(dtheta))
-
-
 def build_model(path: str | Path, deviations: TruthDeviations | None = None) -> mujoco.MjModel:
     """Compile a model file, with the robot's truth deviations applied (through MjSpec).
 
@@ -143,7 +139,9 @@ def _apply(spec: mujoco.MjSpec, dev: TruthDeviations, path: Path) -> None:
         side.pos = [r, 0.0, -2.0 * r]
     cam = _element(spec.camera, camera.CAMERA_NAME, "camera", path)
     cam.pos = np.asarray(cam.pos) + dev.camera_offset[:3]
-    cam.quat = _perturb(np.asarray(cam.quat), dev.camera_offset[3:])
+    # the rotation error is expressed in the platform frame: R ← exp(δθ) R
+    R = matrix_from_quat_wxyz(np.asarray(cam.quat))
+    cam.quat = quat_wxyz_from_matrix(so3_exp(dev.camera_offset[3:]) @ R)
     tag = spec.body(TAG_BODY)
     if tag is not None:
         tag.pos = np.asarray(tag.pos) + dev.tag_offset[:3]

@@ -22,7 +22,7 @@ import numpy as np
 from cdpr_twin import DEFAULT_SCENE
 from cdpr_twin.deviations import N_CABLES, DeviationSpec, TruthDeviations
 from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.kinematics import cable_lengths
+from cdpr_twin.kinematics import cable_lengths, rest_lengths
 from cdpr_twin.measurement import Measurement
 from cdpr_twin.se3 import (
     inverse,
@@ -247,11 +247,17 @@ class Twin:
 
     @property
     def T_base_tag(self) -> np.ndarray:
-        """Ground-truth tag pose (pupil-apriltags frame) (4, 4)."""
+        """Ground-truth tag pose (pupil-apriltags frame) (4, 4), from the (static) model."""
         if self._tag_site < 0:
             raise ModelError(f"{self.model_path} has no site {TAG_SITE!r}; use scene.xml")
-        d = self.data
-        return transform(d.site_xmat[self._tag_site].reshape(3, 3), d.site_xpos[self._tag_site])
+        m = self.model
+        body = m.site_bodyid[self._tag_site]
+        if m.body_parentid[body] != 0 or m.body_mocapid[body] >= 0:
+            raise ModelError(f"{self.model_path}: the tag must be on a static child of the world")
+        T_body = transform(matrix_from_quat_wxyz(m.body_quat[body]), m.body_pos[body])
+        return T_body @ transform(
+            matrix_from_quat_wxyz(m.site_quat[self._tag_site]), m.site_pos[self._tag_site]
+        )
 
     @property
     def tag_size(self) -> float:
@@ -314,8 +320,7 @@ class Twin:
         Args:
             T_base_platform: (4, 4) platform pose.
         """
-        T = np.asarray(T_base_platform, dtype=float)
-        self.true_geometry.check_pose_inside(T, "placed pose")
+        T = self.true_geometry.check_pose_inside(T_base_platform, "placed pose")
         d, m = self.data, self.model
         d.qpos[self._qpos : self._qpos + 3] = T[:3, 3]
         d.qpos[self._qpos + 3 : self._qpos + 7] = quat_wxyz_from_matrix(T[:3, :3])
@@ -340,11 +345,10 @@ class Twin:
             InfeasibleTensionError: if no tension distribution holds the platform there.
         """
         geom = self.true_geometry
-        T = np.asarray(T_base_platform, dtype=float)
-        geom.check_pose_inside(T, "reset pose")
+        T = geom.check_pose_inside(T_base_platform, "reset pose")
         tau = tension_distribution(geom, T, self.tau_min, self.tau_max, model="pulley")
         lengths = cable_lengths(geom, T, "pulley")
-        l0 = self._es * lengths / (self._es + tau)  # τ = E·S/l0 (L − l0)
+        l0 = rest_lengths(lengths, tau, self._es)
         mujoco.mj_resetData(self.model, self.data)
         self.data.act[self._actuators] = l0
         self._rates = np.zeros(N_CABLES)
@@ -357,7 +361,7 @@ class Twin:
         self._encoder_offset = np.zeros(N_CABLES)
         if self.home_encoders:
             g = self.nominal_geometry
-            l0_nominal = g.es * cable_lengths(g, T, "pulley") / (g.es + self.tensions)
+            l0_nominal = rest_lengths(cable_lengths(g, T, "pulley"), self.tensions, g.es)
             self._encoder_offset = l0_nominal - self.rest_lengths
 
     def advance(
@@ -402,6 +406,8 @@ class Twin:
             twist_platform = np.array(twist_platform, dtype=float)
             if twist_platform.shape != (6,) or not math.isfinite(twist_platform.sum()):
                 raise ValueError(f"twist_platform must be 6 finite numbers, got {twist_platform}")
+        if not (math.isfinite(duration) and duration >= 0):
+            raise ValueError(f"duration must be a finite number of seconds ≥ 0, got {duration}")
         n = round(duration / self.timestep)
         if n < 0 or not math.isclose(n * self.timestep, duration, rel_tol=1e-9, abs_tol=1e-12):
             raise ValueError(
