@@ -70,8 +70,10 @@ def trajectories_3d(curves: dict[str, np.ndarray], title: str, path: Path) -> Pa
     ax.set_xlabel("x [cm]")
     ax.set_ylabel("y [cm]")
     ax.set_zlabel("z [cm]")
+    ax.view_init(elev=22, azim=-58)
     ax.set_title(title)
-    ax.legend(loc="upper left", fontsize=8)
+    ax.legend(loc="upper left", fontsize=8, bbox_to_anchor=(0.0, 1.0))
+    fig.subplots_adjust(left=0.0, right=1.0, bottom=0.02, top=0.94)
     return _save(fig, path)
 
 
