@@ -8,8 +8,8 @@ paper's pose p1 before every repeat so that cable lengths never run away):
     ctrl = winch rates of 1e-4 m/s);
 (b) µs per physics step of native ``mujoco.mj_step(model, data, nstep=N)`` on the same model;
 (c) µs per physics step of ``Twin.advance(duration, rates)`` (same constant rates) for
-    ``align_every`` in (1, 5, 10, 20), with ratios to (a) and (b): the cost of the swivel/stiffness
-    refresh done from Python every ``align_every`` steps;
+    ``align_every`` in (1, 5, 10, 20, 40), with ratios to (a) and (b): the cost of the
+    swivel/stiffness refresh done from Python every ``align_every`` steps;
 (d) ms per ``Twin.sense()`` with the camera on (render + AprilTag detection), and its parts;
 (e) the speed/accuracy trade-off of ``align_every``: after a 2 s run from p1 at the winch rates
     of a 1 cm/s vertical platform twist (A · [0, 0, 0.01, 0, 0, 0], A the nominal base-frame
@@ -42,7 +42,7 @@ from cdpr_twin.sim.model import N_CABLES
 from cdpr_twin.sim.twin import Twin
 
 P1 = pose_from_vector([0.284, -0.197, 0.08, 0.0, 0.0, 0.0])
-ALIGN_EVERY = (1, 5, 10, 20)
+ALIGN_EVERY = (1, 5, 10, 20, 40)
 SMALL_RATE = 1e-4  # m/s: pays out 0.4 mm over a 4000-step run, the platform barely moves
 MOVE_TIME = 2.0  # s
 MOVE_TWIST = np.array([0.0, 0.0, 0.01, 0.0, 0.0, 0.0])  # 1 cm/s up, base frame
