@@ -36,17 +36,6 @@ from cdpr_twin.se3 import pose_from_vector
 SCENARIOS_DIR = MODELS_DIR.parent / "scenarios"
 OPEN_LOOP_RUNS = 10
 PBVS_RUNS_PER_ESTIMATOR = 5
-PAPER = {  # DESIGN §8 / paper §IV
-    "open_loop_control_max": (0.014, 1.6),
-    "open_loop_control_final": (0.0013, 0.55),
-    "open_loop_model_max_translation_m": 0.0121,
-    "pbvs_control_max": (0.009, 2.0),
-    "pbvs_model_simple_elastic_max": (0.0129, 2.0),
-    "pbvs_model_pulley_max_translation_m": 0.0156,
-    "ratio_translation": 5.0,
-    "ratio_rotation": 4.0,
-    "open_loop_miss_at_p1_m": 0.01,
-}
 
 
 @dataclass(frozen=True)

@@ -60,11 +60,6 @@ class ModelConfig:
         """Control period [s]."""
         return 1.0 / self.control_rate
 
-    @property
-    def steps_per_tick(self) -> int:
-        """Physics steps per control period (the scenario guarantees a whole number)."""
-        return round(self.control_period / self.timestep)
-
 
 @dataclass(frozen=True)
 class SensorConfig:
