@@ -1,11 +1,10 @@
-"""cdpr-twin: a MuJoCo digital twin of the ACROBOT cable-driven parallel robot."""
+"""cdpr-twin: a MuJoCo digital twin of the ACROBOT cable-driven parallel robot.
 
-import os
+Importing the package changes no global state; :mod:`cdpr_twin.sim` (the only part that imports
+MuJoCo) defaults ``MUJOCO_GL`` to ``egl`` before mujoco's first import.
+"""
+
 from pathlib import Path
-
-# Offscreen rendering through EGL unless the user chose a backend. MuJoCo reads this when it is
-# first imported, so it is set here, at the top of the package, before cdpr_twin.sim imports it.
-os.environ.setdefault("MUJOCO_GL", "egl")
 
 __version__ = "0.1.0"
 

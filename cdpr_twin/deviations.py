@@ -10,9 +10,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-N_CABLES = 8
-
-
 @dataclass(frozen=True, eq=False)
 class TruthDeviations:
     """Concrete calibration errors of one simulated robot (all zero: the nominal robot).
@@ -34,7 +31,7 @@ class TruthDeviations:
     tag_offset: np.ndarray
 
     @classmethod
-    def zero(cls, n_cables: int = N_CABLES) -> TruthDeviations:
+    def zero(cls, n_cables: int) -> TruthDeviations:
         """No deviation: the twin is the nominal robot."""
         return cls(
             np.zeros((n_cables, 3)),
@@ -79,8 +76,12 @@ class DeviationSpec:
             if name != "seed" and not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"DeviationSpec.{name} must be a finite std ≥ 0, got {value}")
 
-    def draw(self, n_cables: int = N_CABLES) -> TruthDeviations:
-        """Draw the deviations of the robot this spec's seed names (deterministic)."""
+    def draw(self, n_cables: int) -> TruthDeviations:
+        """Draw the deviations of the robot this spec's seed names (deterministic).
+
+        Args:
+            n_cables: the robot's cable count m (the draw depends on it).
+        """
         rng = np.random.default_rng(self.seed)
         return TruthDeviations(
             exit_offsets=rng.normal(0.0, self.exit_point_std, (n_cables, 3)),

@@ -2,19 +2,21 @@
 
 Each function takes loaded results and a path, writes a PNG of ``FIGSIZE`` × ``DPI`` pixels and
 returns the path: Fig. 5a/5b (open loop), Fig. 7a/7b (PBVS), Fig. 8 (accuracy at p1).
+
+Figures are :class:`matplotlib.figure.Figure` objects saved directly: no pyplot, no backend
+chosen at import, no global state, so importing this module changes nothing for the caller.
+Estimators the paper does not have get colours from :data:`EXTRA_COLORS`, their name as label.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
 
-from cdpr_twin.results import ESTIMATOR_ORDER, Timeseries
+from cdpr_twin.results import ordered_estimators
+from cdpr_twin.timeseries import Timeseries
 
 FIGSIZE = (12.0, 6.0)
 """Figure size [in]."""
@@ -40,11 +42,31 @@ LABELS = {
     "model_pulley": "Est. 5 pulley",
     "model_elastic_pulley": "Est. 6 elastic+pulley",
 }
+EXTRA_COLORS = ("#bcbd22", "#7f7f7f", "#1f77b4", "#393b79", "#637939", "#843c39", "#7b4173")
+"""Colours of other estimators, in order of first use (none is one of :data:`COLORS`)."""
 
 
-def _save(fig, path: Path) -> Path:
+class _Palette:
+    """Colour by name: :data:`COLORS`, else the next of :data:`EXTRA_COLORS` (cycled)."""
+
+    def __init__(self) -> None:
+        self._extra: dict[str, str] = {}
+
+    def __call__(self, key: str) -> str:
+        if key in COLORS:
+            return COLORS[key]
+        if key not in self._extra:
+            self._extra[key] = EXTRA_COLORS[len(self._extra) % len(EXTRA_COLORS)]
+        return self._extra[key]
+
+
+def _key(label: str) -> str:
+    """The estimator (or ``true``/``plan``) a curve label is about: ``"image in loop"`` → image."""
+    return label.split(" ")[0]
+
+
+def _save(fig: Figure, path: Path) -> Path:
     fig.savefig(path, dpi=DPI)
-    plt.close(fig)
     return path
 
 
@@ -56,15 +78,16 @@ def trajectories_3d(curves: dict[str, np.ndarray], title: str, path: Path) -> Pa
         title: figure title.
         path: output PNG.
     """
-    fig = plt.figure(figsize=FIGSIZE)
+    fig = Figure(figsize=FIGSIZE)
     ax = fig.add_subplot(projection="3d")
+    color = _Palette()
     for label, p in curves.items():
         ok = np.all(np.isfinite(p), axis=1)
-        key = label.split(" ")[0]
+        key = _key(label)
         ax.plot(
             *(p[ok] * 100).T,
             label=LABELS.get(label, label),
-            color=COLORS.get(key),
+            color=color(key),
             lw=2.0 if key == "true" else 1.2,
         )
     ax.set_xlabel("x [cm]")
@@ -91,11 +114,13 @@ def deviations(
         path: output PNG.
         marks: times to mark with dotted vertical lines (segment ends).
     """
-    fig, (a, b) = plt.subplots(2, 1, figsize=FIGSIZE, sharex=True)
+    fig = Figure(figsize=FIGSIZE)
+    a, b = fig.subplots(2, 1, sharex=True)
+    color = _Palette()
     for label, (t, dt, dr) in series.items():
-        key = label.split(" ")[0]
-        a.plot(t, dt * 1e3, label=LABELS.get(label, label), color=COLORS.get(key), lw=1)
-        b.plot(t, np.degrees(dr), color=COLORS.get(key), lw=1)
+        c = color(_key(label))
+        a.plot(t, dt * 1e3, label=LABELS.get(label, label), color=c, lw=1)
+        b.plot(t, np.degrees(dr), color=c, lw=1)
     for ax in (a, b):
         for m in marks:
             ax.axvline(m, color="k", ls=":", lw=1)
@@ -116,7 +141,8 @@ def accuracy_bars(groups: dict[str, dict[str, list[float]]], path: Path) -> Path
         groups: bar label → {"translation_m": [...], "rotation_deg": [...]}.
         path: output PNG.
     """
-    fig, (a, b) = plt.subplots(1, 2, figsize=FIGSIZE)
+    fig = Figure(figsize=FIGSIZE)
+    a, b = fig.subplots(1, 2)
     labels = list(groups)
     x = np.arange(len(labels))
     for ax, key, scale, unit in (
@@ -137,9 +163,9 @@ def accuracy_bars(groups: dict[str, dict[str, list[float]]], path: Path) -> Path
     return _save(fig, path)
 
 
-def open_loop_figures(ts: Timeseries, out: Path, marks: tuple[float, ...]) -> list[Path]:
-    """Fig. 5a and 5b of one open-loop run."""
-    names = [n for n in ESTIMATOR_ORDER if ts.has(n)]
+def open_loop_figures(ts: Timeseries, out: Path, marks: tuple[float, ...] = ()) -> list[Path]:
+    """Fig. 5a and 5b of one open-loop run (``marks``: segment ends [s], dotted in Fig. 5b)."""
+    names = ordered_estimators(ts.estimator_names)
     curves = {"true": ts.poses("true")[:, :3, 3], "plan": ts.poses("plan")[:, :3, 3]}
     curves.update({n: ts.poses(n)[:, :3, 3] for n in names})
     series = {n: (ts.t, *ts.deviation(n)) for n in names}
@@ -152,7 +178,7 @@ def open_loop_figures(ts: Timeseries, out: Path, marks: tuple[float, ...]) -> li
 
 
 def pbvs_figures(runs: dict[str, Timeseries], out: Path) -> list[Path]:
-    """Fig. 7a and 7b: one PBVS run per in-loop estimator."""
+    """Fig. 7a and 7b: one PBVS run per in-loop estimator (``runs``: in-loop name → run)."""
     curves = {f"{n} in loop": ts.poses("true")[:, :3, 3] for n, ts in runs.items()}
     series = {f"{n} in loop": (ts.t, *ts.deviation(n)) for n, ts in runs.items()}
     return [

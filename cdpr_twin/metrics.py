@@ -1,14 +1,25 @@
-"""Deviations of estimates from ground truth, and run summaries (paper Fig. 5b, 7b, 8)."""
+"""Deviations of estimates from ground truth, checkpoints and run summaries (Fig. 5b, 7b, 8).
+
+Ground truth enters here and in the recorders only: it is passed next to the estimates, never
+inside what estimators and controllers see.
+"""
 
 from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from cdpr_twin.estimators.base import PoseEstimate
-from cdpr_twin.se3 import pose_distance
+from cdpr_twin.se3 import pose_distance, pose_distances, vector_from_pose
+from cdpr_twin.types import PoseEstimate
+
+
+def pose_error(T_a: np.ndarray, T_b: np.ndarray) -> dict:
+    """JSON-ready distance between two poses (metres and degrees)."""
+    dt, dr = pose_distance(T_a, T_b)
+    return {"translation_m": dt, "rotation_deg": float(np.degrees(dr))}
 
 
 @dataclass
@@ -24,19 +35,9 @@ class DeviationTrack:
     invalid_updates: int = 0
     flags: Counter = field(default_factory=Counter)
 
-    def add(
-        self,
-        estimate: PoseEstimate,
-        T_true: np.ndarray,
-        distance: tuple[float, float] | None = None,
-    ) -> tuple[float, float]:
-        """Account one estimate; returns its (translation [m], rotation [rad]) deviation.
-
-        ``distance`` may pass the deviation when it was computed already (vectorised).
-        """
-        dt, dr = (
-            distance if distance is not None else pose_distance(estimate.T_base_platform, T_true)
-        )
+    def add(self, estimate: PoseEstimate, distance: tuple[float, float]) -> None:
+        """Account one estimate and its (translation [m], rotation [rad]) deviation."""
+        dt, dr = distance
         if dt > self.max_translation:
             self.max_translation, self.max_translation_time = dt, estimate.time
         if dr > self.max_rotation:
@@ -45,7 +46,6 @@ class DeviationTrack:
         if not estimate.valid:
             self.invalid_updates += 1
         self.flags.update(estimate.flags)
-        return dt, dr
 
     def summary(self) -> dict:
         """JSON-ready summary (metres and degrees)."""
@@ -61,7 +61,95 @@ class DeviationTrack:
         }
 
 
-def pose_error(T_a: np.ndarray, T_b: np.ndarray) -> dict:
-    """JSON-ready distance between two poses (metres and degrees)."""
-    dt, dr = pose_distance(T_a, T_b)
-    return {"translation_m": dt, "rotation_deg": float(np.degrees(dr))}
+class RunMetrics:
+    """Every estimator's deviation from ground truth, tick by tick, and the checkpoints.
+
+    Args:
+        names: the estimators, in recording order.
+        checkpoints: (time [s], pose) pairs at which to record where the platform is.
+        period: the control period [s] (a checkpoint matches the tick within half of it).
+    """
+
+    def __init__(
+        self, names: tuple[str, ...], checkpoints: list[tuple[float, np.ndarray]], period: float
+    ) -> None:
+        self.tracks = {name: DeviationTrack() for name in names}
+        self.checkpoints, self.period = checkpoints, period
+        self.segment_ends: list[dict] = []
+
+    def add(
+        self, time: float, T_true: np.ndarray, estimates: dict[str, PoseEstimate]
+    ) -> dict[str, tuple[float, float]]:
+        """Account one tick; returns each estimator's (translation [m], rotation [rad])."""
+        dts, drs = pose_distances(
+            np.array([e.T_base_platform for e in estimates.values()]), T_true[None]
+        )
+        deviations = {}
+        for (name, e), a, b in zip(estimates.items(), dts, drs, strict=True):
+            deviations[name] = (float(a), float(b))
+            self.tracks[name].add(e, deviations[name])
+        for t_c, waypoint in self.checkpoints:
+            if abs(time - t_c) < 0.5 * self.period:
+                self.segment_ends.append(_segment_end(time, waypoint, T_true, estimates))
+        return deviations
+
+    def estimators(self) -> dict[str, dict]:
+        """Each estimator's summary (max/final deviations, invalid updates, flags)."""
+        return {name: t.summary() for name, t in self.tracks.items()}
+
+
+def _segment_end(
+    time: float, waypoint: np.ndarray, T_true: np.ndarray, estimates: dict[str, PoseEstimate]
+) -> dict:
+    return {
+        "time_s": time,
+        "waypoint": vector_from_pose(waypoint).tolist(),
+        "truth_vs_waypoint": pose_error(T_true, waypoint),
+        "estimates_vs_truth": {
+            n: pose_error(e.T_base_platform, T_true) for n, e in estimates.items()
+        },
+        "estimates_vs_plan": {n: pose_error(e.T_base_platform, waypoint) for n, e in estimates.items()},
+    }
+
+
+def run_summary(
+    scenario: Any,
+    status: str,
+    metrics: RunMetrics,
+    end: dict[str, Any],
+    goal: np.ndarray | None,
+    extra: dict[str, Any],
+) -> dict:
+    """The content of ``summary.json``.
+
+    Args:
+        scenario: the :class:`~cdpr_twin.scenario.Scenario` that ran.
+        status: how it ended.
+        metrics: the run's deviations and checkpoints.
+        end: ground truth at the end: ``time`` [s], ``T_base_platform`` (4, 4), ``tensions`` (m,).
+        goal: (4, 4) the controller's goal pose, or ``None``.
+        extra: the controller's own summary fields.
+    """
+    s, T_end = scenario, end["T_base_platform"]
+    return {
+        "scenario": s.name,
+        "source": str(s.source),
+        "status": status,
+        "controller": s.controller.type,
+        "in_loop": s.estimators.in_loop,
+        "estimator_names": list(s.estimators.names),
+        "seed": s.seed,
+        "truth_seed": s.truth.seed,
+        "camera": s.sensors.camera,
+        "overrides": dict(s.overrides),
+        "timestep_s": s.model.timestep,
+        "control_rate_hz": s.model.control_rate,
+        "simulated_time_s": end["time"],
+        "final_pose": vector_from_pose(T_end).tolist(),
+        "goal_pose": None if goal is None else vector_from_pose(goal).tolist(),
+        "final_error_vs_goal": None if goal is None else pose_error(T_end, goal),
+        "estimators": metrics.estimators(),
+        "segment_ends": metrics.segment_ends,
+        "final_tensions_n": end["tensions"].tolist(),
+        **extra,
+    }

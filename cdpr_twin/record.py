@@ -1,4 +1,5 @@
-"""Run outputs: ``timeseries.csv``, ``recording.rrd`` (Rerun) and ``summary.json``.
+"""Run outputs: ``recording.rrd`` (Rerun), ``summary.json``, and the fan-out of each tick to
+them and to ``timeseries.csv`` (whose schema :mod:`cdpr_twin.timeseries` owns).
 
 Each file is written as ``<name>.partial`` and renamed when complete, so a file under its final
 name is never half-written; ``summary.json`` says whether the run completed or was interrupted.
@@ -33,11 +34,9 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_twin.controllers.base import Command
-from cdpr_twin.estimators.base import PoseEstimate
-from cdpr_twin.measurement import Measurement
 from cdpr_twin.se3 import quat_xyzw_from_matrices
-from cdpr_twin.vision import CameraIntrinsics
+from cdpr_twin.timeseries import TimeseriesWriter
+from cdpr_twin.types import CameraIntrinsics, Command, Measurement, PoseEstimate
 
 SLACK_TENSION = 0.5
 """Below this measured tension [N] a cable is drawn as slack."""
@@ -70,121 +69,11 @@ class SceneInfo:
     frame_max: np.ndarray
 
 
-def _pose_columns(prefix: str) -> list[str]:
-    return [f"{prefix}_{k}" for k in ("x", "y", "z", "qw", "qx", "qy", "qz")]
-
-
 def write_json_atomic(path: Path, data: dict) -> None:
     """Write JSON through a temporary file and rename: never a half-written file."""
     tmp = path.with_name(path.name + ".partial")
     tmp.write_text(json.dumps(data, indent=2, sort_keys=False) + "\n", encoding="utf-8")
     os.replace(tmp, path)
-
-
-class CsvRecorder:
-    """One row per control tick: time, truth, every estimate, sensors, commands, tag pose.
-
-    Rows are buffered and written (and flushed) every ``flush_every`` ticks and at
-    :meth:`close`, with quaternions converted for the whole batch at once.
-    """
-
-    def __init__(
-        self, path: Path, estimators: tuple[str, ...], n_cables: int, flush_every: int = 25
-    ) -> None:
-        self.path = path
-        self._partial = path.with_name(path.name + ".partial")
-        self._file = self._partial.open("w", newline="", encoding="utf-8")
-        self.estimators = estimators
-        self.flush_every = flush_every
-        header = ["t", *_pose_columns("true")]
-        for name in estimators:
-            header += [*_pose_columns(name), f"{name}_valid"]
-        header += [f"tension_{i + 1}" for i in range(n_cables)]
-        header += [f"length_{i + 1}" for i in range(n_cables)]
-        header += [f"rate_{i + 1}" for i in range(n_cables)]
-        header += [*_pose_columns("plan"), *_pose_columns("tag"), "status"]
-        self._file.write(",".join(header) + "\n")
-        self._rows: list[tuple] = []
-        self._formats: dict[tuple[bool, bool], str] = {}
-        self.n_cables = n_cables
-        self.rows = 0
-
-    def tick(
-        self,
-        m: Measurement,
-        estimates: dict[str, PoseEstimate],
-        command: Command | None,
-        plan: np.ndarray | None,
-    ) -> None:
-        """Buffer one row."""
-        poses = [
-            m.T_base_platform_true,
-            *(estimates[n].T_base_platform for n in self.estimators),
-            plan,
-            None if m.tag is None else m.tag.T_cam_tag,
-        ]
-        valid = [int(estimates[n].valid) for n in self.estimators]
-        sensors = [*m.tensions.tolist(), *m.cable_lengths.tolist(), *m.cable_rates.tolist()]
-        status = command.status if command is not None else "start"
-        self._rows.append((m.time, poses, valid, sensors, status))
-        if len(self._rows) >= self.flush_every:
-            self.flush()
-
-    def _row_format(self, has_plan: bool, has_tag: bool) -> str:
-        """The printf format of one row (%.17g round-trips every float exactly)."""
-        key = (has_plan, has_tag)
-        if key not in self._formats:
-            f7, empty7 = ["%.17g"] * 7, [""] * 7
-            cells = ["%.17g", *f7]
-            for _ in self.estimators:
-                cells += [*f7, "%d"]
-            cells += ["%.17g"] * (3 * self.n_cables)
-            cells += f7 if has_plan else empty7
-            cells += f7 if has_tag else empty7
-            cells.append("%s")
-            self._formats[key] = ",".join(cells)
-        return self._formats[key]
-
-    def flush(self) -> None:
-        """Write the buffered rows (floats exactly, to 17 digits) and flush the file."""
-        if not self._rows:
-            return
-        n_poses = len(self._rows[0][1])
-        T = np.tile(np.eye(4), (len(self._rows), n_poses, 1, 1))
-        present = np.ones((len(self._rows), n_poses), dtype=bool)
-        for i, (_, poses, *_) in enumerate(self._rows):
-            for j, P in enumerate(poses):
-                if P is None:
-                    present[i, j] = False
-                else:
-                    T[i, j] = P
-        q = quat_xyzw_from_matrices(T[:, :, :3, :3].reshape(-1, 3, 3)).reshape(*present.shape, 4)
-        pose7 = np.concatenate([T[:, :, :3, 3], q[..., [3, 0, 1, 2]]], axis=2)
-        k = len(self.estimators)
-        lines = []
-        for i, (t, _, valid, sensors, status) in enumerate(self._rows):
-            has_plan, has_tag = bool(present[i, k + 1]), bool(present[i, k + 2])
-            values = [t, *pose7[i, 0].tolist()]
-            for j in range(k):
-                values += [*pose7[i, 1 + j].tolist(), valid[j]]
-            values += sensors
-            if has_plan:
-                values += pose7[i, k + 1].tolist()
-            if has_tag:
-                values += pose7[i, k + 2].tolist()
-            values.append(status)
-            lines.append(self._row_format(has_plan, has_tag) % tuple(values))
-        self._file.write("\n".join(lines) + "\n")
-        self._file.flush()
-        self.rows += len(self._rows)
-        self._rows = []
-
-    def close(self) -> None:
-        """Write what is buffered, close, and give the file its final name."""
-        if not self._file.closed:
-            self.flush()
-            self._file.close()
-            os.replace(self._partial, self.path)
 
 
 class RerunRecorder:
@@ -324,6 +213,7 @@ class RerunRecorder:
     def tick(
         self,
         m: Measurement,
+        T_true: np.ndarray,
         estimates: dict[str, PoseEstimate],
         deviations: dict[str, tuple[float, float]],
         plan: np.ndarray | None,
@@ -331,7 +221,7 @@ class RerunRecorder:
         """Buffer one tick (sent column-wise every ``flush_every`` ticks); log the image now."""
         b = self._buf
         b["time"].append(m.time)
-        b["platform"].append(m.T_base_platform_true)
+        b["platform"].append(T_true)
         b["tension"].append(m.tensions)
         b["length"].append(m.cable_lengths)
         for name in self.estimators:
@@ -443,3 +333,64 @@ class RerunRecorder:
         self.rec.disconnect()
         if self._partial.exists():
             os.replace(self._partial, self.path)
+
+
+class Recorders:
+    """Where each tick goes: ``timeseries.csv`` and, optionally, ``recording.rrd``.
+
+    Args:
+        out_dir: the run's output directory (created), or ``None`` to record nothing.
+        scene: the static scene (for Rerun).
+        names: the estimators, in recording order.
+        n_cables: the robot's cable count.
+        recording_id: the Rerun recording id.
+        rrd: write ``recording.rrd``.
+        spawn: also stream to a live Rerun viewer.
+    """
+
+    def __init__(
+        self,
+        out_dir: Path | None,
+        scene: SceneInfo,
+        names: tuple[str, ...],
+        n_cables: int,
+        recording_id: str,
+        rrd: bool = True,
+        spawn: bool = False,
+    ) -> None:
+        self.out_dir = out_dir
+        self.csv: TimeseriesWriter | None = None
+        self.rrd: RerunRecorder | None = None
+        if out_dir is None:
+            return
+        out_dir.mkdir(parents=True, exist_ok=True)
+        self.csv = TimeseriesWriter(out_dir / "timeseries.csv", names, n_cables)
+        if rrd:
+            self.rrd = RerunRecorder(
+                out_dir / "recording.rrd", scene, names, "cdpr-twin", recording_id, spawn=spawn
+            )
+
+    def tick(
+        self,
+        m: Measurement,
+        T_true: np.ndarray,
+        estimates: dict[str, PoseEstimate],
+        deviations: dict[str, tuple[float, float]],
+        command: Command | None,
+        plan: np.ndarray | None,
+    ) -> None:
+        """Record one control tick."""
+        if self.csv is not None:
+            self.csv.tick(m.time, T_true, estimates, m, command, plan)
+        if self.rrd is not None:
+            self.rrd.tick(m, T_true, estimates, deviations, plan)
+
+    def close(self, summary: dict) -> None:
+        """Complete every file (final names) and write ``summary.json`` last."""
+        if self.csv is not None:
+            self.csv.close()
+            summary["ticks_recorded"] = self.csv.rows
+        if self.rrd is not None:
+            self.rrd.close()
+        if self.out_dir is not None:
+            write_json_atomic(self.out_dir / "summary.json", summary)

@@ -1,77 +1,61 @@
-"""Load run outputs (``timeseries.csv``, ``summary.json``) and compute the paper's quantities.
+"""The paper's quantities, computed from run outputs (``timeseries.csv``, ``summary.json``).
 
-Everything here reads files only, so a report can be recomputed from a ``reproduce`` output
-directory (or any run directory) without rerunning anything.
+The file format of ``timeseries.csv`` is :mod:`cdpr_twin.timeseries`'s (re-exported here:
+:class:`Timeseries`, :func:`load_timeseries`). Which estimators a run has comes from the run
+itself, never from a list here. Everything here reads files only, so a report can be
+recomputed from a ``reproduce`` output directory (or any run directory) without rerunning.
 """
 
 from __future__ import annotations
 
-import csv
 import json
-from dataclasses import dataclass
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 
-from cdpr_twin.estimators import ESTIMATORS
-from cdpr_twin.se3 import matrix_from_quat_wxyz, pose_distances
+from cdpr_twin.timeseries import Timeseries, load_timeseries
 
-ESTIMATOR_ORDER = tuple(ESTIMATORS)
-"""The six estimators in the paper's order (Est. 1 … Est. 6)."""
-MODEL_ESTIMATORS = tuple(n for n in ESTIMATOR_ORDER if n.startswith("model_"))
+__all__ = [
+    "ESTIMATOR_ORDER",
+    "PAPER_ESTIMATORS",
+    "Timeseries",
+    "image_noise_vs_distance",
+    "load_summary",
+    "load_timeseries",
+    "model_estimators",
+    "ordered_estimators",
+    "roughness",
+    "value_at",
+]
 
-
-@dataclass(frozen=True, eq=False)
-class Timeseries:
-    """One run's ``timeseries.csv`` as arrays.
-
-    Attributes:
-        columns: float columns by name (NaN where the file is empty), each (n,).
-        status: (n,) controller status per row.
-    """
-
-    columns: dict[str, np.ndarray]
-    status: np.ndarray
-
-    @property
-    def t(self) -> np.ndarray:
-        """Time [s], (n,)."""
-        return self.columns["t"]
-
-    def has(self, prefix: str) -> bool:
-        """Whether poses named ``prefix`` (e.g. an estimator) are in the file."""
-        return f"{prefix}_x" in self.columns
-
-    def poses(self, prefix: str) -> np.ndarray:
-        """Poses ``<prefix>_{x,y,z,qw,qx,qy,qz}`` as (n, 4, 4) transforms (NaN rows stay NaN)."""
-        c = self.columns
-        q = np.stack([c[f"{prefix}_q{k}"] for k in "wxyz"], axis=1)
-        T = np.tile(np.eye(4), (len(q), 1, 1))
-        T[:, :3, 3] = np.stack([c[f"{prefix}_{k}"] for k in "xyz"], axis=1)
-        ok = np.all(np.isfinite(q), axis=1)
-        T[ok, :3, :3] = [matrix_from_quat_wxyz(v) for v in q[ok]]
-        T[~ok] = np.nan
-        return T
-
-    def deviation(self, prefix: str, reference: str = "true") -> tuple[np.ndarray, np.ndarray]:
-        """Translational [m] and rotational [rad] distance of ``prefix`` poses to ``reference``."""
-        return pose_distances(self.poses(prefix), self.poses(reference))
-
-    def matrix(self, prefix: str, n: int = 8) -> np.ndarray:
-        """Columns ``<prefix>_1 … <prefix>_n`` as (rows, n)."""
-        return np.stack([self.columns[f"{prefix}_{i + 1}"] for i in range(n)], axis=1)
+PAPER_ESTIMATORS = (
+    "control",
+    "image",
+    "model_simple",
+    "model_elastic",
+    "model_pulley",
+    "model_elastic_pulley",
+)
+"""The paper's six estimators in its order (Est. 1 … Est. 6): display order and colours only.
+Which estimators a run has comes from the run (``summary.json`` or ``timeseries.csv``)."""
+ESTIMATOR_ORDER = PAPER_ESTIMATORS
+"""Deprecated alias of :data:`PAPER_ESTIMATORS`."""
 
 
-def load_timeseries(path: str | Path) -> Timeseries:
-    """Read a run's ``timeseries.csv``."""
-    with Path(path).open(newline="", encoding="utf-8") as f:
-        rows = list(csv.reader(f))
-    header, body = rows[0], rows[1:]
-    status = np.array([r[-1] for r in body])
-    columns = {}
-    for j, name in enumerate(header[:-1]):
-        columns[name] = np.array([float(r[j]) if r[j] else np.nan for r in body])
-    return Timeseries(columns, status)
+def ordered_estimators(names: Iterable[str]) -> tuple[str, ...]:
+    """``names`` in display order: the paper's estimators first, in its order, then any other
+    in the given order (each once)."""
+    names = list(dict.fromkeys(names))
+    return (
+        *(n for n in PAPER_ESTIMATORS if n in names),
+        *(n for n in names if n not in PAPER_ESTIMATORS),
+    )
+
+
+def model_estimators(names: Iterable[str]) -> tuple[str, ...]:
+    """The model-based estimators (``model_*``) among ``names``, in display order."""
+    return tuple(n for n in ordered_estimators(names) if n.startswith("model_"))
 
 
 def load_summary(path: str | Path) -> dict:

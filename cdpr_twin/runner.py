@@ -1,4 +1,17 @@
-"""The headless run: sense → estimate → control → actuate → step → record (DESIGN §6)."""
+"""The headless run: sense → estimate → control → actuate → step → record (DESIGN §6).
+
+One tick (:func:`_loop`)::
+
+    m = sensors.read(last_command)              # sim/sensors.py: encoders, tensions, tag
+    estimates = setup.estimate(m)               # estimators/*: in dependency order
+    command = controller.command(t, Δt, estimates[in_loop], m)   # controllers/*
+    physics.advance(Δt, command.cable_rates)    # sim/physics.py: winches, events fire
+    deviations = metrics.add(t, truth, estimates)                # metrics.py (truth only here)
+    recorders.tick(m, truth, estimates, deviations, command, plan)  # record.py → timeseries.py
+
+The runner knows no controller or estimator by name: each controller supplies its goal pose,
+checkpoints, summary fields and the status of a run that ran out of time.
+"""
 
 from __future__ import annotations
 
@@ -9,24 +22,57 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_twin.controllers import Command, Controller, make_controller
-from cdpr_twin.estimators import Estimator, PoseEstimate, make_estimator
-from cdpr_twin.metrics import DeviationTrack, pose_error
-from cdpr_twin.record import CsvRecorder, RerunRecorder, SceneInfo, write_json_atomic
+from cdpr_twin import plugins
+from cdpr_twin.controllers.base import Controller, RunEnd
+from cdpr_twin.estimators.base import Estimator
+from cdpr_twin.events import EventSchedule
+from cdpr_twin.metrics import RunMetrics, run_summary
+from cdpr_twin.plugins import OptionError
+from cdpr_twin.record import Recorders, SceneInfo
 from cdpr_twin.scenario import Scenario, ScenarioError
-from cdpr_twin.se3 import pose_distance, pose_distances, vector_from_pose
-from cdpr_twin.statics import InfeasibleTensionError, tension_distribution
+from cdpr_twin.statics import InfeasibleTensionError
+from cdpr_twin.types import Measurement, PoseEstimate, Status
 
 
 @dataclass
 class RunSetup:
-    """Everything a run needs, built and validated before any output is written."""
+    """Everything a run needs, built and validated before any output is written.
+
+    Attributes:
+        scenario: the scenario.
+        physics: the simulated robot (:class:`cdpr_twin.sim.Physics`; untyped here: this module
+            does not import mujoco).
+        sensors: its sensors (:class:`cdpr_twin.sim.Sensors`).
+        nominal: what the robot's software believes (:class:`cdpr_twin.sim.NominalRobot`).
+        estimators: by name, in recording order (the in-loop one first).
+        order: the names in update order (inputs before the estimators that read them).
+        controller: the controller.
+        goal_pose: (4, 4) the controller's goal, or ``None``.
+        events: the scenario's timed events, hooked into the physics.
+    """
 
     scenario: Scenario
-    twin: object  # cdpr_twin.sim.Twin (kept untyped: this module does not import mujoco)
+    physics: object
+    sensors: object
+    nominal: object
     estimators: dict[str, Estimator]
+    order: tuple[str, ...]
     controller: Controller
     goal_pose: np.ndarray | None
+    events: EventSchedule
+
+    def estimate(self, m: Measurement) -> dict[str, PoseEstimate]:
+        """Update every estimator (in dependency order); returns estimates in recording order."""
+        out: dict[str, PoseEstimate] = {}
+        for name in self.order:
+            est = self.estimators[name]
+            inputs = {n: out[n] for n in est.inputs}
+            out[name] = est.update(m, inputs) if inputs else est.update(m)
+        return {name: out[name] for name in self.estimators}
+
+    def close(self) -> None:
+        """Free the renderer."""
+        self.sensors.close()
 
 
 @dataclass(frozen=True)
@@ -49,75 +95,101 @@ class RunResult:
         return self.summary["simulated_time_s"] / max(self.wall_time, 1e-9)
 
 
+def _update_order(estimators: dict[str, Estimator], src: Path) -> tuple[str, ...]:
+    """Names ordered so that each estimator's inputs update before it (Kahn's algorithm)."""
+    order: list[str] = []
+    pending = dict(estimators)
+    while pending:
+        ready = [n for n, e in pending.items() if all(i in order for i in e.inputs)]
+        if not ready:
+            for name, e in pending.items():
+                missing = [i for i in e.inputs if i not in estimators]
+                if missing:
+                    raise ScenarioError(
+                        f"{src}: estimators: {name!r} reads {missing}, which do not run; add "
+                        "them to estimators.passive"
+                    )
+            raise ScenarioError(f"{src}: estimators: {sorted(pending)} read each other in a cycle")
+        order += ready
+        for name in ready:
+            del pending[name]
+    return tuple(order)
+
+
+def _build_plugins(scenario: Scenario, geom) -> tuple[Controller, dict[str, Estimator]]:
+    src = scenario.source
+    cls = plugins.lookup("controller", scenario.controller.type)
+    try:
+        controller = cls(geom, scenario.controller.options)
+    except OptionError as exc:
+        raise ScenarioError(f"{src}: controller.{exc.field}: {exc.problem}") from None
+    except ValueError as exc:
+        raise ScenarioError(f"{src}: controller: {exc}") from None
+    estimators = {}
+    for name in scenario.estimators.names:
+        est_cls = plugins.lookup("estimator", name)
+        options = scenario.estimators.options.get(name) or est_cls.Options()
+        try:
+            estimators[name] = est_cls(geom, options)
+        except ValueError as exc:
+            raise ScenarioError(f"{src}: estimators.{name}: {exc}") from None
+    return controller, estimators
+
+
 def prepare(scenario: Scenario) -> RunSetup:
-    """Build the twin, estimators and controller; map every problem to a scenario field.
+    """Build the robot, its sensors, the estimators and controller; check everything.
 
     Raises:
         ScenarioError: naming the file and field at fault.
     """
-    from cdpr_twin.sim import ModelError, Twin  # the runner's only door to MuJoCo
+    from cdpr_twin.sim import ModelError, Sensors, SimulationError, build_robot  # MuJoCo's door
 
-    src = scenario.source
+    s, src = scenario, scenario.source
     try:
-        twin = Twin(
-            model_path=scenario.model.file,
-            deviations=scenario.truth,
-            tension_noise_std=scenario.sensors.tension_noise_std,
-            noise_seed=scenario.seed,
-            camera=scenario.sensors.camera,
-            align_every=scenario.model.align_every,
-            timestep=scenario.model.timestep,
+        physics, nominal, _ = build_robot(
+            s.model.file, s.truth, s.model.timestep, s.model.align_every
+        )
+        sensors = Sensors(
+            physics, nominal, s.sensors.tension_noise_std, s.seed, camera=s.sensors.camera
         )
     except ModelError as exc:
         raise ScenarioError(f"{src}: model.file: {exc}") from None
+    except SimulationError as exc:
+        raise ScenarioError(f"{src}: sensors.camera: {exc}") from None
     except ValueError as exc:
         raise ScenarioError(f"{src}: model: {exc}") from None
-    geom = twin.nominal_geometry
     try:
-        twin.reset(scenario.start_pose, settle_time=0.0)
-    except (ValueError, InfeasibleTensionError) as exc:
-        twin.close()
-        raise ScenarioError(f"{src}: start.pose: {exc}") from None
-    params = dict(scenario.controller.params)
-    if scenario.controller.type == "open_loop":
-        for i, w in enumerate(params["waypoints"]):
+        physics.reset(s.start_pose, settle_time=0.0)
+        for i, event in enumerate(s.events):
             try:
-                geom.check_pose_inside(w, "waypoint")
-                tension_distribution(geom, w, tau_min=0.5)
-            except (ValueError, InfeasibleTensionError) as exc:
-                twin.close()
-                raise ScenarioError(
-                    f"{src}: controller.waypoints[{i}]: "
-                    f"{vector_from_pose(w).round(4).tolist()} is outside the "
-                    f"workspace: {exc}"
-                ) from None
-    try:
-        controller = make_controller(scenario.controller.type, geom, **params)
-        estimators = {
-            name: make_estimator(name, geom, **scenario.estimators.options.get(name, {}))
-            for name in scenario.estimators.names
-        }
-    except ValueError as exc:
-        twin.close()
-        raise ScenarioError(f"{src}: {exc}") from None
-    goal = None
-    if scenario.controller.type == "open_loop":
-        goal = params["waypoints"][-1]
-    elif twin.nominal_T_base_tag is not None:  # the pose at which the nominal robot sees s*
-        goal = controller.platform_goal(twin.nominal_T_base_tag)
-    return RunSetup(scenario, twin, estimators, controller, goal)
+                event.check(physics.n_cables)
+            except OptionError as exc:
+                raise ScenarioError(f"{src}: events[{i}].{exc.field}: {exc.problem}") from None
+        controller, estimators = _build_plugins(s, nominal.geometry)
+        order = _update_order(estimators, src)
+    except (ValueError, InfeasibleTensionError) as exc:
+        sensors.close()
+        if isinstance(exc, ScenarioError):
+            raise
+        raise ScenarioError(f"{src}: start.pose: {exc}") from None
+    events = EventSchedule(s.events, physics, sensors)
+    physics.add_hook(events)
+    goal = controller.goal_pose(nominal.T_base_tag)
+    return RunSetup(s, physics, sensors, nominal, estimators, order, controller, goal, events)
 
 
-def _scene(twin) -> SceneInfo:
-    g = twin.true_geometry
+def _scene(setup: RunSetup) -> SceneInfo:
+    p = setup.physics
+    g = p.geometry
+    tag = setup.nominal.T_base_tag is not None and p.has_tag
     return SceneInfo(
         a_base=g.a_base,
         b_platform=g.b_platform,
-        platform_half_size=twin.platform_half_size,
+        platform_half_size=p.platform_half_size,
         T_platform_cam=g.T_platform_cam,
-        intrinsics=twin.intrinsics,
-        T_base_tag=twin.T_base_tag if twin.nominal_T_base_tag is not None else None,
-        tag_size=twin.tag_size if twin.nominal_T_base_tag is not None else 0.0,
+        intrinsics=setup.nominal.intrinsics,
+        T_base_tag=p.T_base_tag if tag else None,
+        tag_size=setup.nominal.tag_size if tag else 0.0,
         frame_min=g.frame_min,
         frame_max=g.frame_max,
     )
@@ -144,161 +216,75 @@ def run(
         summary says ``"status": "interrupted"``, and KeyboardInterrupt is raised again.
     """
     setup = prepare(scenario)
-    twin, estimators, controller = setup.twin, setup.estimators, setup.controller
-    in_loop = scenario.estimators.in_loop
-    period = scenario.model.control_period
-    n_ticks = round(scenario.duration / period)
-    names = scenario.estimators.names
-    tracks = {name: DeviationTrack() for name in names}
-    csv_rec = rrd_rec = None
-    if out_dir is not None:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        csv_rec = CsvRecorder(out_dir / "timeseries.csv", names, twin.true_geometry.n_cables)
-        if record_rrd:
-            rrd_rec = RerunRecorder(
-                out_dir / "recording.rrd",
-                _scene(twin),
-                names,
-                "cdpr-twin",
-                f"{scenario.name}-{scenario.seed}",
-                spawn=spawn,
-            )
-    checkpoints = _checkpoints(scenario)
-    segment_ends: list[dict] = []
-    status, command = "running", None
-    last_tag = None
-    counts = {"tag_lost_ticks": 0, "saturated_ticks": 0}
-
-    def record(m, estimates: dict[str, PoseEstimate], command: Command | None) -> None:
-        plan = controller.planned_pose(m.time)
-        dts, drs = pose_distances(
-            np.array([e.T_base_platform for e in estimates.values()]), m.T_base_platform_true[None]
-        )
-        deviations = {
-            n: tracks[n].add(e, m.T_base_platform_true, (float(a), float(b)))
-            for (n, e), a, b in zip(estimates.items(), dts, drs, strict=True)
-        }
-        if csv_rec is not None:
-            csv_rec.tick(m, estimates, command, plan)
-        if rrd_rec is not None:
-            rrd_rec.tick(m, estimates, deviations, plan)
-        for t_c, waypoint in checkpoints:
-            if abs(m.time - t_c) < 0.5 * period:
-                segment_ends.append(
-                    {
-                        "time_s": m.time,
-                        "waypoint": vector_from_pose(waypoint).tolist(),
-                        "truth_vs_waypoint": pose_error(m.T_base_platform_true, waypoint),
-                        "estimates_vs_truth": {
-                            n: pose_error(e.T_base_platform, m.T_base_platform_true)
-                            for n, e in estimates.items()
-                        },
-                        "estimates_vs_plan": {
-                            n: pose_error(e.T_base_platform, waypoint) for n, e in estimates.items()
-                        },
-                    }
-                )
-
+    s, physics = scenario, setup.physics
+    period = s.model.control_period
+    metrics = RunMetrics(s.estimators.names, setup.controller.checkpoints(s.duration), period)
+    rec_id = f"{s.name}-{s.seed}"
+    names = s.estimators.names
+    try:
+        recorders = Recorders(out_dir, _scene(setup), names, physics.n_cables, rec_id,
+                              record_rrd, spawn)  # fmt: skip
+    except BaseException:
+        setup.close()
+        raise
+    last_tag: list = [None]
+    status = "running"
     start = time.perf_counter()
     try:
-        twin.reset(scenario.start_pose)
-        controller.reset(scenario.start_pose)
-        for est in estimators.values():
-            est.reset(scenario.start_pose, 0.0)
-        m = twin.sense()
-        estimates = {n: est.update(m) for n, est in estimators.items()}
-        record(m, estimates, None)
-        for k in range(n_ticks):
-            command = controller.command(k * period, period, estimates[in_loop], m)
-            counts["tag_lost_ticks"] += command.status == "tag_lost"
-            counts["saturated_ticks"] += command.status == "saturated"
-            twin.advance(period, command.cable_rates, command.twist_platform)
-            m = twin.sense()
-            last_tag = m.tag if m.tag is not None else last_tag
-            estimates = {n: est.update(m) for n, est in estimators.items()}
-            record(m, estimates, command)
-            if progress is not None:
-                progress((k + 1) / n_ticks, m.time)
-            if command.done:
-                status = command.status
-                break
-        else:
-            status = "time_limit" if scenario.controller.type == "pbvs" else "completed"
+        status = _loop(setup, metrics, recorders, progress, last_tag)
     except KeyboardInterrupt:
-        status = "interrupted"
+        status = Status.INTERRUPTED
         raise
     except Exception as exc:  # a diverged simulation or an impossible command: keep the record
         status = f"failed: {type(exc).__name__}: {exc}"
         raise
     finally:
         wall = time.perf_counter() - start
-        summary = _summary(setup, tracks, twin, status, segment_ends, command, last_tag, counts)
-        if csv_rec is not None:
-            csv_rec.close()
-            summary["ticks_recorded"] = csv_rec.rows
-        if rrd_rec is not None:
-            rrd_rec.close()
-        if out_dir is not None:
-            write_json_atomic(out_dir / "summary.json", summary)
-        twin.close()
+        summary = _summary(setup, metrics, status, last_tag[0])
+        recorders.close(summary)
+        setup.close()
     return RunResult(summary, wall, out_dir)
 
 
-def _checkpoints(scenario: Scenario) -> list[tuple[float, np.ndarray]]:
-    if scenario.controller.type != "open_loop":
-        return []
-    params = scenario.controller.params
-    ends = np.cumsum(params["durations"])
-    return [
-        (float(t), w)
-        for t, w in zip(ends, params["waypoints"], strict=True)
-        if t <= scenario.duration + 1e-9
-    ]
+def _loop(setup: RunSetup, metrics: RunMetrics, recorders: Recorders, progress, last_tag) -> str:
+    """The control loop; returns the run's status."""
+    s, physics, sensors, controller = setup.scenario, setup.physics, setup.sensors, setup.controller
+    period, in_loop = s.model.control_period, s.estimators.in_loop
+    n_ticks = round(s.duration / period)
+    physics.reset(s.start_pose)
+    sensors.home(s.start_pose)
+    controller.reset(s.start_pose)
+    for est in setup.estimators.values():
+        est.reset(s.start_pose, 0.0)
+
+    def record(m: Measurement, estimates: dict[str, PoseEstimate], command) -> None:
+        T_true = physics.T_base_platform
+        deviations = metrics.add(m.time, T_true, estimates)
+        plan = controller.planned_pose(m.time)
+        recorders.tick(m, T_true, estimates, deviations, command, plan)
+
+    m = sensors.read(None)
+    estimates = setup.estimate(m)
+    record(m, estimates, None)
+    for k in range(n_ticks):
+        command = controller.command(k * period, period, estimates[in_loop], m)
+        physics.advance(period, command.cable_rates)
+        setup.events.fire(physics.time + 0.5 * physics.timestep)  # due before this tick's read
+        m = sensors.read(command)
+        last_tag[0] = m.tag if m.tag is not None else last_tag[0]
+        estimates = setup.estimate(m)
+        record(m, estimates, command)
+        if progress is not None:
+            progress((k + 1) / n_ticks, m.time)
+        if command.done:
+            return command.status
+    return controller.timeout_status
 
 
-def _summary(
-    setup: RunSetup,
-    tracks: dict[str, DeviationTrack],
-    twin,
-    status: str,
-    segment_ends: list[dict],
-    command: Command | None,
-    last_tag,
-    counts: dict,
-) -> dict:
-    s, goal = setup.scenario, setup.goal_pose
-    T_end = twin.T_base_platform
-    out = {
-        "scenario": s.name,
-        "source": str(s.source),
-        "status": status,
-        "controller": s.controller.type,
-        "in_loop": s.estimators.in_loop,
-        "estimator_names": list(s.estimators.names),
-        "seed": s.seed,
-        "truth_seed": s.truth.seed,
-        "camera": s.sensors.camera,
-        "overrides": dict(s.overrides),
-        "timestep_s": s.model.timestep,
-        "control_rate_hz": s.model.control_rate,
-        "simulated_time_s": twin.time,
-        "final_pose": vector_from_pose(T_end).tolist(),
-        "goal_pose": None if goal is None else vector_from_pose(goal).tolist(),
-        "final_error_vs_goal": None if goal is None else pose_error(T_end, goal),
-        "estimators": {n: t.summary() for n, t in tracks.items()},
-        "segment_ends": segment_ends,
-        "final_tensions_n": twin.tensions.tolist(),
-    }
-    if s.controller.type == "pbvs":
-        goal = s.controller.params["goal_T_cam_tag"]
-        tag_err = None
-        if last_tag is not None:
-            dt, dr = pose_distance(last_tag.T_cam_tag, goal)
-            tag_err = {"translation_m": dt, "rotation_deg": float(np.degrees(dr))}
-        out["pbvs"] = {
-            "converged": status == "converged",
-            "final_tag_error": tag_err,
-            "true_final_tag_error": pose_error(twin.T_cam_tag, goal),
-            **counts,
-        }
-    return out
+def _summary(setup: RunSetup, metrics: RunMetrics, status: str, last_tag) -> dict:
+    p = setup.physics
+    cam_tag = p.T_cam_tag if (p.has_camera and p.has_tag) else None
+    end = RunEnd(status=status, last_tag=last_tag, T_cam_tag_true=cam_tag)
+    truth = {"time": p.time, "T_base_platform": p.T_base_platform, "tensions": p.tensions}
+    extra = setup.controller.summary(end)
+    return run_summary(setup.scenario, status, metrics, truth, setup.goal_pose, extra)

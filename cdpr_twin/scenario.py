@@ -1,9 +1,11 @@
 """Scenario files (TOML) → a frozen, validated :class:`Scenario`, in SI units.
 
-This is the file edge: poses are written ``[x, y, z, rx, ry, rz]`` in metres and degrees,
-angles elsewhere carry ``_deg`` in their key, and the PBVS goal is given in ViSP's tag frame as
-in the paper. Everything is converted here; errors name the file, the field and the fix. A
-scenario file is documented by ``scenarios/paper_open_loop.toml`` and ``paper_pbvs.toml``.
+This is the file edge (units and typed reading in :mod:`cdpr_twin.options`): poses are written
+``[x, y, z, rx, ry, rz]`` in metres and degrees, angles elsewhere carry ``_deg`` in their key,
+and the PBVS goal is given in ViSP's tag frame as in the paper. The controller's and each
+estimator's options are parsed from their own ``Options`` dataclasses (no name is special
+here); errors name the file, the field and the fix. A scenario file is documented by
+``scenarios/paper_open_loop.toml`` and ``paper_pbvs.toml``.
 """
 
 from __future__ import annotations
@@ -18,25 +20,10 @@ from typing import Any
 
 import numpy as np
 
-from cdpr_twin.controllers import CONTROLLERS
+from cdpr_twin import plugins
 from cdpr_twin.deviations import DeviationSpec
-from cdpr_twin.estimators import ESTIMATORS
-from cdpr_twin.se3 import pose_from_vector
-from cdpr_twin.vision import T_TAGPUPIL_TAGVISP
-
-ESTIMATOR_NAMES = tuple(ESTIMATORS)
-CONTROLLER_NAMES = tuple(CONTROLLERS)
-CABLE_MODELS = ("straight", "pulley")
-
-
-class ScenarioError(ValueError):
-    """A scenario file is missing, malformed, or has a bad field."""
-
-
-def _frozen_array(a: Any) -> np.ndarray:
-    out = np.array(a, dtype=float)
-    out.flags.writeable = False
-    return out
+from cdpr_twin.events import EVENT_TYPES, Event
+from cdpr_twin.options import OptionReader, ScenarioError, parse_options
 
 
 @dataclass(frozen=True)
@@ -76,15 +63,15 @@ class SensorConfig:
 
 @dataclass(frozen=True)
 class ControllerConfig:
-    """Controller name and its keyword parameters, in SI (4×4 poses, radians).
+    """Controller name and its options.
 
     Attributes:
-        type: a name of :data:`cdpr_twin.controllers.CONTROLLERS`.
-        params: keyword arguments of that controller.
+        type: a registered controller name.
+        options: an instance of that controller's ``Options`` (SI units).
     """
 
     type: str
-    params: Mapping[str, Any]
+    options: Any
 
 
 @dataclass(frozen=True)
@@ -94,12 +81,12 @@ class EstimatorConfig:
     Attributes:
         in_loop: the estimator whose estimate feeds the controller.
         passive: estimators that run beside it.
-        options: keyword options by estimator name.
+        options: each estimator's ``Options`` instance, by name (defaults when absent).
     """
 
     in_loop: str
     passive: tuple[str, ...]
-    options: Mapping[str, Mapping[str, Any]]
+    options: Mapping[str, Any]
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -123,6 +110,9 @@ class Scenario:
         sensors: sensor settings.
         controller: controller configuration.
         estimators: estimator configuration.
+        events: timed events (faults), in time order.
+        plugins: modules imported before the file's names were checked.
+        overrides: the command-line overrides applied.
     """
 
     name: str
@@ -136,6 +126,8 @@ class Scenario:
     sensors: SensorConfig
     controller: ControllerConfig
     estimators: EstimatorConfig
+    events: tuple[Event, ...] = ()
+    plugins: tuple[str, ...] = ()
     overrides: Mapping[str, Any] = field(default_factory=dict)
 
     def with_overrides(
@@ -161,223 +153,89 @@ class Scenario:
             s = replace(s, sensors=replace(s.sensors, camera=bool(camera)))
             done["camera"] = bool(camera)
         if in_loop is not None:
-            if in_loop not in ESTIMATOR_NAMES:
+            known = plugins.names("estimator")
+            if in_loop not in known:
                 raise ScenarioError(
-                    f"--in-loop {in_loop!r}: unknown estimator; choose one of "
-                    f"{', '.join(ESTIMATOR_NAMES)}"
+                    f"--in-loop {in_loop!r}: unknown estimator; choose one of {', '.join(known)}"
                 )
             passive = tuple(n for n in s.estimators.names if n != in_loop)
             s = replace(s, estimators=replace(s.estimators, in_loop=in_loop, passive=passive))
             done["in_loop"] = in_loop
         if not s.sensors.camera:
-            if s.estimators.in_loop == "image":
-                raise ScenarioError(
-                    f"{s.source}: estimators.in_loop: 'image' needs the camera; "
-                    "choose another in-loop estimator or keep the camera on"
-                )
-            if s.controller.type == "pbvs":
-                raise ScenarioError(f"{s.source}: controller.type: 'pbvs' needs the camera")
-            if "image" in s.estimators.passive:  # nothing to see: drop it, and say so
-                passive = tuple(n for n in s.estimators.passive if n != "image")
-                s = replace(s, estimators=replace(s.estimators, passive=passive))
-                done["dropped_estimators"] = ["image"]
+            s = _without_camera(s, done)
         return replace(s, overrides=MappingProxyType(done))
 
 
-class _Reader:
-    """Typed, unit-aware access to one TOML table, with errors naming file and field."""
-
-    def __init__(self, source: Path, table: Mapping[str, Any], where: str) -> None:
-        self.source, self.table, self.where = source, table, where
-        self.used: set[str] = set()
-
-    def fail(self, key: str, problem: str) -> ScenarioError:
-        name = f"{self.where}.{key}" if self.where else key
-        return ScenarioError(f"{self.source}: {name}: {problem}")
-
-    def has(self, key: str) -> bool:
-        return key in self.table
-
-    def raw(self, key: str, default: Any = ..., kind: str = "") -> Any:
-        self.used.add(key)
-        if key in self.table:
-            return self.table[key]
-        if default is ...:
-            raise self.fail(key, f"missing; add {key} = <{kind}>")
-        return default
-
-    def number(
-        self,
-        key: str,
-        default: Any = ...,
-        minimum: float | None = None,
-        exclusive: bool = False,
-        unit: str = "",
-    ) -> float:
-        v = self.raw(key, default, f"number{' ' + unit if unit else ''}")
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise self.fail(
-                key, f"must be a finite number{' in ' + unit if unit else ''}, got {v!r}"
-            )
-        if minimum is not None and (v <= minimum if exclusive else v < minimum):
-            raise self.fail(
-                key,
-                f"must be {'>' if exclusive else '≥'} {minimum}"
-                f"{' ' + unit if unit else ''}, got {v}",
-            )
-        return float(v)
-
-    def integer(self, key: str, default: Any = ..., minimum: int | None = None) -> int:
-        v = self.raw(key, default, "integer")
-        if isinstance(v, bool) or not isinstance(v, int):
-            raise self.fail(key, f"must be an integer, got {v!r}")
-        if minimum is not None and v < minimum:
-            raise self.fail(key, f"must be ≥ {minimum}, got {v}")
-        return int(v)
-
-    def string(self, key: str, default: Any = ..., choices: tuple[str, ...] = ()) -> str:
-        v = self.raw(key, default, "string")
-        if not isinstance(v, str):
-            raise self.fail(key, f"must be a string, got {v!r}")
-        if choices and v not in choices:
-            raise self.fail(key, f"{v!r} is not one of {', '.join(choices)}")
-        return v
-
-    def boolean(self, key: str, default: Any = ...) -> bool:
-        v = self.raw(key, default, "true/false")
-        if not isinstance(v, bool):
-            raise self.fail(key, f"must be true or false, got {v!r}")
-        return v
-
-    def pose(self, key: str, value: Any = ...) -> np.ndarray:
-        v = self.raw(key, kind="[x, y, z, rx, ry, rz] (m, deg)") if value is ... else value
-        if (
-            not isinstance(v, list)
-            or len(v) != 6
-            or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in v)
-            or not all(math.isfinite(x) for x in v)
-        ):
-            raise self.fail(
-                key, f"must be a pose [x, y, z, rx, ry, rz] in m and degrees, got {v!r}"
-            )
-        return _frozen_array(pose_from_vector(v))
-
-    def table_of(self, key: str, required: bool = True) -> _Reader:
-        v = self.raw(key, ... if required else {}, "table")
-        if not isinstance(v, dict):
-            raise self.fail(key, f"must be a table [{key}], got {v!r}")
-        return _Reader(self.source, v, f"{self.where}.{key}" if self.where else key)
-
-    def done(self) -> None:
-        unknown = sorted(set(self.table) - self.used)
-        if unknown:
-            raise self.fail(
-                unknown[0],
-                f"unknown field; known fields here: {', '.join(sorted(self.used)) or 'none'}",
-            )
+def _needs_camera(kind: str, name: str) -> bool:
+    return bool(getattr(plugins.lookup(kind, name), "needs_camera", False))
 
 
-def _controller(r: _Reader) -> ControllerConfig:
-    kind = r.string("type", choices=CONTROLLER_NAMES)
-    params: dict[str, Any] = {}
-    if kind == "open_loop":
-        raw = r.raw("waypoints", kind="list of poses")
-        if not isinstance(raw, list) or not raw:
-            raise r.fail("waypoints", "must be a non-empty list of poses [x, y, z, rx, ry, rz]")
-        waypoints = tuple(r.pose(f"waypoints[{i}]", w) for i, w in enumerate(raw))
-        durations = r.raw("durations", kind="list of seconds")
-        if (
-            not isinstance(durations, list)
-            or len(durations) != len(waypoints)
-            or any(
-                isinstance(d, bool) or not isinstance(d, (int, float)) or not d > 0
-                for d in durations
-            )
-        ):
-            raise r.fail(
-                "durations",
-                f"must list {len(waypoints)} segment durations > 0 s "
-                f"(one per waypoint), got {durations!r}",
-            )
-        params = {"waypoints": waypoints, "durations": tuple(float(d) for d in durations)}
-    else:
-        goal = r.pose("goal_tag_pose_visp") @ T_TAGPUPIL_TAGVISP
-        goal.flags.writeable = False
-        params = {
-            "goal_T_cam_tag": goal,
-            "gain": r.number("gain", 0.5, minimum=0, exclusive=True, unit="1/s"),
-            "max_linear_speed": r.number(
-                "max_linear_speed", 0.03, minimum=0, exclusive=True, unit="m/s"
-            ),
-            "max_angular_speed": math.radians(
-                r.number("max_angular_speed_deg", 10.0, minimum=0, exclusive=True, unit="deg/s")
-            ),
-            "converged_translation": r.number(
-                "converged_translation", 5e-4, minimum=0, exclusive=True, unit="m"
-            ),
-            "converged_rotation": math.radians(
-                r.number("converged_rotation_deg", 0.1, minimum=0, exclusive=True, unit="deg")
-            ),
-        }
-    params["jacobian_model"] = r.string("jacobian_model", "straight", choices=CABLE_MODELS)
-    r.done()
-    return ControllerConfig(kind, MappingProxyType(params))
-
-
-def _estimators(r: _Reader) -> EstimatorConfig:
-    in_loop = r.string("in_loop", choices=ESTIMATOR_NAMES)
-    passive = r.raw("passive", [], "list of estimator names")
-    if not isinstance(passive, list) or any(p not in ESTIMATOR_NAMES for p in passive):
-        raise r.fail(
-            "passive",
-            f"must list estimator names among {', '.join(ESTIMATOR_NAMES)}, got {passive!r}",
+def _without_camera(s: Scenario, done: dict) -> Scenario:
+    """Refuse what needs the camera in the loop; drop passive estimators that need it."""
+    if _needs_camera("estimator", s.estimators.in_loop):
+        raise ScenarioError(
+            f"{s.source}: estimators.in_loop: {s.estimators.in_loop!r} needs the camera; "
+            "choose another in-loop estimator or keep the camera on"
         )
-    options: dict[str, Mapping[str, Any]] = {}
-    for name in ESTIMATOR_NAMES:
-        if not r.has(name):
-            continue
-        t = r.table_of(name)
-        if name == "image":
-            opts = {"reference": t.string("reference", "previous", choices=("previous", "first"))}
-        elif name.startswith("model_"):
-            opts = {
-                "backend": t.string("backend", "fast", choices=("fast", "scipy")),
-                "taut_threshold": t.number("taut_threshold", 1.0, minimum=0, unit="N"),
-                "tension0": t.number("tension0", 0.0, unit="N"),
-            }
-        else:
-            opts = {}
-        t.done()
-        options[name] = MappingProxyType(opts)
+    if _needs_camera("controller", s.controller.type):
+        raise ScenarioError(f"{s.source}: controller.type: {s.controller.type!r} needs the camera")
+    dropped = [n for n in s.estimators.passive if _needs_camera("estimator", n)]
+    if dropped:  # nothing to see: drop them, and say so
+        passive = tuple(n for n in s.estimators.passive if n not in dropped)
+        s = replace(s, estimators=replace(s.estimators, passive=passive))
+        done["dropped_estimators"] = dropped
+    return s
+
+
+def _controller(r: OptionReader) -> ControllerConfig:
+    kind = r.string("type", choices=plugins.names("controller"))
+    cls = plugins.lookup("controller", kind)
+    return ControllerConfig(kind, parse_options(r, cls.Options, skip=("type",)))
+
+
+def _estimators(r: OptionReader) -> EstimatorConfig:
+    known = plugins.names("estimator")
+    in_loop = r.string("in_loop", choices=known)
+    passive = r.raw("passive", [], "list of estimator names")
+    if not isinstance(passive, list) or any(p not in known for p in passive):
+        raise r.fail(
+            "passive", f"must list estimator names among {', '.join(known)}, got {passive!r}"
+        )
+    options: dict[str, Any] = {}
+    for name in [k for k in r.table if k not in ("in_loop", "passive")]:
+        if name not in known:
+            raise r.fail(name, f"unknown estimator; choose one of {', '.join(known)}")
+        cls = plugins.lookup("estimator", name)
+        options[name] = parse_options(r.table_of(name), cls.Options)
     r.done()
     passive_t = tuple(p for p in dict.fromkeys(passive) if p != in_loop)
     return EstimatorConfig(in_loop, passive_t, MappingProxyType(options))
 
 
-def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario file.
+def _events(top: OptionReader) -> tuple[Event, ...]:
+    raw = top.raw("events", [], "array of tables [[events]]")
+    if not isinstance(raw, list) or not all(isinstance(e, dict) for e in raw):
+        raise top.fail("events", "must be an array of tables [[events]] (type, time, …)")
+    out = []
+    for i, table in enumerate(raw):
+        r = OptionReader(top.source, table, f"events[{i}]")
+        cls = EVENT_TYPES.get(r.string("type", choices=tuple(EVENT_TYPES)))
+        out.append(parse_options(r, cls, skip=("type",)))
+    return tuple(sorted(out, key=lambda e: e.time))
 
-    Args:
-        path: a TOML scenario file.
 
-    Raises:
-        ScenarioError: naming the file, the field and the fix.
-    """
-    source = Path(path)
-    if not source.is_file():
-        raise ScenarioError(f"{source}: scenario file not found")
+def _plugins(top: OptionReader) -> tuple[str, ...]:
+    refs = top.raw("plugins", [], "list of module names or .py files")
+    if not isinstance(refs, list) or not all(isinstance(x, str) for x in refs):
+        raise top.fail("plugins", f"must be a list of module names or .py files, got {refs!r}")
     try:
-        data = tomllib.loads(source.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ScenarioError(f"{source}: not valid TOML: {exc}") from None
-    top = _Reader(source, data, "")
-    name = top.string("name", source.stem)
-    if not name or any(c in name for c in "/\\") or name in (".", ".."):
-        raise top.fail("name", f"must be a plain name usable as a directory, got {name!r}")
-    description = top.string("description", "")
-    duration = top.number("duration", minimum=0, exclusive=True, unit="s")
-    seed = top.integer("seed", 0, minimum=0)
+        plugins.load_modules(refs, top.source.parent)
+    except Exception as exc:  # an import error in the user's module: say which and why
+        raise top.fail("plugins", f"cannot import: {type(exc).__name__}: {exc}") from None
+    return tuple(refs)
 
+
+def _model(top: OptionReader, source: Path) -> ModelConfig:
     m = top.table_of("model", required=False)
     file = Path(m.string("file", "../models/acrobot/scene.xml"))
     file = file if file.is_absolute() else (source.parent / file).resolve()
@@ -393,8 +251,10 @@ def load_scenario(path: str | Path) -> Scenario:
             f"number of physics steps of {timestep:g} s ({steps:.4f});"
             " choose a rate or timestep that divide evenly",
         )
-    model = ModelConfig(file, timestep, control_rate, align_every)
+    return ModelConfig(file, timestep, control_rate, align_every)
 
+
+def _truth(top: OptionReader, source: Path) -> DeviationSpec:
     t = top.table_of("truth", required=False)
     try:
         truth = DeviationSpec(
@@ -415,29 +275,52 @@ def load_scenario(path: str | Path) -> Scenario:
     except ValueError as exc:
         raise ScenarioError(f"{source}: truth: {exc}") from None
     t.done()
+    return truth
 
+
+def _read(source: Path) -> OptionReader:
+    if not source.is_file():
+        raise ScenarioError(f"{source}: scenario file not found")
+    try:
+        data = tomllib.loads(source.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ScenarioError(f"{source}: not valid TOML: {exc}") from None
+    return OptionReader(source, data, "")
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario file.
+
+    Args:
+        path: a TOML scenario file.
+
+    Raises:
+        ScenarioError: naming the file, the field and the fix.
+    """
+    source = Path(path)
+    top = _read(source)
+    loaded = _plugins(top)  # first: the file may name what they register
+    name = top.string("name", source.stem)
+    if not name or any(c in name for c in "/\\") or name in (".", ".."):
+        raise top.fail("name", f"must be a plain name usable as a directory, got {name!r}")
+    description = top.string("description", "")
+    duration = top.number("duration", minimum=0, exclusive=True, unit="s")
+    seed = top.integer("seed", 0, minimum=0)
+    model, truth = _model(top, source), _truth(top, source)
     s = top.table_of("sensors", required=False)
     sensors = SensorConfig(
         s.number("tension_noise_std", 0.24, minimum=0, unit="N"), s.boolean("camera", True)
     )
     s.done()
-
     st = top.table_of("start")
     start = st.pose("pose")
     st.done()
     controller = _controller(top.table_of("controller"))
     estimators = _estimators(top.table_of("estimators"))
+    events = _events(top)
     top.done()
-    return Scenario(
-        name,
-        source,
-        description,
-        duration,
-        seed,
-        start,
-        model,
-        truth,
-        sensors,
-        controller,
-        estimators,
-    ).with_overrides()
+    scenario = Scenario(
+        name, source, description, duration, seed, start, model, truth, sensors,
+        controller, estimators, events, loaded,
+    )  # fmt: skip
+    return scenario.with_overrides()

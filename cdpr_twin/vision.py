@@ -10,81 +10,25 @@ detector shifts them by −0.5 px before solving the pose with the same intrinsi
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import cv2
 import numpy as np
 from pupil_apriltags import Detector
 
-from cdpr_twin.se3 import rot_x, transform
+from cdpr_twin.se3 import transform
+from cdpr_twin.types import T_TAGPUPIL_TAGVISP, CameraIntrinsics, TagDetection
+
+__all__ = [
+    "T_TAGPUPIL_TAGVISP",
+    "CameraIntrinsics",
+    "TagDetection",
+    "TagDetector",
+    "project_points",
+    "refine_quad",
+    "tag_corners_object",
+]
 
 APRILTAG_PIXEL_OFFSET = 0.5
 """AprilTag's pixel-centre coordinate minus OpenCV's [px]."""
-
-T_TAGPUPIL_TAGVISP = transform(rot_x(np.pi), np.zeros(3))
-"""ViSP's tag frame (z out of the tag, y up; the paper's ᶜp_o) in pupil-apriltags' tag frame
-(z into the tag, y down): ``T_cam_tagViSP = T_cam_tagPupil @ T_TAGPUPIL_TAGVISP``. A rotation by
-π about x, its own inverse: ``T_cam_tagPupil = T_cam_tagViSP @ T_TAGPUPIL_TAGVISP`` as well."""
-
-
-@dataclass(frozen=True)
-class CameraIntrinsics:
-    """Pinhole intrinsics in the OpenCV convention.
-
-    Attributes:
-        width: image width [px].
-        height: image height [px].
-        fx: focal length along x [px].
-        fy: focal length along y [px].
-        cx: principal point x [px] (OpenCV: top-left pixel centre at 0).
-        cy: principal point y [px].
-    """
-
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-
-    @classmethod
-    def from_fovy(cls, width: int, height: int, fovy: float) -> CameraIntrinsics:
-        """Intrinsics of an ideal symmetric frustum with square pixels (MuJoCo's cameras).
-
-        Args:
-            width: image width [px].
-            height: image height [px].
-            fovy: vertical field of view [rad].
-        """
-        f = 0.5 * height / np.tan(0.5 * fovy)
-        return cls(width, height, f, f, 0.5 * width - 0.5, 0.5 * height - 0.5)
-
-    @property
-    def K(self) -> np.ndarray:
-        """(3, 3) camera matrix."""
-        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
-
-
-@dataclass(frozen=True, eq=False)
-class TagDetection:
-    """One detected AprilTag.
-
-    Attributes:
-        tag_id: the tag's id in its family.
-        corners: (4, 2) corners [px, OpenCV convention] in pupil-apriltags' order: the tag
-            frame's (−s/2, s/2), (s/2, s/2), (s/2, −s/2), (−s/2, −s/2) (counter-clockwise in the
-            image, starting bottom-left of the upright tag).
-        T_cam_tag: (4, 4) tag pose in the camera frame.
-        decision_margin: pupil-apriltags' decoding margin (higher is more certain).
-        reprojection_error: RMS corner reprojection error of ``T_cam_tag`` [px].
-    """
-
-    tag_id: int
-    corners: np.ndarray
-    T_cam_tag: np.ndarray
-    decision_margin: float
-    reprojection_error: float
-
 
 class _Detector(Detector):
     """pupil-apriltags' Detector with its destructor's use-after-free fixed.

@@ -43,16 +43,16 @@ def test_control_integrates_a_constant_body_twist_in_closed_form(twin):
 
 def test_control_drift_when_the_twin_executes_the_commanded_rates(twin):
     """No model error: 10 s of a smooth commanded motion, rates l̇ = A ᵖv_p with A at the
-    mid-tick pose the estimate predicts. The estimate must follow the truth."""
+    mid-tick pose the estimate predicts. The estimate must follow the truth, and the truth must
+    travel the path the commanded twist prescribes."""
     T0 = paper_pose("p0")
     twin.reset(T0)
     est = make_estimator("control", twin.nominal_geometry)
     est.reset(T0)
-    worst_t = worst_r = 0.0
-    for k in range(250):
-        t = k * DT
-        w = 2 * np.pi / 10
-        xi = np.array(
+    w = 2 * np.pi / 10
+
+    def commanded(t):
+        return np.array(
             [
                 0.02 * np.cos(w * t),
                 0.02 * np.sin(w * t),
@@ -62,15 +62,36 @@ def test_control_drift_when_the_twin_executes_the_commanded_rates(twin):
                 0.03 * np.cos(w * t),
             ]
         )
+
+    worst_t = worst_r = 0.0
+    path = swept = 0.0  # what MuJoCo's platform travelled, tick by tick
+    T_prev = twin.T_base_platform
+    for k in range(250):
+        xi = commanded(k * DT)
         T_mid = est.T_base_platform @ se3.se3_exp(xi * DT / 2)
         rates = kin.jacobian(twin.nominal_geometry, T_mid, "platform", "pulley") @ xi
-        twin.advance(DT, rates, twist_platform=xi)
-        e = est.update(twin.sense())
-        dt, dr = se3.pose_distance(e.T_base_platform, twin.T_base_platform)
+        twin.advance(DT, rates)
+        e = est.update(dataclasses.replace(twin.sense(), twist_platform=xi))
+        T = twin.T_base_platform
+        step_t, step_r = se3.pose_distance(T_prev, T)
+        path, swept, T_prev = path + step_t, swept + step_r, T
+        dt, dr = se3.pose_distance(e.T_base_platform, T)
         worst_t, worst_r = max(worst_t, dt), max(worst_r, dr)
-    moved, _ = se3.pose_distance(T0, twin.T_base_platform)
-    assert worst_t < 1e-3 and np.rad2deg(worst_r) < 0.1
-    assert se3.pose_distance(T0, paper_pose("p0"))[0] == 0.0 and moved < 0.05
+    # measured: worst drift 2.3e-5 m and 9.0e-4°. The drift is not zero: the truth comes from
+    # elastic cables whose tension distribution (and so stretch, ~τ·l/E·S ≈ 1e-5 m) shifts
+    # with the pose, which the control estimate ignores; a twin that merely replayed the
+    # commanded twist would drift by round-off (~1e-15 m) only.
+    assert 2e-6 < worst_t < 1e-4 and np.rad2deg(worst_r) < 0.01
+    # Independent truth for the motion itself: the twist is about the platform origin, so the
+    # origin's speed is |v| and the rotation rate |ω| whatever the orientation; their time
+    # integrals are scalar quadratures of the commanded profile (periodic: the rectangle rule
+    # over one period is exact to round-off), compared with the path MuJoCo's platform took.
+    t = np.arange(250) * DT
+    path_commanded = np.hypot(0.02, 0.01 * np.sin(2 * w * t)).sum() * DT  # 0.211968 m
+    swept_commanded = np.hypot(0.02 * np.sin(w * t), 0.03 * np.cos(w * t)).sum() * DT  # 0.252506
+    # measured: 0.211949 m (−1.9e-5 m) and 0.252490 rad (−1.6e-5 rad)
+    assert abs(path - path_commanded) < 1e-4
+    assert abs(swept - swept_commanded) < 1e-4
 
 
 def test_control_flags_missing_or_non_finite_twists(twin):

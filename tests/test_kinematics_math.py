@@ -27,6 +27,7 @@ from cdpr_twin.kinematics import (
     gravity_wrench,
     jacobian,
     pulley_state,
+    rest_lengths,
 )
 from cdpr_twin.se3 import pose_from_vector, se3_exp, so3_exp, transform
 from cdpr_twin.statics import InfeasibleTensionError, tension_distribution
@@ -217,7 +218,55 @@ def test_pulley_tangent_point_geometry(T: np.ndarray) -> None:
     # (x_i, z) coordinates travelled counter-clockwise from angle π
     ang = np.arctan2(c[:, 2], np.einsum("ij,ij->i", c, x_i)) % (2 * math.pi)
     np.testing.assert_allclose(ps.wrap_length, r * (ang - math.pi), rtol=1e-12)
-    np.testing.assert_allclose(ps.length, cable_lengths(GEOM, T, "pulley"), atol=0)
+
+
+# (swivel yaw φ [deg], drop angle δ of the free segment below the horizontal [deg], free
+# length [m]) of eight hand-built cables, one per exit point A_i
+PULLEY_HAND_CASES = [
+    (0.0, 0.0, 1.0),
+    (90.0, 45.0, 1.0),
+    (180.0, 30.0, 0.7),
+    (-45.0, 60.0, 1.25),
+    (135.0, 15.0, 0.4),
+    (-120.0, 75.0, 0.9),
+    (20.0, 85.0, 1.1),
+    (-170.0, 5.0, 0.6),
+]
+
+
+def test_pulley_lengths_hand_built_in_the_swivel_plane() -> None:
+    """Plane geometry, built forward from the answer: in the pulley plane (x_i horizontal
+    toward B_i, z up) the sheave centre is P = A + r x_i and the cable comes down the swivel
+    axis onto the sheave at A (P's far side). It wraps under the sheave and leaves it at A'
+    going down at δ below the horizontal along d = cos δ x_i − sin δ z; the radius P → A' is
+    perpendicular to d on the lower side: A' = P − r (sin δ x_i + cos δ z). So the wrap is
+    π/2 − δ (a quarter turn from A to the sheave's bottom for a horizontal cable, none for a
+    vertical one) and B = A' + L d. Expect length L + r (π/2 − δ), free length L, and
+    |B − P| = √(L² + r²) (tangent length √(d² − r²) from the sheave centre)."""
+    r = PULLEY_RADIUS
+    a = np.array(A_BASE)
+    phi = np.deg2rad([c[0] for c in PULLEY_HAND_CASES])
+    delta = np.deg2rad([c[1] for c in PULLEY_HAND_CASES])
+    free = np.array([c[2] for c in PULLEY_HAND_CASES])
+    x_i = np.column_stack([np.cos(phi), np.sin(phi), np.zeros(8)])
+    z = np.array([0.0, 0.0, 1.0])
+    centre = a + r * x_i
+    tangent = centre - r * (np.sin(delta)[:, None] * x_i + np.cos(delta)[:, None] * z)
+    d = np.cos(delta)[:, None] * x_i - np.sin(delta)[:, None] * z
+    b = tangent + free[:, None] * d
+    g = dataclasses.replace(GEOM, b_platform=b)  # platform at the base origin: B in F_b
+    ps = pulley_state(g, np.eye(4))
+    np.testing.assert_allclose(ps.phi, phi, atol=1e-14)
+    np.testing.assert_allclose(ps.center, centre, atol=1e-15)
+    np.testing.assert_allclose(ps.tangent, tangent, atol=1e-15)
+    np.testing.assert_allclose(ps.u, d, atol=1e-14)
+    np.testing.assert_allclose(np.linalg.norm(b - centre, axis=1), np.hypot(free, r), rtol=1e-15)
+    np.testing.assert_allclose(ps.free_length, free, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(ps.wrap_length, r * (math.pi / 2 - delta), rtol=0, atol=1e-15)
+    expected = free + r * (math.pi / 2 - delta)
+    np.testing.assert_allclose(cable_lengths(g, np.eye(4), "pulley"), expected, rtol=0, atol=2e-15)
+    # cable 2 by hand: 1 m leaving at 45°, an eighth of a turn of the 4.5 mm sheave
+    assert cable_lengths(g, np.eye(4), "pulley")[1] == pytest.approx(1.0035342917352885, abs=1e-15)
 
 
 # ---------------------------------------------------------------------------- elasticity
@@ -241,17 +290,31 @@ def test_elastic_elongation_hand_case() -> None:
     )
 
 
-@pytest.mark.parametrize("name", sorted(PAPER_POSES))
-def test_elastic_elongation_inverts_twin_cable_law(name: str) -> None:
-    # The twin's cable law τ = E·S/l0 (L − l0): its rest lengths l0 = E·S L / (E·S + τ) give
-    # back L through eq. 14 with the unstretched length as l_i.
-    T = pose_from_vector(PAPER_POSES[name])
-    L = cable_lengths(GEOM, T, "pulley")
-    tau = tension_distribution(GEOM, T)
-    es = GEOM.es
-    l0 = es * L / (es + tau)
-    np.testing.assert_allclose(es / l0 * (L - l0), tau, rtol=1e-9)
-    np.testing.assert_allclose(l0 + elastic_elongation(l0, tau, es), L, rtol=0, atol=4e-16)
+# ACROBOT's cable: E = 111 GPa, Ø 2 mm, E·S = 111e9 · π · (1 mm)² = 348 716.78 N, rounded as in
+# the model file. Tensions picked as round strains τ/E·S; rest lengths and stretches worked out
+# by hand (exact decimals): L = l0 (1 + τ/E·S) ⇒ l0 = L / (1 + τ/E·S), δl = l0 τ/E·S.
+ES_FILE = 348716.8
+ELASTIC_HAND_CASES = [
+    # (stretched L [m], τ [N], rest l0 [m], stretch L − l0 [m])
+    (1.2, 34.87168, 1.199880011998800, 1.199880011998800e-4),  # strain 1e-4: 1.2 / 1.0001
+    (0.9, 69.74336, 0.8998200359928014, 1.799640071985603e-4),  # 2e-4: 0.9 / 1.0002
+    (0.3, 6.974336, 0.2999940001199976, 5.999880002399952e-6),  # 2e-5: 0.3 / 1.00002
+]
+
+
+@pytest.mark.parametrize(("L", "tau", "l0", "stretch"), ELASTIC_HAND_CASES)
+def test_rest_length_and_elongation_hand_case_acrobot_cable(
+    L: float, tau: float, l0: float, stretch: float
+) -> None:
+    # the twin's cable law τ = E·S/l0 (L − l0) inverted (its rest lengths at reset) and eq. 14
+    # with the unstretched length as l_i. The tolerances separate the exact inverse from its
+    # first-order form L (1 − τ/E·S), off by L (τ/E·S)² = 1.2e-8 m to 1.2e-10 m here.
+    es = np.array([ES_FILE])
+    np.testing.assert_allclose(rest_lengths(np.array([L]), np.array([tau]), es), [l0], rtol=1e-14)
+    np.testing.assert_allclose(
+        elastic_elongation(np.array([l0]), np.array([tau]), es), [stretch], rtol=1e-13
+    )
+    assert l0 + stretch == pytest.approx(L, abs=1e-15)  # the hand values are consistent
 
 
 @given(

@@ -1,6 +1,7 @@
 """Open-loop trajectory (eq. 26-30) against its closed form and its own integral."""
 
 import numpy as np
+import pytest
 from conftest import paper_pose
 
 from cdpr_twin import kinematics as kin
@@ -33,20 +34,58 @@ def test_quintic_boundary_conditions_and_closed_form():
         assert abs(quintic(end + 2 * h)[1] - 2 * quintic(end + h)[1] + quintic(end)[1]) < 1e-8
 
 
-def test_planned_poses_and_twists_match_the_closed_form(twin):
+def _angle_axis(R):
+    """Rotation angle from the trace and unit axis from the skew part (no so3_log)."""
+    w = 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    return np.arctan2(np.linalg.norm(w), 0.5 * (np.trace(R) - 1.0)), w / np.linalg.norm(w)
+
+
+# quintic values by hand: s(τ) = 10τ³ − 15τ⁴ + 6τ⁵, s(1/4) = (160 − 60 + 6)/1024
+S_QUARTER = 106 / 1024  # 0.103515625
+DS_HALF = 30 / 16  # ds/dτ at τ = 1/2: 30 τ²(1 − τ)² = 1.875
+
+
+def test_planned_trajectory_passes_the_waypoints_on_straight_quintic_segments(twin):
+    """Independent properties of eq. 26-29 (none recomputes the controller's formula): the
+    waypoints at the segment ends, at rest there, straight lines at the quintic's hand values,
+    one fixed rotation axis with the angle on the same timing law as the position."""
     c = _controller(twin)
-    T0, T1 = paper_pose("p0"), paper_pose("p1")
-    theta_u = se3.so3_log(T0[:3, :3].T @ T1[:3, :3])
-    for t in np.linspace(0, 10, 41):
-        s, ds = quintic(t / 10)
-        R = T0[:3, :3] @ se3.so3_exp(theta_u * s)
-        expected = se3.transform(R, T0[:3, 3] + (T1[:3, 3] - T0[:3, 3]) * s)
-        np.testing.assert_allclose(c.planned_pose(t), expected, atol=1e-12)
-        twist = c.planned_twist_base(t)
-        np.testing.assert_allclose(twist[:3], (T1[:3, 3] - T0[:3, 3]) * ds / 10, atol=1e-12)
-        np.testing.assert_allclose(twist[3:], T0[:3, :3] @ theta_u * ds / 10, atol=1e-12)
-    np.testing.assert_allclose(c.planned_pose(10.0), T1, atol=1e-12)
-    np.testing.assert_allclose(c.planned_pose(25.0), T0, atol=1e-12)
+    p0, p1, p2 = paper_pose("p0"), paper_pose("p1"), paper_pose("p2")
+    for t, T in ((0.0, p0), (10.0, p1), (15.0, p2), (25.0, p0), (30.0, p0)):
+        np.testing.assert_allclose(c.planned_pose(t), T, atol=1e-15)
+    for t in (0.0, 10.0, 15.0, 25.0, -1.0, 30.0):
+        np.testing.assert_allclose(c.planned_twist_base(t), 0.0, atol=1e-15)
+    # first segment p0 → p1 (translation and rotation): positions on the segment at the hand
+    # fractions s(1/4), s(1/2) = 1/2, s(3/4) = 1 − s(1/4), and symmetric about the midpoint
+    d = p1[:3, 3] - p0[:3, 3]
+    angle_total, axis_total = _angle_axis(p0[:3, :3].T @ p1[:3, :3])
+    assert np.rad2deg(angle_total) > 15.0  # p0 is tilted by (−12°, −10°), p1 is level
+    for t, s in ((2.5, S_QUARTER), (5.0, 0.5), (7.5, 1.0 - S_QUARTER)):
+        np.testing.assert_allclose(c.planned_pose(t)[:3, 3], p0[:3, 3] + s * d, atol=1e-15)
+        np.testing.assert_allclose(
+            c.planned_pose(t)[:3, 3] + c.planned_pose(10.0 - t)[:3, 3],
+            p0[:3, 3] + p1[:3, 3],
+            atol=1e-15,
+        )
+    for t in np.linspace(0.25, 9.75, 39):
+        T = c.planned_pose(t)
+        # on the straight line p0 → p1, the fraction travelled ...
+        offset = T[:3, 3] - p0[:3, 3]
+        np.testing.assert_allclose(np.cross(offset, d), 0.0, atol=1e-15)
+        s = offset @ d / (d @ d)
+        # ... equals the fraction of the rotation angle, about p0 → p1's fixed axis
+        angle, axis = _angle_axis(p0[:3, :3].T @ T[:3, :3])
+        np.testing.assert_allclose(axis, axis_total, atol=1e-12)
+        assert angle == pytest.approx(s * angle_total, abs=1e-12)
+    # peak speed at the midpoint: ṡ = (ds/dτ)/10 s with ds/dτ(1/2) = 1.875
+    v = c.planned_twist_base(5.0)
+    np.testing.assert_allclose(v[:3], DS_HALF * d / 10.0, atol=1e-15)
+    np.testing.assert_allclose(np.linalg.norm(v[3:]), DS_HALF * angle_total / 10.0, rtol=1e-12)
+    # second segment p1 → p2: a pure 17 cm climb at constant orientation
+    for t, s in ((12.5, 0.5), (11.25, S_QUARTER)):
+        T = c.planned_pose(t)
+        np.testing.assert_allclose(T[:3, :3], np.eye(3), atol=1e-15)
+        np.testing.assert_allclose(T[:3, 3], [0.284, -0.197, 0.08 + 0.17 * s], atol=1e-15)
 
 
 def test_the_twist_integrates_to_the_planned_poses(twin):

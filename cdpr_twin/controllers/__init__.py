@@ -1,36 +1,34 @@
-"""Controllers at the control rate, chosen by name: ``open_loop`` (§IV-B) and ``pbvs`` (§IV-C)."""
+"""Controllers at the control rate, chosen by name: ``open_loop`` (§IV-B) and ``pbvs`` (§IV-C).
+
+Each registers itself in :mod:`cdpr_twin.plugins`, the registry it shares with estimators.
+"""
 
 from __future__ import annotations
 
 from typing import Any
 
-from cdpr_twin.controllers.base import Command, Controller
+from cdpr_twin import plugins
+from cdpr_twin.controllers.base import Controller, RunEnd
 from cdpr_twin.controllers.open_loop import OpenLoopController
 from cdpr_twin.controllers.pbvs import PbvsController
 from cdpr_twin.geometry import CdprGeometry
-
-CONTROLLERS: dict[str, type[Controller]] = {
-    cls.name: cls for cls in (OpenLoopController, PbvsController)
-}
-"""Controller classes by name."""
+from cdpr_twin.types import Command
 
 
-def make_controller(name: str, geometry: CdprGeometry, **params: Any) -> Controller:
-    """Build a controller by name.
+def make_controller(name: str, geometry: CdprGeometry, **options: Any) -> Controller:
+    """Build a registered controller by name with keyword options (SI units).
 
     Raises:
-        ValueError: for an unknown name or bad parameters.
+        ValueError: for an unknown name or bad options.
     """
-    try:
-        cls = CONTROLLERS[name]
-    except KeyError:
-        raise ValueError(
-            f"unknown controller {name!r}; choose one of {', '.join(CONTROLLERS)}"
-        ) from None
-    try:
-        return cls(geometry, **params)
-    except TypeError as exc:
-        raise ValueError(f"controller {name!r}: bad parameters {sorted(params)}: {exc}") from None
+    return plugins.build("controller", name, geometry, **options)
 
 
-__all__ = ["CONTROLLERS", "Command", "Controller", "make_controller"]
+__all__ = [
+    "Command",
+    "Controller",
+    "OpenLoopController",
+    "PbvsController",
+    "RunEnd",
+    "make_controller",
+]

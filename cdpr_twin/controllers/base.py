@@ -1,48 +1,68 @@
-"""The controllers' common interface: reset at the start pose, command at each control tick."""
+"""The controllers' common interface: reset at the start pose, command at each control tick.
+
+A controller also describes its own task to the runner — its goal pose, the checkpoints at
+which the run records where the platform is, its extra summary fields and how a run that
+ran out of time ended — so the runner needs no knowledge of any controller.
+"""
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import numpy as np
 
-from cdpr_twin.estimators.base import PoseEstimate
 from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.measurement import Measurement
+from cdpr_twin.plugins import NoOptions
+from cdpr_twin.types import Command, Measurement, PoseEstimate, Status, TagDetection
 
 
 @dataclass(frozen=True, eq=False)
-class Command:
-    """What a controller asks of the winches for the next control period.
+class RunEnd:
+    """What a run's end looks like, for a controller's summary fields (metrics only).
 
     Attributes:
-        cable_rates: (m,) winch rates l̇ [m/s].
-        twist_platform: (6,) the platform twist ᵖv_p = [v, ω] these rates realise (in F_p,
-            about the platform origin) [m/s, rad/s]; the control-based estimator integrates it.
-        done: the task is finished (trajectory ended, or servo converged).
-        status: short machine-readable state (``"tracking"``, ``"converged"``, ``"tag_lost"``…).
-        error: (6,) task error when the controller has one (PBVS: e = s − s*), else ``None``.
+        status: how the run ended.
+        last_tag: the last tag detection of the run, or ``None``.
+        T_cam_tag_true: (4, 4) ground-truth tag pose in the camera frame at the end, or
+            ``None`` without camera or tag.
     """
 
-    cable_rates: np.ndarray
-    twist_platform: np.ndarray
-    done: bool = False
-    status: str = ""
-    error: np.ndarray | None = None
+    status: str
+    last_tag: TagDetection | None
+    T_cam_tag_true: np.ndarray | None
 
 
 class Controller(ABC):
     """A controller at a fixed rate; it sees only measurements, estimates and the nominal model.
 
+    Subclasses set ``name`` and ``Options`` and are registered with
+    :func:`cdpr_twin.plugins.register`.
+
     Args:
         geometry: the nominal robot geometry.
+        options: an instance of the class's ``Options`` (defaults when ``None``).
     """
 
-    name: str = ""
+    kind: ClassVar[str] = "controller"
+    name: ClassVar[str] = ""
+    Options: ClassVar[type] = NoOptions
+    needs_camera: ClassVar[bool] = False
+    """Whether the controller needs tag detections (the scenario refuses it without camera)."""
+    timeout_status: ClassVar[Status] = Status.COMPLETED
+    """The run's status when its duration ends before the controller is done."""
 
-    def __init__(self, geometry: CdprGeometry) -> None:
+    def __init__(self, geometry: CdprGeometry, options: Any = None) -> None:
         self.geometry = geometry
+        self.options = self.Options() if options is None else options
+
+    def check(self) -> None:  # noqa: B027  (optional hook: nothing to check by default)
+        """Check the task against the nominal robot before a run starts.
+
+        Raises:
+            cdpr_twin.plugins.OptionError: naming the option at fault.
+        """
 
     @abstractmethod
     def reset(self, T_base_platform0: np.ndarray) -> None:
@@ -64,3 +84,22 @@ class Controller(ABC):
     def planned_pose(self, t: float) -> np.ndarray | None:
         """The pose the controller plans for time t, if it plans one (else ``None``)."""
         return None
+
+    def goal_pose(self, T_base_tag: np.ndarray | None) -> np.ndarray | None:
+        """The platform pose the task should end at, for the summary (else ``None``).
+
+        Args:
+            T_base_tag: (4, 4) the tag pose the nominal model states, or ``None``.
+        """
+        return None
+
+    def checkpoints(self, duration: float) -> list[tuple[float, np.ndarray]]:
+        """Times [s] and poses at which the run records where the platform is.
+
+        E.g. the ends of trajectory segments, within a run of ``duration`` seconds.
+        """
+        return []
+
+    def summary(self, end: RunEnd) -> dict[str, Any]:
+        """Extra top-level fields of ``summary.json`` (none by default)."""
+        return {}

@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
-from cdpr_twin.controllers.base import Command, Controller
-from cdpr_twin.estimators.base import PoseEstimate
+from cdpr_twin.controllers.base import Controller
 from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.kinematics import CableModel, jacobian
-from cdpr_twin.measurement import Measurement
-from cdpr_twin.se3 import so3_exp, so3_log, transform
+from cdpr_twin.kinematics import jacobian
+from cdpr_twin.plugins import OptionError, option, register
+from cdpr_twin.se3 import so3_exp, so3_log, transform, vector_from_pose
+from cdpr_twin.statics import InfeasibleTensionError, tension_distribution
+from cdpr_twin.types import Command, Measurement, PoseEstimate, Status
 
 
 def quintic(tau: float) -> tuple[float, float]:
@@ -60,6 +62,40 @@ class Segment:
         return np.concatenate([self.dt * sdot, self.T_start[:3, :3] @ self.theta_u * sdot])
 
 
+@dataclass(frozen=True)
+class OpenLoopOptions:
+    """The open-loop task.
+
+    Attributes:
+        waypoints: (k,) of (4, 4) poses the trajectory passes through after the start pose
+            (file: a list of ``[x, y, z, rx, ry, rz]`` in m and degrees).
+        durations: (k,) segment durations [s].
+        jacobian_model: cable model of Â (``"straight"``: eq. 6, as in the paper).
+    """
+
+    waypoints: tuple[np.ndarray, ...] = option(pose=True)
+    durations: tuple[float, ...] = option(unit="s")
+    jacobian_model: Literal["straight", "pulley"] = option("straight")
+
+    def __post_init__(self) -> None:
+        n = len(self.waypoints)
+        if n == 0:
+            raise OptionError(
+                "waypoints", "must be a non-empty list of poses [x, y, z, rx, ry, rz]"
+            )
+        if len(self.durations) != n or not all(np.isfinite(d) and d > 0 for d in self.durations):
+            raise OptionError(
+                "durations",
+                f"must list {n} segment durations > 0 s (one per waypoint), got "
+                f"{list(self.durations)!r}",
+            )
+        if self.jacobian_model not in ("straight", "pulley"):
+            raise OptionError(
+                "jacobian_model", f"must be 'straight' or 'pulley', got {self.jacobian_model!r}"
+            )
+
+
+@register
 class OpenLoopController(Controller):
     """Follow straight quintic segments through waypoints with l̇ = Â ᵇv_p (eq. 30).
 
@@ -69,33 +105,37 @@ class OpenLoopController(Controller):
 
     Args:
         geometry: nominal geometry.
-        waypoints: (k, 4, 4) poses the trajectory passes through, after the start pose.
-        durations: (k,) segment durations [s].
-        jacobian_model: cable model of Â (``"straight"``: eq. 6, as in the paper).
+        options: :class:`OpenLoopOptions`.
     """
 
     name = "open_loop"
+    Options = OpenLoopOptions
+    timeout_status = Status.COMPLETED
 
-    def __init__(
-        self,
-        geometry: CdprGeometry,
-        waypoints: Sequence[np.ndarray],
-        durations: Sequence[float],
-        jacobian_model: CableModel = "straight",
-    ) -> None:
-        super().__init__(geometry)
-        if len(waypoints) == 0 or len(waypoints) != len(durations):
-            raise ValueError(
-                f"open_loop needs as many durations as waypoints (≥ 1), got "
-                f"{len(waypoints)} waypoints and {len(durations)} durations"
-            )
-        self.waypoints = [np.asarray(w, dtype=float) for w in waypoints]
-        self.durations = [float(d) for d in durations]
-        for i, w in enumerate(self.waypoints):
-            geometry.check_pose_inside(w, f"waypoint {i + 1}")
-        self.jacobian_model = jacobian_model
+    def __init__(self, geometry: CdprGeometry, options: OpenLoopOptions) -> None:
+        super().__init__(geometry, options)
+        self.waypoints = [np.asarray(w, dtype=float) for w in options.waypoints]
+        self.durations = [float(d) for d in options.durations]
+        self.check()
+        self.jacobian_model = options.jacobian_model
         self.segments: list[Segment] = []
         self._starts = np.zeros(0)
+
+    def check(self) -> None:
+        """Every waypoint inside the frame and holdable with all cables taut (≥ 0.5 N).
+
+        Raises:
+            OptionError: naming the waypoint (``waypoints[i]``, from 0).
+        """
+        for i, w in enumerate(self.waypoints):
+            try:
+                self.geometry.check_pose_inside(w, "waypoint")
+                tension_distribution(self.geometry, w, tau_min=0.5)
+            except (ValueError, InfeasibleTensionError) as exc:
+                raise OptionError(
+                    f"waypoints[{i}]",
+                    f"{vector_from_pose(w).round(4).tolist()} is outside the workspace: {exc}",
+                ) from None
 
     @property
     def total_duration(self) -> float:
@@ -140,4 +180,19 @@ class OpenLoopController(Controller):
         R = T[:3, :3]
         twist_platform = np.concatenate([R.T @ twist_base[:3], R.T @ twist_base[3:]])
         done = t + period >= self.total_duration - 1e-9
-        return Command(rates, twist_platform, done=done, status="done" if done else "tracking")
+        return Command(
+            rates, twist_platform, done=done, status=Status.DONE if done else Status.TRACKING
+        )
+
+    def goal_pose(self, T_base_tag: np.ndarray | None) -> np.ndarray:
+        """The last waypoint."""
+        return self.waypoints[-1]
+
+    def checkpoints(self, duration: float) -> list[tuple[float, np.ndarray]]:
+        """The end of each segment reached within ``duration``, with its waypoint."""
+        ends = np.cumsum(self.durations)
+        return [
+            (float(t), w)
+            for t, w in zip(ends, self.waypoints, strict=True)
+            if t <= duration + 1e-9
+        ]

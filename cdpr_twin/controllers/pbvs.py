@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+from typing import Any, Literal
+
 import numpy as np
 
-from cdpr_twin.controllers.base import Command, Controller
-from cdpr_twin.estimators.base import PoseEstimate
+from cdpr_twin.controllers.base import Controller, RunEnd
 from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.kinematics import CableModel, jacobian
-from cdpr_twin.measurement import Measurement
-from cdpr_twin.se3 import adjoint, inverse, skew, so3_log
+from cdpr_twin.kinematics import jacobian
+from cdpr_twin.plugins import OptionError, option, register
+from cdpr_twin.se3 import adjoint, inverse, pose_distance, skew, so3_log
+from cdpr_twin.types import T_TAGPUPIL_TAGVISP, Command, Measurement, PoseEstimate, Status
 
 
 def interaction_matrix(t_cam_tag: np.ndarray, theta_u: np.ndarray) -> np.ndarray:
@@ -39,6 +43,67 @@ def interaction_matrix(t_cam_tag: np.ndarray, theta_u: np.ndarray) -> np.ndarray
     return L
 
 
+_TEN_DEGREES = math.radians(10.0)
+_TENTH_DEGREE = math.radians(0.1)
+
+
+def _visp_goal(T_cam_tagvisp: np.ndarray) -> np.ndarray:
+    """The paper's goal ᶜp_o (ViSP tag frame) as a pose of pupil-apriltags' tag frame."""
+    goal = T_cam_tagvisp @ T_TAGPUPIL_TAGVISP
+    goal.flags.writeable = False
+    return goal
+
+
+@dataclass(frozen=True)
+class PbvsOptions:
+    """The PBVS task and gains.
+
+    Attributes:
+        goal_T_cam_tag: (4, 4) desired tag pose in the camera frame, pupil-apriltags tag frame
+            (file: ``goal_tag_pose_visp = [x, y, z, rx, ry, rz]``, m and degrees, ViSP's tag
+            frame as in the paper).
+        gain: λ [1/s].
+        max_linear_speed: camera translation speed cap [m/s]; the twist is scaled down
+            uniformly (direction kept) when exceeded.
+        max_angular_speed: camera rotation speed cap [rad/s] (file: deg/s).
+        converged_translation: ‖ᶜt_o − ᶜ*t_o‖ below which translation has converged [m].
+        converged_rotation: θ below which rotation has converged [rad] (file: deg).
+        jacobian_model: cable model of Â (``"straight"``: eq. 6, as in the paper).
+    """
+
+    goal_T_cam_tag: np.ndarray = option(  # noqa: RUF009  (a field, required: no default)
+        key="goal_tag_pose_visp", pose=True, convert=_visp_goal
+    )
+    gain: float = option(0.5, minimum=0.0, exclusive=True, unit="1/s")
+    max_linear_speed: float = option(0.03, minimum=0.0, exclusive=True, unit="m/s")
+    max_angular_speed: float = option(_TEN_DEGREES, minimum=0.0, exclusive=True, unit="deg")
+    converged_translation: float = option(5e-4, minimum=0.0, exclusive=True, unit="m")
+    converged_rotation: float = option(_TENTH_DEGREE, minimum=0.0, exclusive=True, unit="deg")
+    jacobian_model: Literal["straight", "pulley"] = option("straight")
+
+    def __post_init__(self) -> None:
+        goal = np.asarray(self.goal_T_cam_tag, dtype=float)
+        if goal.shape != (4, 4) or not np.all(np.isfinite(goal)) or goal[2, 3] <= 0:
+            raise OptionError(
+                "goal_T_cam_tag", "must be a finite 4×4 pose in front of the camera (z > 0)"
+            )
+        for name in (
+            "gain",
+            "max_linear_speed",
+            "max_angular_speed",
+            "converged_translation",
+            "converged_rotation",
+        ):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise OptionError(name, f"must be > 0, got {value}")
+        if self.jacobian_model not in ("straight", "pulley"):
+            raise OptionError(
+                "jacobian_model", f"must be 'straight' or 'pulley', got {self.jacobian_model!r}"
+            )
+
+
+@register
 class PbvsController(Controller):
     """ᶜv_c = −λ L̂⁺ e (eq. 2), ᵖv_p = Â_d ᶜv_c (eq. 3-4), l̇ = Â ᵖv_p (eq. 5-6).
 
@@ -47,55 +112,30 @@ class PbvsController(Controller):
 
     Args:
         geometry: nominal geometry (its ``T_platform_cam`` is Â_d's ᵖT_c).
-        goal_T_cam_tag: (4, 4) desired tag pose in the camera frame, pupil-apriltags tag frame.
-        gain: λ [1/s].
-        max_linear_speed: camera translation speed cap [m/s]; the twist is scaled down
-            uniformly (direction kept) when exceeded.
-        max_angular_speed: camera rotation speed cap [rad/s].
-        converged_translation: ‖ᶜt_o − ᶜ*t_o‖ below which translation has converged [m].
-        converged_rotation: θ below which rotation has converged [rad].
-        jacobian_model: cable model of Â (``"straight"``: eq. 6, as in the paper).
+        options: :class:`PbvsOptions`.
     """
 
     name = "pbvs"
+    Options = PbvsOptions
+    needs_camera = True
+    timeout_status = Status.TIME_LIMIT
 
-    def __init__(
-        self,
-        geometry: CdprGeometry,
-        goal_T_cam_tag: np.ndarray,
-        gain: float = 0.5,
-        max_linear_speed: float = 0.03,
-        max_angular_speed: float = np.deg2rad(10.0),
-        converged_translation: float = 5e-4,
-        converged_rotation: float = np.deg2rad(0.1),
-        jacobian_model: CableModel = "straight",
-    ) -> None:
-        super().__init__(geometry)
-        goal = np.asarray(goal_T_cam_tag, dtype=float)
-        if goal.shape != (4, 4) or not np.all(np.isfinite(goal)) or goal[2, 3] <= 0:
-            raise ValueError(
-                "pbvs: goal_T_cam_tag must be a finite 4×4 pose in front of the camera (z > 0)"
-            )
-        for name, value in (
-            ("gain", gain),
-            ("max_linear_speed", max_linear_speed),
-            ("max_angular_speed", max_angular_speed),
-            ("converged_translation", converged_translation),
-            ("converged_rotation", converged_rotation),
-        ):
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"pbvs: {name} must be > 0, got {value}")
-        self.goal = goal
-        self.gain = float(gain)
-        self.max_linear_speed = float(max_linear_speed)
-        self.max_angular_speed = float(max_angular_speed)
-        self.converged_translation = float(converged_translation)
-        self.converged_rotation = float(converged_rotation)
-        self.jacobian_model = jacobian_model
+    def __init__(self, geometry: CdprGeometry, options: PbvsOptions) -> None:
+        super().__init__(geometry, options)
+        o = options
+        self.goal = np.asarray(o.goal_T_cam_tag, dtype=float)
+        self.gain = float(o.gain)
+        self.max_linear_speed = float(o.max_linear_speed)
+        self.max_angular_speed = float(o.max_angular_speed)
+        self.converged_translation = float(o.converged_translation)
+        self.converged_rotation = float(o.converged_rotation)
+        self.jacobian_model = o.jacobian_model
         self._Ad = adjoint(geometry.T_platform_cam)
+        self._counts = {Status.TAG_LOST: 0, Status.SATURATED: 0}
 
     def reset(self, T_base_platform0: np.ndarray) -> None:
-        """Nothing to plan: PBVS reacts to each detection."""
+        """Nothing to plan: PBVS reacts to each detection (the tick counts restart)."""
+        self._counts = {Status.TAG_LOST: 0, Status.SATURATED: 0}
 
     def platform_goal(self, T_base_tag: np.ndarray) -> np.ndarray:
         """The platform pose at which the camera sees a tag at ``T_base_tag`` as the goal.
@@ -109,20 +149,50 @@ class PbvsController(Controller):
         R_goal_cur = self.goal[:3, :3] @ T_cam_tag[:3, :3].T  # ᶜ*R_c = ᶜ*R_o ᶜR_oᵀ
         return np.concatenate([T_cam_tag[:3, 3] - self.goal[:3, 3], so3_log(R_goal_cur)])
 
+    def goal_pose(self, T_base_tag: np.ndarray | None) -> np.ndarray | None:
+        """Where the nominal robot sees the goal view, or ``None`` without a tag pose."""
+        return None if T_base_tag is None else self.platform_goal(T_base_tag)
+
+    def summary(self, end: RunEnd) -> dict[str, Any]:
+        """``pbvs``: convergence, detected and true final tag errors, tag-lost/saturated ticks."""
+        tag_err = None
+        if end.last_tag is not None:
+            dt, dr = pose_distance(end.last_tag.T_cam_tag, self.goal)
+            tag_err = {"translation_m": dt, "rotation_deg": float(np.degrees(dr))}
+        true_err = None
+        if end.T_cam_tag_true is not None:
+            dt, dr = pose_distance(end.T_cam_tag_true, self.goal)
+            true_err = {"translation_m": dt, "rotation_deg": float(np.degrees(dr))}
+        return {
+            "pbvs": {
+                "converged": end.status == Status.CONVERGED,
+                "final_tag_error": tag_err,
+                "true_final_tag_error": true_err,
+                "tag_lost_ticks": self._counts[Status.TAG_LOST],
+                "saturated_ticks": self._counts[Status.SATURATED],
+            }
+        }
+
     def command(
         self, t: float, period: float, estimate: PoseEstimate, measurement: Measurement
     ) -> Command:
         """One PBVS step; zero velocity while the tag is not detected."""
+        cmd = self._command(estimate, measurement)
+        if cmd.status in self._counts:
+            self._counts[cmd.status] += 1
+        return cmd
+
+    def _command(self, estimate: PoseEstimate, measurement: Measurement) -> Command:
         zero8, zero6 = np.zeros(self.geometry.n_cables), np.zeros(6)
         if measurement.tag is None:
-            return Command(zero8, zero6, status="tag_lost")
+            return Command(zero8, zero6, status=Status.TAG_LOST)
         T_co = measurement.tag.T_cam_tag
         e = self.error(T_co)
         if (
             np.linalg.norm(e[:3]) < self.converged_translation
             and np.linalg.norm(e[3:]) < self.converged_rotation
         ):
-            return Command(zero8, zero6, done=True, status="converged", error=e)
+            return Command(zero8, zero6, done=True, status=Status.CONVERGED, error=e)
         v_cam = -self.gain * np.linalg.pinv(interaction_matrix(T_co[:3, 3], e[3:])) @ e
         scale = max(
             1.0,
@@ -132,5 +202,5 @@ class PbvsController(Controller):
         v_cam = v_cam / scale
         twist_platform = self._Ad @ v_cam  # eq. 3-4
         A = jacobian(self.geometry, estimate.T_base_platform, "platform", self.jacobian_model)
-        status = "saturated" if scale > 1.0 else "servoing"
+        status = Status.SATURATED if scale > 1.0 else Status.SERVOING
         return Command(A @ twist_platform, twist_platform, status=status, error=e)

@@ -3,13 +3,17 @@
 >>> est = make_estimator("model_elastic_pulley", geometry)
 >>> est.reset(T_base_platform0)
 >>> estimate = est.update(measurement)
+
+Each registers itself in :mod:`cdpr_twin.plugins`; more can be registered from outside the
+package (a scenario file's ``plugins`` list imports them).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from cdpr_twin.estimators.base import Estimator, PoseEstimate
+from cdpr_twin import plugins
+from cdpr_twin.estimators.base import Estimator
 from cdpr_twin.estimators.control import ControlEstimator
 from cdpr_twin.estimators.image import ImageEstimator
 from cdpr_twin.estimators.model import (
@@ -20,9 +24,10 @@ from cdpr_twin.estimators.model import (
     SimpleModelEstimator,
 )
 from cdpr_twin.geometry import CdprGeometry
+from cdpr_twin.types import PoseEstimate
 
-ESTIMATORS: dict[str, type[Estimator]] = {
-    cls.name: cls
+PAPER_ESTIMATORS = tuple(
+    cls.name
     for cls in (
         ControlEstimator,
         ImageEstimator,
@@ -31,32 +36,29 @@ ESTIMATORS: dict[str, type[Estimator]] = {
         PulleyModelEstimator,
         ElasticPulleyModelEstimator,
     )
-}
-"""Estimator classes by name, in the paper's order (Est. 1 … Est. 6)."""
+)
+"""The paper's six estimators, in its order (Est. 1 … Est. 6)."""
 
 
 def make_estimator(name: str, geometry: CdprGeometry, **options: Any) -> Estimator:
-    """Build an estimator by its name (DESIGN §7).
+    """Build a registered estimator by name (DESIGN §7).
 
     Args:
-        name: one of :data:`ESTIMATORS`.
+        name: a registered estimator name (:func:`cdpr_twin.plugins.names`).
         geometry: the nominal geometry.
-        **options: the estimator's keyword options (e.g. ``reference="first"`` for ``image``,
-            ``backend="scipy"`` for ``model_*``).
+        **options: fields of the estimator's ``Options`` (e.g. ``reference="first"`` for
+            ``image``, ``backend="scipy"`` for ``model_*``).
 
     Raises:
         ValueError: for an unknown name or option.
     """
-    try:
-        cls = ESTIMATORS[name]
-    except KeyError:
-        raise ValueError(
-            f"unknown estimator {name!r}; choose one of {', '.join(ESTIMATORS)}"
-        ) from None
-    try:
-        return cls(geometry, **options)
-    except TypeError as exc:
-        raise ValueError(f"estimator {name!r}: bad options {sorted(options)}: {exc}") from None
+    return plugins.build("estimator", name, geometry, **options)
 
 
-__all__ = ["ESTIMATORS", "Estimator", "ModelEstimator", "PoseEstimate", "make_estimator"]
+__all__ = [
+    "PAPER_ESTIMATORS",
+    "Estimator",
+    "ModelEstimator",
+    "PoseEstimate",
+    "make_estimator",
+]

@@ -1,15 +1,23 @@
-"""The estimators' common interface: reset at a known pose, update from a Measurement."""
+"""The estimators' common interface: reset at a known pose, update from a Measurement.
+
+An estimator sees the nominal geometry, measurements and — when it declares them in
+:attr:`Estimator.inputs` — the current estimates of other estimators (a fusing estimator);
+never MuJoCo, never ground truth.
+"""
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Any, ClassVar
 
 import numpy as np
 
 from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.measurement import Measurement
+from cdpr_twin.plugins import NoOptions
 from cdpr_twin.se3 import check_rigid
+from cdpr_twin.types import Measurement, PoseEstimate
 
 TAG_LOST = "tag_lost"
 """No tag detection in this measurement: the estimate is held."""
@@ -27,48 +35,30 @@ REANCHORED = "reanchored"
 """Image-based: no successive detection pair; the reference restarts at the held estimate."""
 
 
-@dataclass(frozen=True, eq=False)
-class PoseEstimate:
-    """One estimate of the platform pose.
-
-    Attributes:
-        time: time of the measurement it comes from [s].
-        T_base_platform: (4, 4) estimated pose (the last valid one when ``valid`` is False).
-        valid: whether this update produced a new estimate from its inputs.
-        flags: why not, or what is special (the module constants of
-            :mod:`cdpr_twin.estimators.base`).
-        cables: indices (from 0) of the cables used, for model-based estimators.
-        residual: largest |model length − measured length| over the cables used [m].
-        iterations: solver iterations.
-    """
-
-    time: float
-    T_base_platform: np.ndarray
-    valid: bool = True
-    flags: frozenset[str] = field(default_factory=frozenset)
-    cables: tuple[int, ...] = ()
-    residual: float = 0.0
-    iterations: int = 0
-
-    def __post_init__(self) -> None:
-        T = np.array(self.T_base_platform, dtype=float)
-        T.flags.writeable = False
-        object.__setattr__(self, "T_base_platform", T)
-        if not isinstance(self.flags, frozenset):
-            object.__setattr__(self, "flags", frozenset(self.flags))
+NO_INPUTS: Mapping[str, PoseEstimate] = MappingProxyType({})
 
 
 class Estimator(ABC):
     """A moving-platform pose estimator (paper §III). All start from a known pose.
 
+    Subclasses set ``name`` and ``Options`` (a frozen dataclass whose fields are the
+    estimator's scenario options, see :mod:`cdpr_twin.plugins`) and are registered with
+    :func:`cdpr_twin.plugins.register`.
+
     Args:
         geometry: the *nominal* robot geometry the estimator believes in.
+        options: an instance of the class's ``Options`` (defaults when ``None``).
     """
 
-    name: str = ""
+    kind: ClassVar[str] = "estimator"
+    name: ClassVar[str] = ""
+    Options: ClassVar[type] = NoOptions
+    needs_camera: ClassVar[bool] = False
+    """Whether it reads tag detections (dropped from the passive set when the camera is off)."""
 
-    def __init__(self, geometry: CdprGeometry) -> None:
+    def __init__(self, geometry: CdprGeometry, options: Any = None) -> None:
         self.geometry = geometry
+        self.options = self.Options() if options is None else options
         self._T = np.full((4, 4), np.nan)
         self._time = np.nan
         self._ready = False
@@ -86,6 +76,11 @@ class Estimator(ABC):
         self._ready = True
 
     @property
+    def inputs(self) -> tuple[str, ...]:
+        """Names of the estimators whose current estimates :meth:`update` needs (none here)."""
+        return ()
+
+    @property
     def T_base_platform(self) -> np.ndarray:
         """The current estimate (4, 4)."""
         return self._T.copy()
@@ -99,5 +94,12 @@ class Estimator(ABC):
         return PoseEstimate(m.time, self._T, valid=False, flags=frozenset(flags), **extra)
 
     @abstractmethod
-    def update(self, measurement: Measurement) -> PoseEstimate:
-        """Update from one measurement and return the new estimate."""
+    def update(
+        self, measurement: Measurement, inputs: Mapping[str, PoseEstimate] = NO_INPUTS
+    ) -> PoseEstimate:
+        """Update from one measurement and return the new estimate.
+
+        Args:
+            measurement: the sensors' reading.
+            inputs: this tick's estimates of the estimators named by :attr:`inputs`.
+        """

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
-from cdpr_twin.estimators.base import NO_TWIST, NON_FINITE_INPUT, Estimator, PoseEstimate
-from cdpr_twin.measurement import Measurement
+from cdpr_twin.estimators.base import NO_INPUTS, NO_TWIST, NON_FINITE_INPUT, Estimator
+from cdpr_twin.plugins import register
 from cdpr_twin.se3 import se3_exp
+from cdpr_twin.types import Measurement, PoseEstimate
 
 
+@register
 class ControlEstimator(Estimator):
     """ᵇT_p(t) = ᵇT_p(t − Δt) · exp(ᵖv_p Δt), with ᵖv_p the twist commanded over the last tick.
 
@@ -17,7 +21,9 @@ class ControlEstimator(Estimator):
 
     name = "control"
 
-    def update(self, measurement: Measurement) -> PoseEstimate:
+    def update(
+        self, measurement: Measurement, inputs: Mapping[str, PoseEstimate] = NO_INPUTS
+    ) -> PoseEstimate:
         """Compose the estimate with the exponential of the last commanded twist."""
         self._check_reset()
         m = measurement

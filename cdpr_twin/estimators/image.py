@@ -2,30 +2,53 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 
 from cdpr_twin.estimators.base import (
     NO_CAMERA,
+    NO_INPUTS,
     NON_FINITE_INPUT,
     REANCHORED,
     TAG_LOST,
     Estimator,
-    PoseEstimate,
 )
 from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.measurement import Measurement
+from cdpr_twin.plugins import OptionError, option, register
 from cdpr_twin.se3 import inverse
+from cdpr_twin.types import Measurement, PoseEstimate
 
 
+@dataclass(frozen=True)
+class ImageOptions:
+    """Options of the image-based estimator.
+
+    Attributes:
+        reference: ``"previous"`` — compose successive detections (the paper's choice);
+            ``"first"`` — compose against the first detection after reset.
+    """
+
+    reference: Literal["previous", "first"] = option("previous")
+
+    def __post_init__(self) -> None:
+        if self.reference not in ("previous", "first"):
+            raise OptionError(
+                "reference", f"must be 'previous' or 'first', got {self.reference!r}"
+            )
+
+
+@register
 class ImageEstimator(Estimator):
     """ᵇT_p(t) = ᵇT_p(t0) ᵖT_c ᶜT_o(t0) ᶜT_o(t)⁻¹ ᵖT_c⁻¹ (eq. 12), the tag being motionless.
 
     Args:
         geometry: nominal geometry (its ``T_platform_cam`` is ᵖT_c).
-        reference: ``"previous"`` — t0 = t − Δt, successive detections (the paper's choice);
-            ``"first"`` — t0 is the first detection after :meth:`reset`.
+        options: :class:`ImageOptions`; ``reference="previous"``: t0 = t − Δt, successive
+            detections (the paper's choice); ``"first"``: t0 is the first detection after
+            :meth:`reset`.
 
     The first detection after :meth:`reset` anchors the tag in F_b at the reset pose (eq. 10):
     feed the measurement taken at that pose first.
@@ -39,14 +62,12 @@ class ImageEstimator(Estimator):
     """
 
     name = "image"
+    Options = ImageOptions
+    needs_camera = True
 
-    def __init__(
-        self, geometry: CdprGeometry, reference: Literal["previous", "first"] = "previous"
-    ) -> None:
-        super().__init__(geometry)
-        if reference not in ("previous", "first"):
-            raise ValueError(f"image: reference must be 'previous' or 'first', got {reference!r}")
-        self.reference = reference
+    def __init__(self, geometry: CdprGeometry, options: ImageOptions | None = None) -> None:
+        super().__init__(geometry, options)
+        self.reference = self.options.reference
         self._T_base_tag: np.ndarray | None = None
         self._had_tag = False
 
@@ -56,7 +77,9 @@ class ImageEstimator(Estimator):
         self._T_base_tag = None
         self._had_tag = False
 
-    def update(self, measurement: Measurement) -> PoseEstimate:
+    def update(
+        self, measurement: Measurement, inputs: Mapping[str, PoseEstimate] = NO_INPUTS
+    ) -> PoseEstimate:
         """Compose the estimate from the reference detection and this one."""
         self._check_reset()
         m = measurement

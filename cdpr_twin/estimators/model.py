@@ -18,6 +18,8 @@ Two backends solve the same square system and agree to round-off:
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import ClassVar, Literal
 
 import numpy as np
@@ -26,15 +28,16 @@ from scipy.optimize import least_squares
 
 from cdpr_twin.estimators.base import (
     FEW_TAUT_CABLES,
+    NO_INPUTS,
     NON_FINITE_INPUT,
     NOT_CONVERGED,
     Estimator,
-    PoseEstimate,
 )
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import elastic_elongation, lengths_and_jacobian
-from cdpr_twin.measurement import Measurement
+from cdpr_twin.plugins import OptionError, option, register
 from cdpr_twin.se3 import exp_coefficients, matrix_from_quat_wxyz, quat_wxyz_from_matrix, transform
+from cdpr_twin.types import Measurement, PoseEstimate
 
 Backend = Literal["fast", "scipy"]
 N_USED = 6
@@ -238,46 +241,53 @@ def solve_scipy(
     return T, float(np.max(np.abs(sol.fun[:N_USED]))), int(sol.nfev)
 
 
+@dataclass(frozen=True)
+class ModelOptions:
+    """Options of the model-based estimators (Algorithm 1).
+
+    Attributes:
+        backend: ``"fast"`` (Newton on SE(3)) or ``"scipy"`` (the paper's formulation).
+        taut_threshold: a cable counts as taut above this tension [N]; with fewer than six
+            taut cables the estimate is held and flagged (the six would include slack ones).
+        tension0: τ(0) of eq. 13, the tension at which the encoders read unstretched lengths [N].
+        max_residual: the solve is accepted when every used length matches within this [m].
+    """
+
+    backend: Literal["fast", "scipy"] = option("fast")
+    taut_threshold: float = option(1.0, minimum=0.0, unit="N")
+    tension0: float = option(0.0, unit="N")
+    max_residual: float = option(1e-9, minimum=1e-15, unit="m")
+
+    def __post_init__(self) -> None:
+        if self.backend not in ("fast", "scipy"):
+            raise OptionError("backend", f"must be 'fast' or 'scipy', got {self.backend!r}")
+        for name, low in (("taut_threshold", 0.0), ("max_residual", 1e-15)):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= low):
+                raise OptionError(name, f"must be a finite number ≥ {low}, got {value}")
+        if not math.isfinite(self.tension0):
+            raise OptionError("tension0", f"must be finite, got {self.tension0}")
+
+
 class ModelEstimator(Estimator):
     """Algorithm 1: least squares on the six most-tensioned cables, warm-started.
 
     Args:
         geometry: nominal geometry.
-        backend: ``"fast"`` or ``"scipy"`` (see the module docstring).
-        taut_threshold: a cable counts as taut above this tension [N]; with fewer than six taut
-            cables the estimate is held and flagged (the six would include slack ones).
-        tension0: τ(0) of eq. 13, the tension at which the encoders read unstretched lengths [N].
-        max_residual: the solve is accepted when every used length matches within this [m].
+        options: :class:`ModelOptions`.
     """
 
+    Options = ModelOptions
     elastic: ClassVar[bool] = False
     pulley: ClassVar[bool] = False
 
-    def __init__(
-        self,
-        geometry: CdprGeometry,
-        backend: Backend = "fast",
-        taut_threshold: float = 1.0,
-        tension0: float = 0.0,
-        max_residual: float = 1e-9,
-    ) -> None:
-        super().__init__(geometry)
-        if backend not in ("fast", "scipy"):
-            raise ValueError(f"{self.name}: backend must be 'fast' or 'scipy', got {backend!r}")
-        self.backend = backend
-        for name, value, low in (
-            ("taut_threshold", taut_threshold, 0.0),
-            ("max_residual", max_residual, 1e-15),
-        ):
-            if not (math.isfinite(value) and value >= low):
-                raise ValueError(
-                    f"{self.name}: {name} must be a finite number ≥ {low}, got {value}"
-                )
-        if not math.isfinite(tension0):
-            raise ValueError(f"{self.name}: tension0 must be finite, got {tension0}")
-        self.taut_threshold = float(taut_threshold)
-        self.tension0 = float(tension0)
-        self.max_residual = float(max_residual)
+    def __init__(self, geometry: CdprGeometry, options: ModelOptions | None = None) -> None:
+        super().__init__(geometry, options)
+        o = self.options
+        self.backend: Backend = o.backend
+        self.taut_threshold = float(o.taut_threshold)
+        self.tension0 = float(o.tension0)
+        self.max_residual = float(o.max_residual)
         radii = geometry.pulley_radius if self.pulley else None
         self._cables = _cable_tuples(geometry.a_base, geometry.b_platform, radii)
 
@@ -301,7 +311,9 @@ class ModelEstimator(Estimator):
         r = g.pulley_radius[cables] if self.pulley else None
         return solve_scipy(g.a_base[cables], g.b_platform[cables], r, targets[cables], T0)
 
-    def update(self, measurement: Measurement) -> PoseEstimate:
+    def update(
+        self, measurement: Measurement, inputs: Mapping[str, PoseEstimate] = NO_INPUTS
+    ) -> PoseEstimate:
         """One pass of Algorithm 1's loop (lines 7-12)."""
         self._check_reset()
         m = measurement
@@ -325,12 +337,14 @@ class ModelEstimator(Estimator):
         return PoseEstimate(m.time, T, cables=used, residual=residual, iterations=iterations)
 
 
+@register
 class SimpleModelEstimator(ModelEstimator):
     """Est. 3: massless, inextensible, straight cables from A_i to B_i."""
 
     name = "model_simple"
 
 
+@register
 class ElasticModelEstimator(ModelEstimator):
     """Est. 4: straight cables, lengths corrected for elastic stretch (eq. 13-14)."""
 
@@ -338,6 +352,7 @@ class ElasticModelEstimator(ModelEstimator):
     elastic = True
 
 
+@register
 class PulleyModelEstimator(ModelEstimator):
     """Est. 5: inextensible cables over swivelling pulleys (eq. 15-24)."""
 
@@ -345,6 +360,7 @@ class PulleyModelEstimator(ModelEstimator):
     pulley = True
 
 
+@register
 class ElasticPulleyModelEstimator(ModelEstimator):
     """Est. 6: pulleys and stretch together (eq. 25)."""
 

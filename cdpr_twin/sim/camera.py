@@ -12,12 +12,17 @@ import mujoco
 import numpy as np
 
 from cdpr_twin.se3 import matrix_from_quat_wxyz, rot_x, transform
-from cdpr_twin.vision import CameraIntrinsics
+from cdpr_twin.types import CameraIntrinsics
 
 R_MJCAM_CV = rot_x(np.pi)
 """Rotation from the OpenCV camera frame to MuJoCo's camera frame (its own inverse)."""
 
 CAMERA_NAME = "platform_cam"
+
+
+def has_camera(model: mujoco.MjModel, name: str = CAMERA_NAME) -> bool:
+    """Whether the model has a camera of that name."""
+    return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, name) >= 0
 
 
 def camera_id(model: mujoco.MjModel, name: str = CAMERA_NAME) -> int:

@@ -14,7 +14,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from cdpr_twin.deviations import N_CABLES, TruthDeviations
+from cdpr_twin.deviations import TruthDeviations
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.se3 import matrix_from_quat_wxyz, quat_wxyz_from_matrix, so3_exp
 from cdpr_twin.sim import camera
@@ -55,6 +55,30 @@ def tendon_name(i: int) -> str:
 def actuator_name(i: int) -> str:
     """Name of cable i's winch actuator (i from 0)."""
     return f"winch{i + 1}_actuator"
+
+
+_CABLE_PARTS = (
+    (mujoco.mjtObj.mjOBJ_BODY, swivel_body),
+    (mujoco.mjtObj.mjOBJ_GEOM, sheave_geom),
+    (mujoco.mjtObj.mjOBJ_SITE, anchor_site),
+    (mujoco.mjtObj.mjOBJ_TENDON, tendon_name),
+    (mujoco.mjtObj.mjOBJ_ACTUATOR, actuator_name),
+)
+
+
+def cable_count(model: mujoco.MjModel) -> int:
+    """Number of cables: tendons named ``cable1_tendon``, ``cable2_tendon``… without a gap."""
+    n = 0
+    while mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TENDON, tendon_name(n)) >= 0:
+        n += 1
+    return n
+
+
+def _spec_cable_count(spec: mujoco.MjSpec) -> int:
+    n = 0
+    while spec.tendon(tendon_name(n)) is not None:
+        n += 1
+    return n
 
 
 def _load_spec(path: Path) -> mujoco.MjSpec:
@@ -102,26 +126,34 @@ def build_model(path: str | Path, deviations: TruthDeviations | None = None) -> 
         model = spec.compile()
     except ValueError as exc:
         raise ModelError(f"model file {path} does not compile: {exc}") from exc
-    for i in range(N_CABLES):  # fail early and clearly on a model that is not ACROBOT-shaped
-        for objtype, name in (
-            (mujoco.mjtObj.mjOBJ_BODY, swivel_body(i)),
-            (mujoco.mjtObj.mjOBJ_GEOM, sheave_geom(i)),
-            (mujoco.mjtObj.mjOBJ_SITE, anchor_site(i)),
-            (mujoco.mjtObj.mjOBJ_TENDON, tendon_name(i)),
-            (mujoco.mjtObj.mjOBJ_ACTUATOR, actuator_name(i)),
-        ):
-            if mujoco.mj_name2id(model, objtype, name) < 0:
+    n = cable_count(model)
+    if n < 1:
+        raise ModelError(
+            f"model file {path} has no cables: a cable robot needs, for cable 1, 2…, a tendon "
+            f"{tendon_name(0)!r}, a winch {actuator_name(0)!r}, a mocap swivel body "
+            f"{swivel_body(0)!r} with a sheave {sheave_geom(0)!r}, and an anchor site "
+            f"{anchor_site(0)!r} (see models/acrobot/acrobot.xml)"
+        )
+    for i in range(n):  # fail early and clearly on a cable that misses a part
+        for objtype, name in _CABLE_PARTS:
+            if mujoco.mj_name2id(model, objtype, name(i)) < 0:
                 raise ModelError(
                     f"model file {path} has no {objtype.name[6:].lower()} named "
-                    f"{name!r}, which the ACROBOT twin needs"
+                    f"{name(i)!r}, which cable {i + 1} needs"
                 )
     return model
 
 
 def _apply(spec: mujoco.MjSpec, dev: TruthDeviations, path: Path) -> None:
+    n = _spec_cable_count(spec)
+    if len(dev.es_scale) != n:
+        raise ModelError(
+            f"model file {path} has {n} cables but the truth deviations were drawn for "
+            f"{len(dev.es_scale)}; draw them with DeviationSpec.draw({n})"
+        )
     es = _element(spec.numeric, "cable_es", "numeric", path)
     es.data = list(np.asarray(es.data) * dev.es_scale)
-    for i in range(N_CABLES):
+    for i in range(n):
         body = _element(spec.body, swivel_body(i), "body", path)
         body.pos = np.asarray(body.pos) + dev.exit_offsets[i]
         site = _element(spec.site, anchor_site(i), "site", path)
@@ -137,11 +169,12 @@ def _apply(spec: mujoco.MjSpec, dev: TruthDeviations, path: Path) -> None:
         sheave.pos = [r, 0.0, 0.0]
         side = _element(spec.site, side_site(i), "site", path)
         side.pos = [r, 0.0, -2.0 * r]
-    cam = _element(spec.camera, camera.CAMERA_NAME, "camera", path)
-    cam.pos = np.asarray(cam.pos) + dev.camera_offset[:3]
-    # the rotation error is expressed in the platform frame: R ← exp(δθ) R
-    R = matrix_from_quat_wxyz(np.asarray(cam.quat))
-    cam.quat = quat_wxyz_from_matrix(so3_exp(dev.camera_offset[3:]) @ R)
+    cam = spec.camera(camera.CAMERA_NAME)
+    if cam is not None:
+        cam.pos = np.asarray(cam.pos) + dev.camera_offset[:3]
+        # the rotation error is expressed in the platform frame: R ← exp(δθ) R
+        R = matrix_from_quat_wxyz(np.asarray(cam.quat))
+        cam.quat = quat_wxyz_from_matrix(so3_exp(dev.camera_offset[3:]) @ R)
     tag = spec.body(TAG_BODY)
     if tag is not None:
         tag.pos = np.asarray(tag.pos) + dev.tag_offset[:3]
@@ -170,15 +203,17 @@ def read_geometry(model: mujoco.MjModel) -> CdprGeometry:
         The :class:`CdprGeometry`: exit points from the swivel bodies, anchor points from the
         anchor sites, radii from the sheaves, E·S from ``<numeric name="cable_es">``, mass and
         centre of mass from the platform body, the OpenCV camera mounting from
-        ``platform_cam``, the workspace from ``frame_min``/``frame_max``.
+        ``platform_cam`` (identity when the model has no camera), the workspace from
+        ``frame_min``/``frame_max``.
     """
+    n = cable_count(model)
 
     def ids(objtype: mujoco.mjtObj, names: list[str]) -> np.ndarray:
         return np.array([mujoco.mj_name2id(model, objtype, n) for n in names])
 
-    bodies = ids(mujoco.mjtObj.mjOBJ_BODY, [swivel_body(i) for i in range(N_CABLES)])
-    sites = ids(mujoco.mjtObj.mjOBJ_SITE, [anchor_site(i) for i in range(N_CABLES)])
-    sheaves = ids(mujoco.mjtObj.mjOBJ_GEOM, [sheave_geom(i) for i in range(N_CABLES)])
+    bodies = ids(mujoco.mjtObj.mjOBJ_BODY, [swivel_body(i) for i in range(n)])
+    sites = ids(mujoco.mjtObj.mjOBJ_SITE, [anchor_site(i) for i in range(n)])
+    sheaves = ids(mujoco.mjtObj.mjOBJ_GEOM, [sheave_geom(i) for i in range(n)])
     platform = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, PLATFORM_BODY)
     if platform < 0 or np.any(model.site_bodyid[sites] != platform):
         raise ModelError("the model's anchor sites must sit on a body named 'platform'")
@@ -187,11 +222,11 @@ def read_geometry(model: mujoco.MjModel) -> CdprGeometry:
         a_base=model.body_pos[bodies],
         b_platform=model.site_pos[sites],
         pulley_radius=model.geom_size[sheaves, 0],
-        es=np.broadcast_to(es, (N_CABLES,)),
+        es=np.broadcast_to(es, (n,)),
         mass=float(model.body_mass[platform]),
         com_platform=model.body_ipos[platform],
         gravity=model.opt.gravity,
-        T_platform_cam=camera.T_body_cam(model),
+        T_platform_cam=camera.T_body_cam(model) if camera.has_camera(model) else np.eye(4),
         frame_min=numeric(model, "frame_min"),
         frame_max=numeric(model, "frame_max"),
     )

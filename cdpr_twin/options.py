@@ -1,0 +1,224 @@
+"""Typed, unit-aware reading of TOML tables, and generic parsing of options dataclasses.
+
+This is the file edge: poses are written ``[x, y, z, rx, ry, rz]`` in metres and degrees,
+angles elsewhere carry ``_deg`` in their key, and everything is converted to SI here. Errors
+name the file, the field and the fix. :func:`parse_options` reads any frozen dataclass whose
+fields carry :func:`cdpr_twin.plugins.option` metadata: estimators', controllers' and events'
+options are parsed by this one function, from their own declarations.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from collections.abc import Mapping
+from typing import Any, Literal
+
+import numpy as np
+
+from cdpr_twin.plugins import OptionError, spec_of
+from cdpr_twin.se3 import pose_from_vector
+
+
+class ScenarioError(ValueError):
+    """A scenario file is missing, malformed, or has a bad field."""
+
+
+def _frozen_array(a: Any) -> np.ndarray:
+    out = np.array(a, dtype=float)
+    out.flags.writeable = False
+    return out
+
+
+def _is_number(v: Any) -> bool:
+    return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
+
+
+class OptionReader:
+    """Typed, unit-aware access to one TOML table, with errors naming file and field.
+
+    Args:
+        source: the file (for messages).
+        table: the table's content.
+        where: the table's dotted name (``""`` for the top level).
+    """
+
+    def __init__(self, source: Any, table: Mapping[str, Any], where: str) -> None:
+        self.source, self.table, self.where = source, table, where
+        self.used: set[str] = set()
+
+    def fail(self, key: str, problem: str) -> ScenarioError:
+        """An error naming the file and ``<table>.<key>``."""
+        name = f"{self.where}.{key}" if self.where else key
+        return ScenarioError(f"{self.source}: {name}: {problem}")
+
+    def has(self, key: str) -> bool:
+        """Whether the table sets ``key``."""
+        return key in self.table
+
+    def raw(self, key: str, default: Any = ..., kind: str = "") -> Any:
+        """The value as written (``default`` when absent; required when no default)."""
+        self.used.add(key)
+        if key in self.table:
+            return self.table[key]
+        if default is ...:
+            raise self.fail(key, f"missing; add {key} = <{kind}>")
+        return default
+
+    def number(
+        self,
+        key: str,
+        default: Any = ...,
+        minimum: float | None = None,
+        exclusive: bool = False,
+        unit: str = "",
+        value: Any = ...,
+    ) -> float:
+        """A finite number, at least ``minimum``."""
+        v = self.raw(key, default, f"number{' ' + unit if unit else ''}") if value is ... else value
+        if not _is_number(v):
+            raise self.fail(
+                key, f"must be a finite number{' in ' + unit if unit else ''}, got {v!r}"
+            )
+        if minimum is not None and (v <= minimum if exclusive else v < minimum):
+            raise self.fail(
+                key,
+                f"must be {'>' if exclusive else '≥'} {minimum}"
+                f"{' ' + unit if unit else ''}, got {v}",
+            )
+        return float(v)
+
+    def integer(self, key: str, default: Any = ..., minimum: int | None = None) -> int:
+        """An integer, at least ``minimum``."""
+        v = self.raw(key, default, "integer")
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.fail(key, f"must be an integer, got {v!r}")
+        if minimum is not None and v < minimum:
+            raise self.fail(key, f"must be ≥ {minimum}, got {v}")
+        return int(v)
+
+    def string(self, key: str, default: Any = ..., choices: tuple[str, ...] = ()) -> str:
+        """A string, one of ``choices`` when given."""
+        v = self.raw(key, default, "string")
+        if not isinstance(v, str):
+            raise self.fail(key, f"must be a string, got {v!r}")
+        if choices and v not in choices:
+            raise self.fail(key, f"{v!r} is not one of {', '.join(choices)}")
+        return v
+
+    def boolean(self, key: str, default: Any = ...) -> bool:
+        """True or false."""
+        v = self.raw(key, default, "true/false")
+        if not isinstance(v, bool):
+            raise self.fail(key, f"must be true or false, got {v!r}")
+        return v
+
+    def pose(self, key: str, value: Any = ...) -> np.ndarray:
+        """A pose ``[x, y, z, rx, ry, rz]`` (m, deg) as a read-only (4, 4) transform."""
+        v = self.raw(key, kind="[x, y, z, rx, ry, rz] (m, deg)") if value is ... else value
+        if not isinstance(v, list) or len(v) != 6 or not all(_is_number(x) for x in v):
+            raise self.fail(
+                key, f"must be a pose [x, y, z, rx, ry, rz] in m and degrees, got {v!r}"
+            )
+        return _frozen_array(pose_from_vector(v))
+
+    def list_of(self, key: str, kind: str) -> list:
+        """A list (of anything; items are checked by the caller)."""
+        v = self.raw(key, kind=f"list of {kind}")
+        if not isinstance(v, list):
+            raise self.fail(key, f"must be a list of {kind}, got {v!r}")
+        return v
+
+    def table_of(self, key: str, required: bool = True) -> OptionReader:
+        """A sub-table's reader."""
+        v = self.raw(key, ... if required else {}, "table")
+        if not isinstance(v, dict):
+            raise self.fail(key, f"must be a table [{key}], got {v!r}")
+        return OptionReader(self.source, v, f"{self.where}.{key}" if self.where else key)
+
+    def done(self) -> None:
+        """Refuse keys nobody asked for (typos)."""
+        unknown = sorted(set(self.table) - self.used)
+        if unknown:
+            raise self.fail(
+                unknown[0],
+                f"unknown field; known fields here: {', '.join(sorted(self.used)) or 'none'}",
+            )
+
+
+def _read_field(r: OptionReader, f: dataclasses.Field, hint: Any) -> Any:
+    """One option's value, converted to SI (the caller checks that the key is present)."""
+    spec = spec_of(f)
+    key = spec.file_key(f.name)
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if spec.pose:
+        if origin is tuple:
+            items = r.list_of(key, "poses [x, y, z, rx, ry, rz] (m, deg)")
+            if not items:
+                raise r.fail(key, "must be a non-empty list of poses [x, y, z, rx, ry, rz]")
+            value: Any = tuple(r.pose(f"{key}[{i}]", p) for i, p in enumerate(items))
+        else:
+            value = r.pose(key)
+    elif hint is float:
+        value = r.number(key, minimum=spec.minimum, exclusive=spec.exclusive, unit=spec.unit)
+        value = math.radians(value) if spec.unit == "deg" else value
+    elif hint is bool:
+        value = r.boolean(key)
+    elif hint is int:
+        value = r.integer(key, minimum=None if spec.minimum is None else int(spec.minimum))
+    elif hint is str or origin is Literal:
+        value = r.string(key, choices=tuple(args) if origin is Literal else ())
+    elif origin is tuple and args[0] is float:
+        items = r.list_of(key, f"numbers{' in ' + spec.unit if spec.unit else ''}")
+        value = tuple(r.number(f"{key}[{i}]", value=x, unit=spec.unit) for i, x in enumerate(items))
+    elif origin is tuple and args[0] is str:
+        items = r.list_of(key, "strings")
+        if not all(isinstance(x, str) for x in items):
+            raise r.fail(key, f"must be a list of strings, got {items!r}")
+        value = tuple(items)
+    else:  # a plugin author's mistake, not the user's
+        raise TypeError(f"option {f.name}: type {hint!r} cannot be read from a file")
+    return spec.convert(value) if spec.convert is not None else value
+
+
+def parse_options(r: OptionReader, cls: type, skip: tuple[str, ...] = ()) -> Any:
+    """Build an options dataclass from a table, each field as its declaration says.
+
+    Fields absent from the table keep their dataclass defaults (required ones are an error);
+    unknown keys are refused. Validation errors of the dataclass (:class:`OptionError`) are
+    reported under the field's file key.
+
+    Args:
+        r: the table.
+        cls: a frozen dataclass with :func:`cdpr_twin.plugins.option` fields.
+        skip: keys of the table that belong to the caller (e.g. ``type``).
+
+    Raises:
+        ScenarioError: naming the file and field.
+    """
+    hints = typing.get_type_hints(cls)
+    kwargs: dict[str, Any] = {}
+    keys: dict[str, str] = {}
+    for f in dataclasses.fields(cls):
+        key = spec_of(f).file_key(f.name)
+        keys[f.name] = key
+        if not r.has(key):
+            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+                r.raw(key, kind=_kind(hints[f.name], spec_of(f)))  # raises "missing"
+            continue
+        kwargs[f.name] = _read_field(r, f, hints[f.name])
+    r.used.update(skip)
+    r.done()
+    try:
+        return cls(**kwargs)
+    except OptionError as exc:
+        raise r.fail(keys.get(exc.field, exc.field), exc.problem) from None
+
+
+def _kind(hint: Any, spec: Any) -> str:
+    if spec.pose:
+        return "list of poses" if typing.get_origin(hint) is tuple else "[x, y, z, rx, ry, rz]"
+    names = {float: "number", int: "integer", bool: "true/false", str: "string"}
+    unit = f" {spec.unit}" if spec.unit else ""
+    return names.get(hint, "list") + unit

@@ -1,0 +1,190 @@
+"""One registry for estimators and controllers, and self-describing options (numpy only).
+
+A plugin is a class with a ``name``, a ``kind`` (``"estimator"`` or ``"controller"``) and an
+``Options`` frozen dataclass whose fields, with their defaults, *are* its scenario-file schema:
+:mod:`cdpr_twin.scenario` parses them generically from each field's type and the metadata that
+:func:`option` attaches (unit, bounds, file key). Register a plugin with :func:`register`; a
+scenario file can import modules that register more (``plugins = ["my_module", "file.py"]``).
+
+>>> @register
+... class Mean(Estimator):
+...     name = "mean"
+...     Options = MeanOptions
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import importlib.util
+import sys
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, TypeVar
+
+KINDS = ("estimator", "controller")
+_REGISTRY: dict[str, dict[str, type]] = {kind: {} for kind in KINDS}
+_BUILTINS_LOADED = False
+
+C = TypeVar("C", bound=type)
+
+
+class OptionError(ValueError):
+    """An option value is invalid.
+
+    Attributes:
+        field: the option (as named in the Options dataclass) at fault.
+    """
+
+    def __init__(self, field: str, problem: str) -> None:
+        super().__init__(f"{field}: {problem}")
+        self.field = field
+        self.problem = problem
+
+
+@dataclasses.dataclass(frozen=True)
+class OptionSpec:
+    """How one option is written in a scenario file.
+
+    Attributes:
+        key: the key in the file (default: the field name, plus ``_deg`` for angles).
+        unit: unit in the file (``"deg"`` is converted to radians; others are SI already).
+        minimum: lowest allowed value (numbers).
+        exclusive: the minimum itself is not allowed.
+        pose: the value is a pose ``[x, y, z, rx, ry, rz]`` (m, deg) → (4, 4) transform.
+        convert: applied to the parsed value (e.g. a frame change).
+        doc: one line for error messages and listings.
+    """
+
+    key: str = ""
+    unit: str = ""
+    minimum: float | None = None
+    exclusive: bool = False
+    pose: bool = False
+    convert: Callable[[Any], Any] | None = None
+    doc: str = ""
+
+    def file_key(self, field_name: str) -> str:
+        """The key of this option in a scenario file."""
+        if self.key:
+            return self.key
+        return f"{field_name}_deg" if self.unit == "deg" else field_name
+
+
+def option(default: Any = dataclasses.MISSING, **spec: Any) -> Any:
+    """A dataclass field carrying its :class:`OptionSpec` (``unit=``, ``minimum=``…).
+
+    Args:
+        default: the default in SI units (radians for ``unit="deg"``); omit for a required option.
+        **spec: the :class:`OptionSpec` fields.
+    """
+    meta = {"option": OptionSpec(**spec)}
+    if isinstance(default, (list, dict, set)):
+        raise TypeError("option defaults must be immutable (use a tuple)")
+    return dataclasses.field(default=default, metadata=meta)
+
+
+def spec_of(field: dataclasses.Field) -> OptionSpec:
+    """The :class:`OptionSpec` of an Options field (a default one when none was given)."""
+    return field.metadata.get("option", OptionSpec())
+
+
+@dataclasses.dataclass(frozen=True)
+class NoOptions:
+    """Options of a plugin that has none."""
+
+
+def register(cls: C) -> C:
+    """Class decorator: add an estimator or controller to the registry under ``cls.name``.
+
+    Raises:
+        TypeError: when the class has no name, no known kind, or no dataclass ``Options``.
+        ValueError: when another class already has that name.
+    """
+    kind, name = getattr(cls, "kind", ""), getattr(cls, "name", "")
+    if kind not in KINDS or not name:
+        raise TypeError(f"{cls.__name__}: set class attributes kind (one of {KINDS}) and name")
+    options = getattr(cls, "Options", None)
+    if not (dataclasses.is_dataclass(options) and options.__dataclass_params__.frozen):
+        raise TypeError(f"{cls.__name__}: Options must be a frozen dataclass")
+    known = _REGISTRY[kind].get(name)
+    if known is not None and known.__qualname__ != cls.__qualname__:
+        raise ValueError(f"a {kind} named {name!r} is already registered ({known.__module__})")
+    _REGISTRY[kind][name] = cls
+    return cls
+
+
+def _load_builtins() -> None:
+    global _BUILTINS_LOADED
+    if not _BUILTINS_LOADED:
+        _BUILTINS_LOADED = True
+        importlib.import_module("cdpr_twin.estimators")
+        importlib.import_module("cdpr_twin.controllers")
+
+
+def registry(kind: str) -> Mapping[str, type]:
+    """The registered classes of one kind, by name (a read-only live view)."""
+    _load_builtins()
+    return MappingProxyType(_REGISTRY[kind])
+
+
+def names(kind: str) -> tuple[str, ...]:
+    """Registered names of one kind, in registration order."""
+    return tuple(registry(kind))
+
+
+def lookup(kind: str, name: str) -> type:
+    """The class registered under a name.
+
+    Raises:
+        ValueError: for an unknown name, listing the known ones.
+    """
+    try:
+        return registry(kind)[name]
+    except KeyError:
+        raise ValueError(
+            f"unknown {kind} {name!r}; choose one of {', '.join(names(kind))}"
+        ) from None
+
+
+def build(kind: str, name: str, geometry: Any, **options: Any) -> Any:
+    """Instantiate a registered plugin with keyword options (SI units).
+
+    Raises:
+        ValueError: for an unknown name, an unknown option or an invalid value.
+    """
+    cls = lookup(kind, name)
+    try:
+        opts = cls.Options(**options)
+    except TypeError as exc:
+        known = ", ".join(f.name for f in dataclasses.fields(cls.Options)) or "none"
+        raise ValueError(
+            f"{kind} {name!r}: bad options {sorted(options)} ({exc}); known: {known}"
+        ) from None
+    except OptionError as exc:
+        raise ValueError(f"{name}: {exc}") from None
+    return cls(geometry, opts)
+
+
+def load_modules(refs: list[str], base_dir: Path) -> None:
+    """Import plugin modules: dotted module names, or ``.py`` files relative to ``base_dir``.
+
+    Raises:
+        ImportError: when one cannot be imported (with the reason).
+    """
+    for ref in refs:
+        if ref.endswith(".py"):
+            path = Path(ref) if Path(ref).is_absolute() else (base_dir / ref).resolve()
+            if not path.is_file():
+                raise ImportError(f"plugin file {path} not found")
+            mod_name = f"cdpr_twin_plugin_{path.stem}"
+            if mod_name in sys.modules:
+                continue
+            spec = importlib.util.spec_from_file_location(mod_name, path)
+            assert spec is not None and spec.loader is not None
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[mod_name] = module
+            spec.loader.exec_module(module)
+        else:
+            importlib.import_module(ref)

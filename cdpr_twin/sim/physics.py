@@ -1,0 +1,416 @@
+"""The thin physics core: winches, elastic cables through kinematic swivel pulleys, stepping.
+
+Physics (DESIGN §5). Each cable is a spatial tendon entry site → sheave (cylinder wrap) → B_i.
+Its winch actuator carries the unstretched length l0_i as activation state (``dyntype=
+integrator``: MuJoCo integrates the commanded rate exactly every step) and pulls with
+
+    τ_i = (E·S / l0_i) · (L_i − l0_i) + c_i · L̇_i,   clamped to τ_i ≥ 0 (a cable never pushes),
+
+where L_i is the tendon length less the constant entry segment (A_i → wrap → B_i, the paper's
+l_f of eq. 15) and c_i = η·E·S/l0_i. The stiffness E·S/l0_i and the swivel yaw φ_i (eq. 20, the
+ideal swivel as mocap bodies) are refreshed from Python every ``align_every`` physics steps; a
+disabled cable (a break) gets zero stiffness at every refresh.
+
+Like dm_control's ``Physics``, this object owns ``MjModel``/``MjData`` and answers named
+ground-truth questions (``T_base_platform``, ``tensions``…); sensors and the runner ask it, and
+nothing outside :mod:`cdpr_twin.sim` touches MuJoCo. Step hooks (:class:`StepHook`, e.g. a
+scenario's timed events) act between physics steps at the times they ask for.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Protocol
+
+import mujoco
+import numpy as np
+
+from cdpr_twin.geometry import CdprGeometry
+from cdpr_twin.kinematics import cable_lengths, rest_lengths
+from cdpr_twin.se3 import (
+    inverse,
+    matrix_from_quat_wxyz,
+    pose_distance,
+    quat_wxyz_from_matrix,
+    transform,
+)
+from cdpr_twin.sim import camera as cam_mod
+from cdpr_twin.sim.model import (
+    PLATFORM_BODY,
+    ModelError,
+    actuator_name,
+    anchor_site,
+    cable_count,
+    numeric,
+    read_geometry,
+    swivel_body,
+)
+from cdpr_twin.statics import tension_distribution
+
+TAG_SITE = "tag_center"
+_BAD_WARNINGS = (
+    mujoco.mjtWarning.mjWARN_BADQACC,
+    mujoco.mjtWarning.mjWARN_BADQPOS,
+    mujoco.mjtWarning.mjWARN_BADQVEL,
+    mujoco.mjtWarning.mjWARN_BADCTRL,
+)
+
+
+class SimulationError(RuntimeError):
+    """The simulation diverged or was asked for something it cannot do."""
+
+
+class StepHook(Protocol):
+    """Something that acts on the physics between steps at times of its choosing."""
+
+    def next_time(self) -> float:
+        """Simulation time [s] of the next action (``inf`` when there is none)."""
+        ...
+
+    def fire(self, time: float) -> None:
+        """Act now: everything due at or before ``time`` [s]."""
+        ...
+
+
+def _as_slice(ids: np.ndarray) -> slice | np.ndarray:
+    """A slice when ids are consecutive (assignments through it are views), else the ids."""
+    ids = np.asarray(ids)
+    if ids.size and np.all(np.diff(ids) == 1):
+        return slice(int(ids[0]), int(ids[-1]) + 1)
+    return ids
+
+
+class Physics:
+    """The simulated robot's mechanics and its ground truth.
+
+    Args:
+        model: a compiled cable-robot model (:func:`cdpr_twin.sim.build_model`).
+        align_every: physics steps between refreshes of the swivel yaws and cable stiffnesses.
+        source: where the model came from, for error messages.
+
+    Raises:
+        ModelError: when the model is not a cable robot this core can drive.
+    """
+
+    def __init__(self, model: mujoco.MjModel, align_every: int = 10, source: str = "model") -> None:
+        if int(align_every) < 1:
+            raise ValueError(f"align_every must be ≥ 1 physics step, got {align_every}")
+        self.model, self.source = model, source
+        self.data = mujoco.MjData(model)
+        self.n_cables = cable_count(model)
+        self.cable_names = tuple(f"cable{i + 1}" for i in range(self.n_cables))
+        self.geometry: CdprGeometry = read_geometry(model)
+        self.align_every = int(align_every)
+        self._hooks: list[StepHook] = []
+        self.cable_enabled = np.ones(self.n_cables, dtype=bool)
+        self._index(model)
+        self._entry = float(numeric(model, "cable_entry_height")[0])
+        self._damping_time = float(numeric(model, "cable_damping_time")[0])
+        # force = k·l0 + k·h − k·L − η·k·L̇: the bias per unit stiffness
+        self._bias_unit = np.array([self._entry, -1.0, -self._damping_time])
+        self._es = self.geometry.es.copy()
+        self._a = self.geometry.a_base.copy()
+        self._quat_buf = np.zeros((self.n_cables, 4))
+        self.was_reset = False
+        self.settle_error: tuple[float, float] = (math.nan, math.nan)
+
+    def _index(self, m: mujoco.MjModel) -> None:
+        """Ids of the parts the core drives (slices where contiguous, so writes are views)."""
+        n, name2id, obj = self.n_cables, mujoco.mj_name2id, mujoco.mjtObj
+        self._platform = name2id(m, obj.mjOBJ_BODY, PLATFORM_BODY)
+        if self._platform < 0 or m.body_jntadr[self._platform] < 0:
+            raise ModelError(f"{self.source}: needs a free-floating body named {PLATFORM_BODY!r}")
+        self._qpos = m.jnt_qposadr[m.body_jntadr[self._platform]]
+        anchors = [name2id(m, obj.mjOBJ_SITE, anchor_site(i)) for i in range(n)]
+        mocap = [m.body_mocapid[name2id(m, obj.mjOBJ_BODY, swivel_body(i))] for i in range(n)]
+        actuators = np.array([name2id(m, obj.mjOBJ_ACTUATOR, actuator_name(i)) for i in range(n)])
+        if min(mocap) < 0:
+            raise ModelError(f"{self.source}: the pulley swivel bodies must be mocap bodies")
+        self._tendons = m.actuator_trnid[actuators, 0]
+        self._act_range = m.actuator_actrange[actuators].copy()
+        self._anchors, self._mocap = _as_slice(anchors), _as_slice(mocap)
+        self._actuators = _as_slice(actuators)
+        self._gain = m.actuator_gainprm[self._actuators]  # views when the ids are contiguous
+        self._bias = m.actuator_biasprm[self._actuators]
+        if not (
+            np.shares_memory(self._gain, m.actuator_gainprm)
+            and np.shares_memory(self._bias, m.actuator_biasprm)
+        ):
+            raise ModelError(f"{self.source}: the winch actuators must be declared together")
+        self._ctrl_lo, self._ctrl_hi = m.actuator_ctrlrange[self._actuators].T.copy()
+        self._tag_site = name2id(m, obj.mjOBJ_SITE, TAG_SITE)
+        self._cam = cam_mod.camera_id(m) if cam_mod.has_camera(m) else -1
+
+    # ------------------------------------------------------------------ ground truth
+    @property
+    def timestep(self) -> float:
+        """Physics step [s]."""
+        return float(self.model.opt.timestep)
+
+    @property
+    def time(self) -> float:
+        """Simulation time [s]."""
+        return float(self.data.time)
+
+    @property
+    def T_base_platform(self) -> np.ndarray:
+        """Ground-truth platform pose (4, 4)."""
+        q = self.data.qpos[self._qpos : self._qpos + 7]
+        return transform(matrix_from_quat_wxyz(q[3:]), q[:3])
+
+    @property
+    def rest_lengths(self) -> np.ndarray:
+        """Unstretched lengths l0 paid out by the winches. (m,) [m]."""
+        return self.data.act[self._actuators].copy()
+
+    @property
+    def cable_lengths(self) -> np.ndarray:
+        """True stretched cable lengths from A_i over the sheave to B_i (MuJoCo). (m,) [m]."""
+        return self.data.ten_length[self._tendons] - self._entry
+
+    @property
+    def tensions(self) -> np.ndarray:
+        """True cable tensions (m,) [N]."""
+        return 0.0 - self.data.actuator_force[self._actuators]  # 0.0 -: no "-0.0" when slack
+
+    @property
+    def winch_rates(self) -> np.ndarray:
+        """The winch rates being applied dl0/dt (m,) [m/s]."""
+        return self.data.ctrl[self._actuators].copy()
+
+    @property
+    def has_camera(self) -> bool:
+        """Whether the robot carries the onboard camera."""
+        return self._cam >= 0
+
+    @property
+    def has_tag(self) -> bool:
+        """Whether the scene has a tag (a site ``tag_center`` on a static body)."""
+        return self._tag_site >= 0
+
+    @property
+    def T_base_cam(self) -> np.ndarray:
+        """Ground-truth OpenCV camera pose (4, 4)."""
+        if self._cam < 0:
+            raise ModelError(f"{self.source} has no camera {cam_mod.CAMERA_NAME!r}")
+        return cam_mod.T_world_cam(self.data, self._cam)
+
+    @property
+    def T_base_tag(self) -> np.ndarray:
+        """Ground-truth tag pose (pupil-apriltags frame) (4, 4), from the (static) model."""
+        if self._tag_site < 0:
+            raise ModelError(f"{self.source} has no site {TAG_SITE!r}; use scene.xml")
+        m = self.model
+        body = m.site_bodyid[self._tag_site]
+        if m.body_parentid[body] != 0 or m.body_mocapid[body] >= 0:
+            raise ModelError(f"{self.source}: the tag must be on a static child of the world")
+        T_body = transform(matrix_from_quat_wxyz(m.body_quat[body]), m.body_pos[body])
+        return T_body @ transform(
+            matrix_from_quat_wxyz(m.site_quat[self._tag_site]), m.site_pos[self._tag_site]
+        )
+
+    @property
+    def T_cam_tag(self) -> np.ndarray:
+        """Ground-truth tag pose in the camera frame (4, 4)."""
+        return inverse(self.T_base_cam) @ self.T_base_tag
+
+    @property
+    def platform_half_size(self) -> np.ndarray:
+        """Half-sizes of the platform box geom (3,) [m]."""
+        geom = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_GEOM, "platform_box")
+        return self.model.geom_size[geom].copy()
+
+    # ------------------------------------------------------------------ actuation
+    def add_hook(self, hook: StepHook) -> None:
+        """Let ``hook`` act between physics steps (stepping stops at its times)."""
+        self._hooks.append(hook)
+
+    def disable_cable(self, i: int) -> None:
+        """Cut cable i (from 0): its force is zero from now on, across every refresh."""
+        if not 0 <= i < self.n_cables:
+            raise ValueError(f"cable index {i} out of range 0…{self.n_cables - 1}")
+        self.cable_enabled[i] = False
+        self.refresh()
+
+    def refresh(self) -> None:
+        """Point each swivel at its B_i (eq. 20) and set the cable stiffness E·S/l0.
+
+        Called every ``align_every`` physics steps: the hot path of the core (index arrays
+        are slices wherever the model's ids are contiguous, so the assignments are views).
+        """
+        d = self.data
+        lvec = d.site_xpos[self._anchors] - self._a
+        half = 0.5 * np.arctan2(lvec[:, 1], lvec[:, 0])
+        quat = self._quat_buf
+        quat[:, 0] = np.cos(half)
+        quat[:, 3] = np.sin(half)
+        d.mocap_quat[self._mocap] = quat
+        l0 = d.act[self._actuators]
+        # 0 before reset(), and for disabled cables
+        on = (l0 > 0) & self.cable_enabled
+        k = np.divide(self._es, l0, out=np.zeros(self.n_cables), where=on)
+        self._gain[:, 0] = k
+        self._bias[:, :3] = k[:, None] * self._bias_unit
+
+    def step(self, n: int) -> None:
+        """Advance n physics steps, refreshing every ``align_every`` and firing due hooks.
+
+        Raises:
+            SimulationError: when the simulation diverges.
+        """
+        while n > 0:
+            chunk = min(n, self.align_every)
+            if self._hooks:
+                chunk = self._fire_hooks(chunk)
+            self.refresh()
+            mujoco.mj_step(self.model, self.data, nstep=chunk)
+            n -= chunk
+        self._check_state()
+
+    def _fire_hooks(self, chunk: int) -> int:
+        """Fire the hooks that are due; shorten the chunk to stop at the next hook time."""
+        dt, t = self.timestep, self.time
+        for hook in self._hooks:
+            if hook.next_time() <= t + 0.5 * dt:
+                hook.fire(t + 0.5 * dt)
+            next_time = hook.next_time()
+            if math.isfinite(next_time):
+                steps = math.ceil((next_time - t) / dt - 0.5)
+                if 0 < steps < chunk:
+                    chunk = steps
+        return chunk
+
+    def _check_state(self) -> None:
+        d = self.data
+        bad = [mujoco.mjtWarning(w).name for w in _BAD_WARNINGS if d.warning[w].number > 0]
+        if bad or not math.isfinite(d.qpos.sum() + d.qvel.sum()):
+            raise SimulationError(
+                f"the simulation diverged at t = {d.time:.4f} s (MuJoCo warnings: {bad or 'none'});"
+                " lower the timestep or the commanded cable rates"
+            )
+
+    def set_winch_rates(self, rates: np.ndarray, steps: int) -> None:
+        """Command winch rates for the next ``steps`` physics steps (checked against limits).
+
+        Raises:
+            ValueError: non-finite or out-of-range rates, or rates that would run a winch past
+                its range within those steps.
+        """
+        rates = np.array(rates, dtype=float)
+        if rates.shape != (self.n_cables,):
+            raise ValueError(f"cable_rates must have shape ({self.n_cables},), got {rates.shape}")
+        if not math.isfinite(rates.sum()):
+            raise ValueError(
+                f"cable_rates must be finite, got {rates.tolist()} (NaN or inf from the "
+                "controller?)"
+            )
+        lo, hi = self._ctrl_lo, self._ctrl_hi
+        if (rates < lo).any() or (rates > hi).any():
+            raise ValueError(
+                f"cable rates {np.round(rates, 4).tolist()} m/s exceed the winches' "
+                f"range [{lo.min()}, {hi.max()}] m/s"
+            )
+        l0_end = self.rest_lengths + rates * steps * self.timestep
+        if np.any(l0_end < self._act_range[:, 0]) or np.any(l0_end > self._act_range[:, 1]):
+            raise ValueError(
+                f"these rates would run winch lengths to {np.round(l0_end, 4)} m, "
+                f"outside the winch range {self._act_range[0].tolist()} m"
+            )
+        self.data.ctrl[self._actuators] = rates
+
+    def steps_in(self, duration: float) -> int:
+        """The whole number of physics steps in ``duration`` seconds.
+
+        Raises:
+            ValueError: when ``duration`` is negative, not finite, or not a whole number of steps.
+        """
+        if not (math.isfinite(duration) and duration >= 0):
+            raise ValueError(f"duration must be a finite number of seconds ≥ 0, got {duration}")
+        n = round(duration / self.timestep)
+        if not math.isclose(n * self.timestep, duration, rel_tol=1e-9, abs_tol=1e-12):
+            raise ValueError(
+                f"duration {duration} s is not a whole number of physics steps of {self.timestep} s"
+            )
+        return n
+
+    def advance(self, duration: float, cable_rates: np.ndarray) -> None:
+        """Run the winches at constant rates while physics steps.
+
+        Args:
+            duration: how long [s]; a whole number of physics steps.
+            cable_rates: (m,) winch rates dl0/dt [m/s] (positive pays cable out).
+
+        Raises:
+            ValueError: bad rates or duration (see :meth:`set_winch_rates`, :meth:`steps_in`).
+            SimulationError: before :meth:`reset`, or when the simulation diverges.
+        """
+        if not self.was_reset:
+            raise SimulationError(
+                "call reset(T_base_platform) before advance(): the winches have paid out no "
+                "cable yet"
+            )
+        rates = np.array(cable_rates, dtype=float)
+        if rates.shape == (self.n_cables,) and not math.isfinite(rates.sum()):
+            self.set_winch_rates(rates, 0)  # the clearest error first
+        n = self.steps_in(duration)
+        self.set_winch_rates(rates, n)
+        self.step(n)
+
+    # ------------------------------------------------------------------ placing
+    def place(self, T_base_platform: np.ndarray) -> None:
+        """Put the platform at a pose kinematically (no dynamics, winches untouched).
+
+        Swivels are aligned and positions, tendon lengths and Jacobians recomputed, so that
+        MuJoCo's own cable geometry can be inspected at any pose. Velocities are zeroed.
+
+        Args:
+            T_base_platform: (4, 4) platform pose.
+        """
+        T = self.geometry.check_pose_inside(T_base_platform, "placed pose")
+        d, m = self.data, self.model
+        d.qpos[self._qpos : self._qpos + 3] = T[:3, 3]
+        d.qpos[self._qpos + 3 : self._qpos + 7] = quat_wxyz_from_matrix(T[:3, :3])
+        d.qvel[:] = 0.0
+        mujoco.mj_kinematics(m, d)
+        self.refresh()
+        mujoco.mj_forward(m, d)
+
+    def reset(
+        self,
+        T_base_platform: np.ndarray,
+        settle_time: float = 0.3,
+        tau_min: float = 2.0,
+        tau_max: float = 75.0,
+    ) -> None:
+        """Place the platform at a pose, all cables taut, and let it settle.
+
+        The rest lengths come from a minimum-norm tension distribution of the *true* robot
+        (τ_min ≤ τ ≤ τ_max), so the pose is a static equilibrium; the settle removes numerical
+        residue only. Time restarts at 0; every cable is enabled again.
+
+        Args:
+            T_base_platform: (4, 4) requested platform pose.
+            settle_time: how long to settle [s].
+            tau_min: lowest tension of the distribution [N].
+            tau_max: highest tension of the distribution [N].
+
+        Raises:
+            ValueError: if the pose leaves the frame.
+            InfeasibleTensionError: if no tension distribution holds the platform there.
+        """
+        geom = self.geometry
+        T = geom.check_pose_inside(T_base_platform, "reset pose")
+        tau = tension_distribution(geom, T, tau_min, tau_max, model="pulley")
+        l0 = rest_lengths(cable_lengths(geom, T, "pulley"), tau, self._es)
+        mujoco.mj_resetData(self.model, self.data)
+        self.cable_enabled[:] = True
+        self.data.act[self._actuators] = l0
+        self.place(T)
+        self.was_reset = True
+        hooks, self._hooks = self._hooks, []  # no event acts while settling
+        try:
+            self.step(round(settle_time / self.timestep))
+        finally:
+            self._hooks = hooks
+        self.settle_error = pose_distance(T, self.T_base_platform)
+        self.data.time = 0.0

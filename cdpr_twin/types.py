@@ -1,0 +1,220 @@
+"""Values that cross layers (numpy only): sensors → estimators → controllers → winches.
+
+Importing this module loads neither MuJoCo, OpenCV nor pupil-apriltags, so estimators and
+controllers built on it run on a real robot's logs as well as on the twin's.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cdpr_twin.se3 import rot_x, transform
+
+T_TAGPUPIL_TAGVISP = transform(rot_x(np.pi), np.zeros(3))
+"""ViSP's tag frame (z out of the tag, y up; the paper's ᶜp_o) in pupil-apriltags' tag frame
+(z into the tag, y down): ``T_cam_tagViSP = T_cam_tagPupil @ T_TAGPUPIL_TAGVISP``. A rotation by
+π about x, its own inverse: ``T_cam_tagPupil = T_cam_tagViSP @ T_TAGPUPIL_TAGVISP`` as well."""
+
+
+def _frozen(value: object) -> np.ndarray:
+    out = np.array(value)
+    out.flags.writeable = False
+    return out
+
+
+@dataclass(frozen=True)
+class CameraIntrinsics:
+    """Pinhole intrinsics in the OpenCV convention.
+
+    Attributes:
+        width: image width [px].
+        height: image height [px].
+        fx: focal length along x [px].
+        fy: focal length along y [px].
+        cx: principal point x [px] (OpenCV: top-left pixel centre at 0).
+        cy: principal point y [px].
+    """
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    @classmethod
+    def from_fovy(cls, width: int, height: int, fovy: float) -> CameraIntrinsics:
+        """Intrinsics of an ideal symmetric frustum with square pixels (MuJoCo's cameras).
+
+        Args:
+            width: image width [px].
+            height: image height [px].
+            fovy: vertical field of view [rad].
+        """
+        f = 0.5 * height / np.tan(0.5 * fovy)
+        return cls(width, height, f, f, 0.5 * width - 0.5, 0.5 * height - 0.5)
+
+    @property
+    def K(self) -> np.ndarray:
+        """(3, 3) camera matrix."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True, eq=False)
+class TagDetection:
+    """One detected AprilTag.
+
+    Attributes:
+        tag_id: the tag's id in its family.
+        corners: (4, 2) corners [px, OpenCV convention] in pupil-apriltags' order: the tag
+            frame's (−s/2, s/2), (s/2, s/2), (s/2, −s/2), (−s/2, −s/2) (counter-clockwise in the
+            image, starting bottom-left of the upright tag).
+        T_cam_tag: (4, 4) tag pose in the camera frame (pupil-apriltags' tag frame).
+        decision_margin: pupil-apriltags' decoding margin (higher is more certain).
+        reprojection_error: RMS corner reprojection error of ``T_cam_tag`` [px].
+    """
+
+    tag_id: int
+    corners: np.ndarray
+    T_cam_tag: np.ndarray
+    decision_margin: float
+    reprojection_error: float
+
+
+class Status(enum.StrEnum):
+    """What a controller reports at each tick, and how a run ended (``summary.json``)."""
+
+    START = "start"
+    """The row recorded at the start pose, before any command."""
+    TRACKING = "tracking"
+    """Open loop: following the trajectory."""
+    DONE = "done"
+    """Open loop: the trajectory's last period was commanded."""
+    COMPLETED = "completed"
+    """Open loop: the run's duration ended before the trajectory did."""
+    SERVOING = "servoing"
+    """PBVS: moving toward the goal view."""
+    SATURATED = "saturated"
+    """PBVS: moving, with the speed capped."""
+    TAG_LOST = "tag_lost"
+    """PBVS: no tag detection, zero velocity commanded."""
+    CONVERGED = "converged"
+    """PBVS: the feature error is below the convergence thresholds."""
+    TIME_LIMIT = "time_limit"
+    """PBVS: the run's duration ended before convergence."""
+    INTERRUPTED = "interrupted"
+    """The run was stopped by Ctrl-C (or SIGTERM)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Command:
+    """What a controller asks of the winches for the next control period.
+
+    Attributes:
+        cable_rates: (m,) winch rates l̇ [m/s].
+        twist_platform: (6,) the platform twist ᵖv_p = [v, ω] these rates realise (in F_p,
+            about the platform origin) [m/s, rad/s]; the control-based estimator integrates it.
+        done: the task is finished (trajectory ended, or servo converged).
+        status: what the controller is doing.
+        error: (6,) task error when the controller has one (PBVS: e = s − s*), else ``None``.
+    """
+
+    cable_rates: np.ndarray
+    twist_platform: np.ndarray
+    done: bool = False
+    status: Status = Status.TRACKING
+    error: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class PoseEstimate:
+    """One estimate of the platform pose.
+
+    Attributes:
+        time: time of the measurement it comes from [s].
+        T_base_platform: (4, 4) estimated pose (the last valid one when ``valid`` is False).
+        valid: whether this update produced a new estimate from its inputs.
+        flags: why not, or what is special (the constants of :mod:`cdpr_twin.estimators.base`).
+        cables: indices (from 0) of the cables used, for model-based estimators.
+        residual: largest |model length − measured length| over the cables used [m].
+        iterations: solver iterations.
+        covariance: (6, 6) covariance of the pose error δ in ``T_true = T_est · exp(δ)``,
+            δ = [v, ω] in F_p [m², m·rad, rad²]; ``None`` when the estimator gives none.
+    """
+
+    time: float
+    T_base_platform: np.ndarray
+    valid: bool = True
+    flags: frozenset[str] = field(default_factory=frozenset)
+    cables: tuple[int, ...] = ()
+    residual: float = 0.0
+    iterations: int = 0
+    covariance: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(
+            self, "T_base_platform", _frozen(np.asarray(self.T_base_platform, dtype=float))
+        )
+        if not isinstance(self.flags, frozenset):
+            object.__setattr__(self, "flags", frozenset(self.flags))
+        if self.covariance is not None:
+            cov = _frozen(np.asarray(self.covariance, dtype=float))
+            if cov.shape != (6, 6):
+                raise ValueError(f"PoseEstimate.covariance must be (6, 6), got {cov.shape}")
+            object.__setattr__(self, "covariance", cov)
+
+
+@dataclass(frozen=True, eq=False)
+class Measurement:
+    """What the robot's sensors report at one instant: the only input of estimators.
+
+    Ground truth is not here: the runner reads it from the physics for metrics and recording
+    only, so no estimator or controller can see it.
+
+    Attributes:
+        time: time of the reading [s].
+        cable_lengths: (m,) encoder readings: each winch's unstretched paid-out length l0_i,
+            homed at the start pose to the nominal model's value there [m].
+        tensions: (m,) tension-sensor readings at B_i, noise included [N].
+        command: the last command sent to the winches (``None`` before the first).
+        image: (H, W, 3) RGB uint8 frame of the onboard camera, or ``None`` (no camera).
+        tag: the tag detected in ``image``, or ``None`` (no camera, or tag not found).
+    """
+
+    time: float
+    cable_lengths: np.ndarray
+    tensions: np.ndarray
+    command: Command | None = None
+    image: np.ndarray | None = None
+    tag: TagDetection | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("cable_lengths", "tensions", "image"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, _frozen(value))
+
+    @property
+    def n_cables(self) -> int:
+        """Number of cables m."""
+        return len(self.cable_lengths)
+
+    @property
+    def cable_rates(self) -> np.ndarray:
+        """(m,) winch rates of the last command [m/s] (zeros before the first)."""
+        if self.command is None:
+            return np.zeros(self.n_cables)
+        return np.asarray(self.command.cable_rates)
+
+    @property
+    def twist_platform(self) -> np.ndarray | None:
+        """(6,) platform twist of the last command, or ``None`` before the first."""
+        return None if self.command is None else np.asarray(self.command.twist_platform)
+
+    @property
+    def camera_on(self) -> bool:
+        """Whether this measurement carries a camera frame."""
+        return self.image is not None
