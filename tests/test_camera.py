@@ -28,7 +28,7 @@ def test_intrinsics_reproject_true_corners_onto_detected(camera_twin, name):
     camera_twin.reset(paper_pose(name))
     m = camera_twin.sense()
     true_corners = vision.project_points(
-        camera_twin.intrinsics, camera_twin.T_cam_tag, vision.tag_corners_object(0.04)
+        camera_twin.nominal.intrinsics, camera_twin.T_cam_tag, vision.tag_corners_object(0.04)
     )
     # bar: 1 px; measured 0.007 px at p1, 0.07 px at p0
     assert np.max(np.linalg.norm(m.tag.corners - true_corners, axis=1)) < 0.2
@@ -41,8 +41,8 @@ def test_camera_frame_conventions(camera_twin):
     np.testing.assert_allclose(T_pc[:3, 2], [0, 0, -1], atol=1e-12)  # optical axis: −z_p
     np.testing.assert_allclose(T_pc[:3, 0], [-1, 0, 0], atol=1e-12)  # image x: −x_p
     # a point straight below the camera projects to the principal point
-    K = camera_twin.intrinsics
-    T_bc = camera_twin.T_base_cam
+    K = camera_twin.nominal.intrinsics
+    T_bc = camera_twin.physics.T_base_cam
     below = T_bc[:3, 3] - [0, 0, 0.1]
     p_cam = se3.inverse(T_bc) @ np.append(below, 1)
     uv = vision.project_points(K, np.eye(4), p_cam[None, :3])[0]

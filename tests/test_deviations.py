@@ -36,10 +36,10 @@ def _model_arrays(model):
 
 
 def test_same_seed_same_model_other_seed_other_model():
-    a = _model_arrays(build_model(DEFAULT_SCENE, SPEC.draw()))
-    b = _model_arrays(build_model(DEFAULT_SCENE, SPEC.draw()))
+    a = _model_arrays(build_model(DEFAULT_SCENE, SPEC.draw(8)))
+    b = _model_arrays(build_model(DEFAULT_SCENE, SPEC.draw(8)))
     c = _model_arrays(
-        build_model(DEFAULT_SCENE, DeviationSpec(**{**vars(SPEC), "seed": 43}).draw())
+        build_model(DEFAULT_SCENE, DeviationSpec(**{**vars(SPEC), "seed": 43}).draw(8))
     )
     assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
     assert not all(np.array_equal(x, y) for x, y in zip(a, c, strict=True))
@@ -79,7 +79,7 @@ def test_mounting_errors_are_applied_in_the_frames_they_are_stated_in():
     """camera_offset is [δp, δθ] in F_p, tag_offset in F_b: a concrete value, not only its norm."""
     from cdpr_twin.deviations import TruthDeviations
 
-    dev = TruthDeviations.zero()
+    dev = TruthDeviations.zero(8)
     dev = TruthDeviations(
         dev.exit_offsets,
         dev.anchor_offsets,
@@ -99,12 +99,12 @@ def test_mounting_errors_are_applied_in_the_frames_they_are_stated_in():
             se3.so3_exp(dev.camera_offset[3:]) @ nominal.T_platform_cam[:3, :3],
             atol=1e-12,
         )
-        T_bt = t.T_base_tag
+        T_bt = t.physics.T_base_tag
         np.testing.assert_allclose(
-            T_bt[:3, 3] - t.nominal_T_base_tag[:3, 3], dev.tag_offset[:3], atol=1e-12
+            T_bt[:3, 3] - t.nominal.T_base_tag[:3, 3], dev.tag_offset[:3], atol=1e-12
         )
         np.testing.assert_allclose(
-            T_bt[:3, :3], se3.so3_exp(dev.tag_offset[3:]) @ t.nominal_T_base_tag[:3, :3], atol=1e-12
+            T_bt[:3, :3], se3.so3_exp(dev.tag_offset[3:]) @ t.nominal.T_base_tag[:3, :3], atol=1e-12
         )
 
 

@@ -10,19 +10,22 @@ from cdpr_twin import kinematics as kin
 from cdpr_twin import se3
 from cdpr_twin.estimators import make_estimator
 from cdpr_twin.estimators.base import NO_CAMERA, NO_TWIST, NON_FINITE_INPUT, REANCHORED, TAG_LOST
-from cdpr_twin.measurement import Measurement
+from cdpr_twin.types import Command, Measurement
 
 DT = 0.04  # 25 Hz
 
 
-def _drive(twin, twists_base, record=True):
+def _drive(twin, twists_base, truths=None):
     """Move the twin tick by tick at base-frame twists (rates from the exact Jacobian at the
-    true pose); returns the measurements after each tick."""
+    true pose); returns the measurements after each tick (and appends the true poses then to
+    ``truths`` when given)."""
     out = []
     for twist in twists_base:
         rates = kin.jacobian(twin.true_geometry, twin.T_base_platform, "base", "pulley") @ twist
         twin.advance(DT, rates)
-        out.append(twin.sense() if record else None)
+        out.append(twin.sense())
+        if truths is not None:
+            truths.append(twin.T_base_platform)
     return out
 
 
@@ -35,7 +38,7 @@ def test_control_integrates_a_constant_body_twist_in_closed_form(twin):
     est.reset(T0)
     xi = np.array([0.01, -0.02, 0.005, 0.1, -0.05, 0.2])
     for k in range(1, 101):
-        m = Measurement(k * DT, np.ones(8), np.ones(8), np.zeros(8), xi, np.eye(4))
+        m = Measurement(k * DT, np.ones(8), np.ones(8), Command(np.zeros(8), xi))
         e = est.update(m)
     expected = T0 @ se3.se3_exp(xi * 100 * DT)
     np.testing.assert_allclose(e.T_base_platform, expected, atol=1e-12)
@@ -71,7 +74,7 @@ def test_control_drift_when_the_twin_executes_the_commanded_rates(twin):
         T_mid = est.T_base_platform @ se3.se3_exp(xi * DT / 2)
         rates = kin.jacobian(twin.nominal_geometry, T_mid, "platform", "pulley") @ xi
         twin.advance(DT, rates)
-        e = est.update(dataclasses.replace(twin.sense(), twist_platform=xi))
+        e = est.update(twin.sense(Command(rates, xi)))
         T = twin.T_base_platform
         step_t, step_r = se3.pose_distance(T_prev, T)
         path, swept, T_prev = path + step_t, swept + step_r, T
@@ -97,13 +100,13 @@ def test_control_drift_when_the_twin_executes_the_commanded_rates(twin):
 def test_control_flags_missing_or_non_finite_twists(twin):
     est = make_estimator("control", twin.nominal_geometry)
     est.reset(np.eye(4))
-    base = Measurement(DT, np.ones(8), np.ones(8), np.zeros(8), None, np.eye(4))
+    base = Measurement(DT, np.ones(8), np.ones(8))
     e = est.update(base)
     assert not e.valid and NO_TWIST in e.flags
     for bad in (np.nan, np.inf):
         xi = np.zeros(6)
         xi[4] = bad
-        e = est.update(dataclasses.replace(base, time=2 * DT, twist_platform=xi))
+        e = est.update(dataclasses.replace(base, time=2 * DT, command=Command(np.zeros(8), xi)))
         assert not e.valid and NON_FINITE_INPUT in e.flags
         np.testing.assert_array_equal(e.T_base_platform, np.eye(4))
     with pytest.raises(ValueError, match="time order"):
@@ -136,14 +139,7 @@ def test_image_composition_with_an_asymmetric_camera_mounting():
             tag = TagDetection(0, np.zeros((4, 2)), T_co, 100.0, 0.0)
             e = est.update(
                 Measurement(
-                    k * DT,
-                    np.ones(8),
-                    np.ones(8),
-                    np.zeros(8),
-                    None,
-                    T,
-                    np.zeros((2, 2, 3), np.uint8),
-                    tag,
+                    k * DT, np.ones(8), np.ones(8), image=np.zeros((2, 2, 3), np.uint8), tag=tag
                 )
             )
             np.testing.assert_allclose(e.T_base_platform, T, atol=1e-12)
@@ -171,10 +167,11 @@ def test_image_tracks_a_known_motion_near_the_tag(camera_twin):
     est.update(camera_twin.sense())
     twists = [np.array([0.006, 0.0, 0.03, 0.0, 0.0, 0.0])] * 125  # 5 s
     worst = 0.0
-    for m in _drive(camera_twin, twists):
+    truths = []
+    for m, T_true in zip(_drive(camera_twin, twists, truths), truths, strict=True):
         e = est.update(m)
         assert e.valid
-        worst = max(worst, se3.pose_distance(e.T_base_platform, m.T_base_platform_true)[0])
+        worst = max(worst, se3.pose_distance(e.T_base_platform, T_true)[0])
         distance = np.linalg.norm(camera_twin.T_cam_tag[:3, 3])
     assert 0.2 < distance < 0.3
     assert worst < 5e-3

@@ -8,10 +8,10 @@ from hypothesis import strategies as st
 
 from cdpr_twin import kinematics as kin
 from cdpr_twin import se3
-from cdpr_twin.estimators import ESTIMATORS, make_estimator
+from cdpr_twin.estimators import make_estimator
 from cdpr_twin.estimators.base import FEW_TAUT_CABLES, NON_FINITE_INPUT
 from cdpr_twin.estimators.model import solve_fast, solve_scipy
-from cdpr_twin.measurement import Measurement
+from cdpr_twin.types import Measurement
 from cdpr_twin.statics import InfeasibleTensionError, tension_distribution
 
 MODELS = ["model_simple", "model_elastic", "model_pulley", "model_elastic_pulley"]
@@ -42,7 +42,7 @@ def _predicted_error(twin, name, cables):
     true pose, mapped through its (linearised) Jacobian on the six cables used."""
     g, T = twin.true_geometry, twin.T_base_platform
     l0, tau = twin.rest_lengths, twin.tensions
-    est = ESTIMATORS[name](g)
+    est = make_estimator(name, g)
     model = "pulley" if est.pulley else "straight"
     residual = kin.cable_lengths(g, T, model) - est.corrected_lengths(l0, tau)
     A = kin.jacobian(g, T, "base", model)[list(cables)]
@@ -125,7 +125,7 @@ def test_fast_and_scipy_backends_agree(twin):
     geom = twin.nominal_geometry
     worst_t = worst_r = 0.0
     for T, lengths, tensions, T0 in _synthetic_cases(geom, 110, seed=3):
-        m = Measurement(0.0, lengths, tensions, np.zeros(8), None, T)
+        m = Measurement(0.0, lengths, tensions)
         for name in MODELS:
             fast, slow = (make_estimator(name, geom, backend=b) for b in ("fast", "scipy"))
             fast.reset(T0)

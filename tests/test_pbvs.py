@@ -12,7 +12,7 @@ from cdpr_twin.controllers.pbvs import interaction_matrix
 from cdpr_twin.estimators.base import PoseEstimate
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import jacobian
-from cdpr_twin.measurement import Measurement
+from cdpr_twin.types import Measurement
 from cdpr_twin.vision import TagDetection
 
 # A camera mounting that is not its own inverse (the nominal one, diag(−1, 1, −1), is).
@@ -74,7 +74,7 @@ def test_commanded_platform_twist_moves_the_camera_as_pbvs_asked():
     for k in range(2):
         T_co = se3.inverse(T_bp @ T_PLATFORM_CAM) @ T_base_tag
         tag = TagDetection(0, np.zeros((4, 2)), T_co, 100.0, 0.0)
-        m = Measurement(k * dt, np.ones(8), np.ones(8), np.zeros(8), None, T_bp, None, tag)
+        m = Measurement(k * dt, np.ones(8), np.ones(8), tag=tag)
         cmd = ctrl.command(k * dt, dt, PoseEstimate(0.0, T_bp), m)
         errors.append(cmd.error)
         # the rates realise the platform twist (l̇ = A ᵖv_p, eq. 5)

@@ -16,7 +16,7 @@ def _mujoco_pull_directions(twin):
     m, d = twin.model, twin.data
     out = []
     xpos = np.asarray(d.wrap_xpos).reshape(-1, 3)
-    for t in twin._tendons:
+    for t in twin.physics._tendons:
         pts = xpos[d.ten_wrapadr[t] : d.ten_wrapadr[t] + d.ten_wrapnum[t]]
         assert m.tendon_num[t] == 3 and len(pts) == 4, "entry, 2 sheave tangent points, anchor"
         v = pts[-2] - pts[-1]
@@ -60,11 +60,11 @@ def _mujoco_cable_readings(twin):
 
 def test_pulley_length_matches_mujoco_wrap(twin):
     """eq. 15-24 == MuJoCo's wrapped tendon length less the entry segment, over 250 poses."""
-    entry = twin._entry
+    entry = twin.physics._entry
     worst, wrap_min = 0.0, np.inf
     for T in random_workspace_poses(250, seed=1):
         twin.place(T)
-        mj = twin.data.ten_length[twin._tendons] - entry
+        mj = twin.data.ten_length[twin.physics._tendons] - entry
         paper = kin.cable_lengths(twin.true_geometry, T, "pulley")
         straight = kin.cable_lengths(twin.true_geometry, T, "straight")
         worst = max(worst, np.max(np.abs(paper - mj)))
@@ -78,7 +78,7 @@ def test_jacobian_matches_mujoco_tendon_jacobian_and_finite_differences(twin):
     geom = twin.true_geometry
     for T in random_workspace_poses(30, seed=2):
         twin.place(T)
-        J = np.array(twin.data.ten_J).reshape(twin.model.ntendon, twin.model.nv)[twin._tendons]
+        J = np.array(twin.data.ten_J).reshape(twin.model.ntendon, twin.model.nv)[twin.physics._tendons]
         # free joint: qvel = [v of the origin in F_b, ω in F_p]
         R = T[:3, :3]
         A_p = kin.jacobian(geom, T, "platform", "pulley")
@@ -112,9 +112,9 @@ def test_reset_is_a_static_equilibrium(twin, name):
     # force balance with MuJoCo's own cable directions: Σ τ_i ũ_i + m g = 0, moments about
     # the centre of mass likewise
     u = _mujoco_pull_directions(twin)
-    b = twin.data.site_xpos[twin._anchors]
-    com = twin.data.xipos[twin._platform]
-    mass = twin.model.body_mass[twin._platform]
+    b = twin.data.site_xpos[twin.physics._anchors]
+    com = twin.data.xipos[twin.physics._platform]
+    mass = twin.model.body_mass[twin.physics._platform]
     f = (tau[:, None] * u).sum(axis=0) + mass * twin.model.opt.gravity
     mom = np.cross(b - com, tau[:, None] * u).sum(axis=0)
     assert np.linalg.norm(f) < 1e-3
@@ -156,11 +156,11 @@ def test_stiffness_matches_analytic(twin):
     K = kin.stiffness_matrix(twin.true_geometry, T, twin.rest_lengths, "pulley")
     dw = np.array([0.0, 0.0, -2.0, 0.0, 0.0, 0.0])
     predicted = np.linalg.solve(K, dw)
-    twin.data.xfrc_applied[twin._platform] = dw
+    twin.data.xfrc_applied[twin.physics._platform] = dw
     try:
         twin.advance(1.0, np.zeros(8))
     finally:
-        twin.data.xfrc_applied[twin._platform] = 0.0
+        twin.data.xfrc_applied[twin.physics._platform] = 0.0
     T1 = twin.T_base_platform
     moved = np.concatenate([T1[:3, 3] - T[:3, 3], se3.so3_log(T1[:3, :3] @ T[:3, :3].T)])
     assert np.linalg.norm(moved[:3] - predicted[:3]) < 0.05 * np.linalg.norm(predicted[:3])

@@ -27,6 +27,11 @@ from cdpr_twin.sim.sensors import NominalRobot, Sensors
 from cdpr_twin.types import Command, Measurement
 
 
+def _truth(name: str, doc: str) -> property:
+    """A read-only view of one of the physics' ground-truth getters."""
+    return property(lambda self: getattr(self.physics, name), doc=doc)
+
+
 def _nominal_robot(model: mujoco.MjModel) -> NominalRobot:
     tag = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, TAG_BODY)
     T_base_tag = None
@@ -120,6 +125,15 @@ class Twin:
         self.sensors = Sensors(
             self.physics, self.nominal, tension_noise_std, noise_seed, camera, home_encoders
         )
+
+    model = _truth("model", "The simulated robot's ``MjModel``.")
+    data = _truth("data", "The simulated robot's ``MjData``.")
+    T_base_platform = _truth("T_base_platform", "Ground-truth platform pose (4, 4).")
+    tensions = _truth("tensions", "True cable tensions (m,) [N].")
+    cable_lengths = _truth("cable_lengths", "True stretched cable lengths (m,) [m].")
+    rest_lengths = _truth("rest_lengths", "Unstretched lengths paid out (m,) [m].")
+    T_cam_tag = _truth("T_cam_tag", "Ground-truth tag pose in the camera frame (4, 4).")
+    settle_error = _truth("settle_error", "Pose error after the last reset's settle [m, rad].")
 
     def close(self) -> None:
         """Free the renderer's GL context."""
