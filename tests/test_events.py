@@ -1,0 +1,90 @@
+"""Timed events act through the physics hooks: a cable broken at t = 1 s stays broken."""
+
+import mujoco
+import numpy as np
+import pytest
+from conftest import paper_pose
+
+from cdpr_twin.events import CableBreak, EventSchedule
+from cdpr_twin.runner import run
+from cdpr_twin.scenario import ScenarioError, load_scenario
+from cdpr_twin.sim import build_robot
+from cdpr_twin.timeseries import Timeseries
+
+ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
+OPEN_LOOP = (ROOT / "scenarios" / "paper_open_loop.toml").read_text()
+
+
+def _mujoco_force(physics, cable: int) -> float:
+    """Cable force straight from MuJoCo (the winch actuator's output), by name."""
+    aid = mujoco.mj_name2id(physics.model, mujoco.mjtObj.mjOBJ_ACTUATOR, f"winch{cable}_actuator")
+    return float(physics.data.actuator_force[aid])
+
+
+@pytest.mark.parametrize("break_time", [1.0, 1.0127])  # on a tick, and between two steps
+def test_a_broken_cable_stays_slack_across_swivel_and_stiffness_refreshes(break_time):
+    physics, _, _ = build_robot(align_every=10)
+    physics.reset(paper_pose("p1"))
+    schedule = EventSchedule((CableBreak(time=break_time, cable=7),), physics, sensors=None)
+    physics.add_hook(schedule)
+    before = _mujoco_force(physics, 7)
+    assert before < -10.0  # taut (MuJoCo's actuator force is a pull: negative)
+    forces, times = [], []
+    for _ in range(4000):  # 2 s, one step at a time: every refresh is crossed
+        physics.step(1)
+        forces.append(_mujoco_force(physics, 7))
+        times.append(physics.time)
+    forces, times = np.array(forces), np.array(times)
+    fired_at = schedule.fired[0][0]
+    assert abs(fired_at - break_time) <= 0.5 * physics.timestep
+    assert np.all(forces[times <= break_time - physics.timestep] < -5.0)
+    # from the first step after the break on, the force is exactly zero, at every one of the
+    # ~200 refreshes that follow (which recompute every other cable's stiffness)
+    after = forces[times > fired_at + 0.5 * physics.timestep]
+    assert len(after) > 1900 and np.all(after == 0.0)
+    assert physics.tensions[6] == 0.0 and np.delete(physics.tensions, 6).max() > 2.0
+    # the physics answers: the platform, hanging from seven cables, has moved
+    assert np.linalg.norm(physics.T_base_platform[:3, 3] - paper_pose("p1")[:3, 3]) > 1e-3
+
+
+def test_a_cable_break_from_a_scenario_file(tmp_path):
+    text = OPEN_LOOP.replace("duration = 25.0", "duration = 2.0")
+    text += '\n[[events]]\ntype = "cable_break"\ntime = 1.0\ncable = 8\n'
+    text = text.replace("tension_noise_std = 0.24", "tension_noise_std = 0.0")
+    path = tmp_path / "break.toml"
+    path.write_text(text.replace('"../models/', f'"{ROOT}/models/'))
+    scenario = load_scenario(path).with_overrides(camera=False)
+    assert scenario.events == (CableBreak(time=1.0, cable=8),)
+    run(scenario, tmp_path / "out", record_rrd=False)
+    ts = Timeseries.load(tmp_path / "out" / "timeseries.csv")
+    tau8 = ts.columns["tension_8"]
+    assert np.all(tau8[ts.t < 1.0 - 1e-9] > 2.0)
+    assert np.all(tau8[ts.t > 1.0 + 1e-9] == 0.0)  # noise-free sensor: exactly no force
+    # without the event the same run keeps cable 8 taut, and ends elsewhere
+    intact = load_scenario(ROOT / "scenarios" / "paper_open_loop.toml").with_overrides(
+        camera=False, duration=2.0
+    )
+    intact_summary = run(intact, None).summary
+    assert intact_summary["final_tensions_n"][7] > 1.0
+    moved = np.subtract(intact_summary["final_pose"][:3], ts.poses("true")[-1][:3, 3])
+    assert np.linalg.norm(moved) > 1e-3
+
+
+@pytest.mark.parametrize(
+    ("event", "field"),
+    [
+        ('type = "cable_break"\ntime = 1.0\ncable = 9', "events[0].cable: must be in 1…8"),
+        ('type = "cable_break"\ntime = -1.0\ncable = 2', "events[0].time"),
+        ('type = "meteor"\ntime = 1.0', "events[0].type"),
+        ('type = "cable_break"\ncable = 2', "events[0].time: missing"),
+        ('type = "cable_break"\ntime = 1.0\ncable = 2\nwhen = 3', "events[0].when: unknown field"),
+    ],
+)
+def test_bad_events_are_errors_naming_the_field(tmp_path, event, field):
+    path = tmp_path / "bad.toml"
+    text = OPEN_LOOP.replace('"../models/', f'"{ROOT}/models/') + f"\n[[events]]\n{event}\n"
+    path.write_text(text)
+    with pytest.raises(ScenarioError, match=field.replace("[", r"\[").replace("]", r"\]")):
+        from cdpr_twin.runner import prepare
+
+        prepare(load_scenario(path).with_overrides(camera=False)).close()
