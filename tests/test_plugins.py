@@ -1,0 +1,125 @@
+"""A 7th estimator defined here, outside the package, runs through a scenario and `reproduce`.
+
+``MidpointEstimator`` fuses two other estimators: it declares them as inputs and returns the
+midpoint of their poses (translation average, rotation halfway along the geodesic), with a
+covariance. The scenario files name this module in ``plugins``, so spawned workers import it
+too; no package code knows it.
+"""
+
+import dataclasses
+import json
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cdpr_twin import plugins, se3
+from cdpr_twin.estimators.base import NO_INPUTS, Estimator
+from cdpr_twin.plugins import OptionError, option
+from cdpr_twin.runner import run
+from cdpr_twin.scenario import ScenarioError, load_scenario
+from cdpr_twin.timeseries import Timeseries
+from cdpr_twin.types import Measurement, PoseEstimate
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@dataclasses.dataclass(frozen=True)
+class MidpointOptions:
+    """Which two estimators to fuse."""
+
+    of: tuple[str, ...] = option(("control", "model_elastic_pulley"))
+
+    def __post_init__(self) -> None:
+        if len(self.of) != 2:
+            raise OptionError("of", f"must name two estimators, got {list(self.of)}")
+
+
+@plugins.register
+class MidpointEstimator(Estimator):
+    """The midpoint of two other estimators' poses."""
+
+    name = "midpoint"
+    Options = MidpointOptions
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        return self.options.of
+
+    def update(
+        self,
+        measurement: Measurement,
+        inputs: Mapping[str, PoseEstimate] = NO_INPUTS,
+    ) -> PoseEstimate:
+        a, b = (inputs[n].T_base_platform for n in self.options.of)
+        R = a[:3, :3] @ se3.so3_exp(0.5 * se3.so3_log(a[:3, :3].T @ b[:3, :3]))
+        self._T = se3.transform(R, 0.5 * (a[:3, 3] + b[:3, 3]))
+        spread = np.concatenate([a[:3, 3] - b[:3, 3], se3.so3_log(a[:3, :3].T @ b[:3, :3])])
+        cov = np.diag(0.25 * spread**2 + 1e-12)
+        return PoseEstimate(measurement.time, self._T, covariance=cov)
+
+
+def _with_midpoint(scenario: str, tmp_path: Path) -> Path:
+    """A copy of a paper scenario that also runs the midpoint estimator."""
+    text = (ROOT / "scenarios" / scenario).read_text()
+    text = text.replace('"../models/', f'"{ROOT}/models/')
+    text = f'plugins = ["{Path(__file__).stem}"]\n' + text
+    text = text.replace('passive = ["', 'passive = ["midpoint", "', 1)
+    text += '\n[estimators.midpoint]\nof = ["control", "model_elastic_pulley"]\n'
+    path = tmp_path / scenario
+    path.write_text(text)
+    return path
+
+
+def test_a_fusing_estimator_from_outside_the_package_runs_in_a_scenario(tmp_path):
+    scenario = load_scenario(_with_midpoint("paper_open_loop.toml", tmp_path))
+    scenario = scenario.with_overrides(duration=2.0, camera=False)
+    assert "midpoint" in scenario.estimators.names
+    out = tmp_path / "out"
+    summary = run(scenario, out, record_rrd=False).summary
+    assert "midpoint" in summary["estimators"]
+    ts = Timeseries.load(out / "timeseries.csv")
+    assert "midpoint" in ts.estimator_names
+    # every row: the midpoint of the two inputs' recorded positions (independent arithmetic)
+    mid = ts.poses("midpoint")[:, :3, 3]
+    expected = 0.5 * (ts.poses("control")[:, :3, 3] + ts.poses("model_elastic_pulley")[:, :3, 3])
+    np.testing.assert_allclose(mid, expected, atol=1e-12)
+    _, rot_to_a = ts.deviation("midpoint", "control")
+    _, rot_ab = ts.deviation("model_elastic_pulley", "control")
+    np.testing.assert_allclose(rot_to_a, 0.5 * rot_ab, atol=1e-9)
+
+
+def test_inputs_that_do_not_run_or_bad_options_are_scenario_errors(tmp_path):
+    from cdpr_twin.runner import prepare
+
+    path = _with_midpoint("paper_open_loop.toml", tmp_path)
+    path.write_text(
+        path.read_text().replace(
+            'of = ["control", "model_elastic_pulley"]', 'of = ["control", "image"]'
+        )
+    )
+    with pytest.raises(ScenarioError, match="'midpoint' reads \\['image'\\], which do not run"):
+        prepare(load_scenario(path).with_overrides(camera=False)).close()
+    path.write_text(path.read_text().replace('of = ["control", "image"]', 'of = ["control"]'))
+    with pytest.raises(ScenarioError, match="estimators.midpoint.of: must name two"):
+        load_scenario(path)
+
+
+@pytest.mark.slow
+def test_a_seventh_estimator_goes_through_reproduce(tmp_path):
+    from cdpr_twin.study import reproduce
+
+    scenarios = (
+        _with_midpoint("paper_open_loop.toml", tmp_path),
+        _with_midpoint("paper_pbvs.toml", tmp_path),
+    )
+    out = tmp_path / "study"
+    rep = reproduce(out, workers=2, runs_scale=0.1, duration=3.0, scenarios=scenarios)
+    records = json.loads((out / "runs.json").read_text())
+    names = {r["name"] for r in records}
+    assert "pbvs_midpoint_seed1" in names and len(records) == 1 + 7
+    assert all(r["ok"] for r in records), [r["status"] for r in records if not r["ok"]]
+    assert "midpoint" in rep["open_loop"]["estimators"]
+    assert "midpoint" in rep["pbvs"]
+    assert "midpoint" in (out / "report.md").read_text()
