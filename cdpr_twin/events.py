@@ -19,9 +19,21 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Protocol
 
 from cdpr_twin.plugins import OptionError, option
+
+
+class StepHook(Protocol):
+    """Something that acts on the physics between steps, at times of its choosing."""
+
+    def next_time(self) -> float:
+        """Simulation time [s] of the next action (``inf`` when there is none)."""
+        ...
+
+    def fire(self, time: float) -> None:
+        """Act now: everything due at or before ``time`` [s]."""
+        ...
 
 
 @dataclass(frozen=True)

@@ -52,7 +52,13 @@ def tension_distribution(
             f"position {np.round(T_base_platform[:3, 3], 4).tolist()} m (linprog: {lp.message}); "
             "choose a pose nearer the workspace centre or widen the tension bounds"
         )
-    x0 = lp.x
+    return _minimum_norm(W, rhs, lp.x, tau_min, tau_max)
+
+
+def _minimum_norm(
+    W: np.ndarray, rhs: np.ndarray, x0: np.ndarray, tau_min: float, tau_max: float
+) -> np.ndarray:
+    """The least-norm τ with W τ = rhs within the bounds, from a feasible vertex x0."""
     # Minimum norm on the null space: τ = x0 + N λ.
     _, s, vt = np.linalg.svd(W)
     rank = int(np.sum(s > s[0] * 1e-12))

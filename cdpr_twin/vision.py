@@ -77,6 +77,51 @@ def project_points(
     return uv * [intrinsics.fx, intrinsics.fy] + [intrinsics.cx, intrinsics.cy]
 
 
+def _edge_line(
+    img: np.ndarray,
+    p0: np.ndarray,
+    p1: np.ndarray,
+    edge_len: float,
+    centre: np.ndarray,
+    steps: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Total-least-squares line (point, direction) through one edge's sub-pixel crossings.
+
+    Profiles across the edge p0 → p1 are sampled at ``steps`` [px] along its outward normal;
+    the mid-level crossing of each is an edge point. ``None`` with fewer than 4 points.
+    """
+    d = (p1 - p0) / edge_len
+    n = np.array([-d[1], d[0]])
+    if n @ ((p0 + p1) / 2 - centre) < 0:
+        n = -n  # outward normal: dark inside, light outside
+    ts = np.linspace(0.15, 0.85, max(8, int(edge_len / 2)))
+    base = p0 + ts[:, None] * (p1 - p0)
+    pts = base[:, None, :] + steps[None, :, None] * n  # (k, s, 2)
+    prof = cv2.remap(
+        img,
+        pts[..., 0].astype(np.float32),
+        pts[..., 1].astype(np.float32),
+        cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_REPLICATE,
+    )
+    lo, hi = prof.min(axis=1, keepdims=True), prof.max(axis=1, keepdims=True)
+    ok = (hi - lo).ravel() > 20.0
+    f = prof - 0.5 * (lo + hi)  # rising from dark (inside) to light (outside)
+    found = []
+    for k in np.flatnonzero(ok):
+        idx = np.flatnonzero((f[k, :-1] < 0) & (f[k, 1:] >= 0))
+        if idx.size != 1:
+            continue
+        i = idx[0]
+        t = steps[i] + (steps[i + 1] - steps[i]) * f[k, i] / (f[k, i] - f[k, i + 1])
+        found.append(base[k] + t * n)
+    if len(found) < 4:
+        return None
+    q = np.array(found)
+    mean = q.mean(axis=0)
+    return mean, np.linalg.svd(q - mean)[2][0]
+
+
 def refine_quad(gray: np.ndarray, corners: np.ndarray, half_width: float = 3.0) -> np.ndarray:
     """Sub-pixel refinement of a dark quad's corners on a light background.
 
@@ -104,38 +149,10 @@ def refine_quad(gray: np.ndarray, corners: np.ndarray, half_width: float = 3.0) 
     img = gray.astype(np.float32)
     lines = []
     for j in range(4):
-        p0, p1 = c[j], c[(j + 1) % 4]
-        d = (p1 - p0) / edge_len[j]
-        n = np.array([-d[1], d[0]])
-        if n @ ((p0 + p1) / 2 - centre) < 0:
-            n = -n  # outward normal: dark inside, light outside
-        ts = np.linspace(0.15, 0.85, max(8, int(edge_len[j] / 2)))
-        base = p0 + ts[:, None] * (p1 - p0)
-        pts = base[:, None, :] + steps[None, :, None] * n  # (k, s, 2)
-        prof = cv2.remap(
-            img,
-            pts[..., 0].astype(np.float32),
-            pts[..., 1].astype(np.float32),
-            cv2.INTER_LINEAR,
-            borderMode=cv2.BORDER_REPLICATE,
-        )
-        lo, hi = prof.min(axis=1, keepdims=True), prof.max(axis=1, keepdims=True)
-        ok = (hi - lo).ravel() > 20.0
-        f = prof - 0.5 * (lo + hi)  # rising from dark (inside) to light (outside)
-        found = []
-        for k in np.flatnonzero(ok):
-            idx = np.flatnonzero((f[k, :-1] < 0) & (f[k, 1:] >= 0))
-            if idx.size != 1:
-                continue
-            i = idx[0]
-            t = steps[i] + (steps[i + 1] - steps[i]) * f[k, i] / (f[k, i] - f[k, i + 1])
-            found.append(base[k] + t * n)
-        if len(found) < 4:
+        line = _edge_line(img, c[j], c[(j + 1) % 4], edge_len[j], centre, steps)
+        if line is None:
             return c
-        q = np.array(found)
-        mean = q.mean(axis=0)
-        direction = np.linalg.svd(q - mean)[2][0]
-        lines.append((mean, direction))
+        lines.append(line)
     out = np.empty((4, 2))
     for j in range(4):  # corner j is the meeting point of edges j-1 and j
         (m0, d0), (m1, d1) = lines[j - 1], lines[j]
@@ -212,9 +229,25 @@ class TagDetector:
         corners = np.asarray(det.corners, dtype=float) - APRILTAG_PIXEL_OFFSET
         if self.refine_corners:
             corners = refine_quad(gray, corners)
-        # Planar targets have two nearly equally good poses when seen face-on from afar. Refine
-        # pupil-apriltags' pose and both IPPE solutions with LM on the OpenCV-convention corners
-        # and keep the one that reprojects best.
+        best = self._best_pose(det, corners)
+        if best is None:
+            return None
+        T = best
+        err = project_points(self.intrinsics, T, self._object_points) - corners
+        return TagDetection(
+            tag_id=int(det.tag_id),
+            corners=corners,
+            T_cam_tag=T,
+            decision_margin=float(det.decision_margin),
+            reprojection_error=float(np.sqrt(np.mean(np.sum(err**2, axis=1)))),
+        )
+
+    def _best_pose(self, det, corners: np.ndarray) -> np.ndarray | None:
+        """The best-reprojecting of pupil-apriltags' pose and both IPPE solutions, refined.
+
+        Planar targets have two nearly equally good poses when seen face-on from afar: each
+        seed is refined with LM on the OpenCV-convention corners. Returns (4, 4) or ``None``.
+        """
         seeds = [(cv2.Rodrigues(np.asarray(det.pose_R))[0], np.asarray(det.pose_t).reshape(3, 1))]
         n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
             self._object_points, corners, self.intrinsics.K, None, flags=cv2.SOLVEPNP_IPPE_SQUARE
@@ -238,14 +271,4 @@ class TagDetector:
             err = float(np.sum(e**2))
             if err < best_err:
                 best, best_err = T_try, err
-        if best is None:
-            return None
-        T = best
-        err = project_points(self.intrinsics, T, self._object_points) - corners
-        return TagDetection(
-            tag_id=int(det.tag_id),
-            corners=corners,
-            T_cam_tag=T,
-            decision_margin=float(det.decision_margin),
-            reprojection_error=float(np.sqrt(np.mean(np.sum(err**2, axis=1)))),
-        )
+        return best

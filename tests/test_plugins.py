@@ -102,7 +102,7 @@ def test_inputs_that_do_not_run_or_bad_options_are_scenario_errors(tmp_path):
     with pytest.raises(ScenarioError, match="'midpoint' reads \\['image'\\], which do not run"):
         prepare(load_scenario(path).with_overrides(camera=False)).close()
     path.write_text(path.read_text().replace('of = ["control", "image"]', 'of = ["control"]'))
-    with pytest.raises(ScenarioError, match="estimators.midpoint.of: must name two"):
+    with pytest.raises(ScenarioError, match=r"estimators\.midpoint\.of: must name two"):
         load_scenario(path)
 
 

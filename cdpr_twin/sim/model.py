@@ -27,6 +27,18 @@ class ModelError(ValueError):
     """A model file is missing, malformed, or lacks an element the twin needs."""
 
 
+class SimulationError(RuntimeError):
+    """The simulation diverged or was asked for something it cannot do."""
+
+
+def as_slice(ids: np.ndarray | list) -> slice | np.ndarray:
+    """A slice when ids are consecutive (assignments through it are views), else the ids."""
+    ids = np.asarray(ids)
+    if ids.size and np.all(np.diff(ids) == 1):
+        return slice(int(ids[0]), int(ids[-1]) + 1)
+    return ids
+
+
 def swivel_body(i: int) -> str:
     """Name of cable i's pulley swivel body (i from 0)."""
     return f"pulley{i + 1}_swivel"

@@ -20,11 +20,11 @@ scenario's timed events) act between physics steps at the times they ask for.
 from __future__ import annotations
 
 import math
-from typing import Protocol
 
 import mujoco
 import numpy as np
 
+from cdpr_twin.events import StepHook
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import cable_lengths, rest_lengths
 from cdpr_twin.se3 import (
@@ -38,8 +38,10 @@ from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim.model import (
     PLATFORM_BODY,
     ModelError,
+    SimulationError,
     actuator_name,
     anchor_site,
+    as_slice,
     cable_count,
     numeric,
     read_geometry,
@@ -54,30 +56,6 @@ _BAD_WARNINGS = (
     mujoco.mjtWarning.mjWARN_BADQVEL,
     mujoco.mjtWarning.mjWARN_BADCTRL,
 )
-
-
-class SimulationError(RuntimeError):
-    """The simulation diverged or was asked for something it cannot do."""
-
-
-class StepHook(Protocol):
-    """Something that acts on the physics between steps at times of its choosing."""
-
-    def next_time(self) -> float:
-        """Simulation time [s] of the next action (``inf`` when there is none)."""
-        ...
-
-    def fire(self, time: float) -> None:
-        """Act now: everything due at or before ``time`` [s]."""
-        ...
-
-
-def _as_slice(ids: np.ndarray) -> slice | np.ndarray:
-    """A slice when ids are consecutive (assignments through it are views), else the ids."""
-    ids = np.asarray(ids)
-    if ids.size and np.all(np.diff(ids) == 1):
-        return slice(int(ids[0]), int(ids[-1]) + 1)
-    return ids
 
 
 class Physics:
@@ -128,8 +106,8 @@ class Physics:
             raise ModelError(f"{self.source}: the pulley swivel bodies must be mocap bodies")
         self._tendons = m.actuator_trnid[actuators, 0]
         self._act_range = m.actuator_actrange[actuators].copy()
-        self._anchors, self._mocap = _as_slice(anchors), _as_slice(mocap)
-        self._actuators = _as_slice(actuators)
+        self._anchors, self._mocap = as_slice(anchors), as_slice(mocap)
+        self._actuators = as_slice(actuators)
         self._gain = m.actuator_gainprm[self._actuators]  # views when the ids are contiguous
         self._bias = m.actuator_biasprm[self._actuators]
         if not (

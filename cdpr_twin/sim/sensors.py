@@ -15,7 +15,8 @@ import numpy as np
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import cable_lengths, rest_lengths
 from cdpr_twin.sim import camera as cam_mod
-from cdpr_twin.sim.physics import Physics, SimulationError
+from cdpr_twin.sim.model import SimulationError
+from cdpr_twin.sim.physics import Physics
 from cdpr_twin.types import CameraIntrinsics, Command, Measurement
 
 

@@ -1,0 +1,285 @@
+"""Every number of the study's report, computed from the runs' files only.
+
+Nothing about the experiment is assumed here: p1 and the time the open-loop plan reaches it
+come from the open-loop run's ``summary.json`` (its first segment end), the estimators from each
+run's ``timeseries.csv``, the robot from the scenario file the runs were made with.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cdpr_twin.results import (
+    image_noise_vs_distance,
+    load_summary,
+    model_estimators,
+    ordered_estimators,
+    roughness,
+    value_at,
+)
+from cdpr_twin.se3 import pose_distances, pose_from_vector
+from cdpr_twin.study.findings import evaluate
+from cdpr_twin.study.plan import PBVS_SCENARIO
+from cdpr_twin.timeseries import Timeseries
+
+PBVS_CONVERGED = "converged"
+"""A PBVS run's final status when it converged (only those count for accuracy)."""
+
+
+@dataclass(frozen=True, eq=False)
+class SegmentEnd:
+    """Where an open-loop plan reaches a waypoint.
+
+    Attributes:
+        time_s: time of the tick at the segment's end [s].
+        waypoint: the waypoint as written in ``summary.json``: [x, y, z (m), rx, ry, rz (deg)].
+    """
+
+    time_s: float
+    waypoint: tuple[float, ...]
+
+    @property
+    def T_waypoint(self) -> np.ndarray:
+        """(4, 4) the waypoint's pose."""
+        return pose_from_vector(self.waypoint)
+
+
+def segment_ends(summary: dict) -> list[SegmentEnd]:
+    """The segment ends an open-loop run's ``summary.json`` lists (p1 first), in time order."""
+    return [
+        SegmentEnd(float(e["time_s"]), tuple(float(v) for v in e["waypoint"]))
+        for e in summary.get("segment_ends", [])
+    ]
+
+
+def figure_runs(records: list[dict]) -> tuple[Path | None, dict[str, Path]]:
+    """The runs of Fig. 5 and 7 (seed 1): the open-loop run, and each PBVS run by estimator.
+
+    Returns:
+        ``(open-loop run directory or None, {in-loop estimator: PBVS run directory})``, the
+        estimators in display order; failed runs are left out.
+    """
+    ok = [r for r in records if r["ok"] and r["seed"] == 1]
+    open_loop = next((Path(r["dir"]) for r in ok if r["kind"] == "open_loop"), None)
+    pbvs = {r["in_loop"]: Path(r["dir"]) for r in ok if r["kind"] == "pbvs"}
+    return open_loop, {n: pbvs[n] for n in ordered_estimators(pbvs)}
+
+
+def reference_p1(records: list[dict]) -> SegmentEnd | None:
+    """p1: the first segment end of the (first successful) open-loop run, or ``None``."""
+    for r in records:
+        if r["ok"] and r["kind"] == "open_loop":
+            ends = segment_ends(load_summary(Path(r["dir"]) / "summary.json"))
+            if ends:
+                return ends[0]
+    return None
+
+
+def accuracy_at_p1(run_dir: Path, kind: str, p1: np.ndarray | None = None) -> dict | None:
+    """Final platform error at p1 of one run, recomputed from its time series.
+
+    Open loop: ground truth at the run's first segment end against its first waypoint (p1).
+    PBVS: ground truth at the end of the run against ``p1`` or, when ``None``, against the run's
+    own ``goal_pose``. ``None`` when the run has no such time or pose.
+    """
+    summary = load_summary(run_dir / "summary.json")
+    ts = Timeseries.load(run_dir / "timeseries.csv")
+    if kind == "open_loop":
+        ends = segment_ends(summary)
+        if not ends:
+            return None
+        row, reference = int(np.argmin(np.abs(ts.t - ends[0].time_s))), ends[0].T_waypoint
+    else:
+        if p1 is None and summary.get("goal_pose") is None:
+            return None
+        reference = p1 if p1 is not None else pose_from_vector(summary["goal_pose"])
+        row = len(ts.t) - 1
+    dt, dr = pose_distances(ts.poses("true")[row : row + 1], reference[None])
+    return {
+        "time_s": float(ts.t[row]),
+        "translation_m": float(dt[0]),
+        "rotation_deg": float(np.degrees(dr[0])),
+    }
+
+
+def _model_physics(ts: Timeseries, scenario_file: Path) -> dict:
+    """Why the model-based variants agree on ACROBOT: stretch and wrap along the run."""
+    from cdpr_twin import kinematics as kin
+    from cdpr_twin.scenario import load_scenario
+    from cdpr_twin.sim import build_model, read_geometry
+
+    geom = read_geometry(build_model(load_scenario(scenario_file).model.file))
+    tau, l0 = ts.matrix("tension"), ts.matrix("length")
+    stretch = np.abs(tau) * l0 / geom.es  # eq. 14 with τ(0) = 0
+    T = ts.poses("true")
+    wrap = np.array(
+        [
+            kin.cable_lengths(geom, Ti, "pulley") - kin.cable_lengths(geom, Ti)
+            for Ti in T[:: max(1, len(T) // 200)]
+        ]
+    )
+    return {
+        "max_stretch_m": float(np.nanmax(stretch)),
+        "wrap_min_m": float(wrap.min()),
+        "wrap_max_m": float(wrap.max()),
+        "wrap_change_max_m": float((wrap.max(axis=0) - wrap.min(axis=0)).max()),
+    }
+
+
+def _camera_tag_errors(scenario_file: str | Path) -> dict:
+    """Magnitude of the drawn robot's camera-mount and tag-placement rotation errors."""
+    from cdpr_twin.scenario import load_scenario
+
+    dev = load_scenario(scenario_file).truth.draw()
+    return {
+        "camera_rotation_deg": float(np.degrees(np.linalg.norm(dev.camera_offset[3:]))),
+        "camera_position_m": float(np.linalg.norm(dev.camera_offset[:3])),
+        "tag_rotation_deg": float(np.degrees(np.linalg.norm(dev.tag_offset[3:]))),
+        "tag_position_m": float(np.linalg.norm(dev.tag_offset[:3])),
+    }
+
+
+def _estimator_deviations(ts: Timeseries, names: tuple[str, ...]) -> dict:
+    """Each estimator's max and final deviation from ground truth, and its roughness."""
+    out = {}
+    for n in names:
+        dt, dr = ts.deviation(n)
+        out[n] = {
+            "max_translation_m": float(np.nanmax(dt)),
+            "max_rotation_deg": float(np.degrees(np.nanmax(dr))),
+            "final_translation_m": float(dt[-1]),
+            "final_rotation_deg": float(np.degrees(dr[-1])),
+            "roughness_m": roughness(ts, n),
+        }
+    return out
+
+
+def _at_p1(ts: Timeseries, names: tuple[str, ...], t1: float) -> dict:
+    """The robot's miss of the plan at p1 (time t1), and each estimate's distance to plan and
+    truth there."""
+    miss_t, miss_r = ts.deviation("true", "plan")
+    follow = {}
+    for n in names:
+        vs_plan, _ = ts.deviation(n, "plan")
+        vs_truth, _ = ts.deviation(n)
+        follow[n] = {"vs_plan_m": value_at(ts, t1, vs_plan), "vs_truth_m": value_at(ts, t1, vs_truth)}
+    miss = {
+        "time_s": t1,
+        "translation_m": value_at(ts, t1, miss_t),
+        "rotation_deg": float(np.degrees(value_at(ts, t1, miss_r))),
+    }
+    return {"miss_at_p1": miss, "follow_plan": follow}
+
+
+def _model_variants(ts: Timeseries, models: tuple[str, ...], ol: dict, source: Path) -> dict:
+    """How far apart the model-based estimates are, against their deviation from truth."""
+    P = np.array([ts.poses(n)[:, :3, 3] for n in models])
+    pairwise = max(
+        float(np.nanmax(np.linalg.norm(P[i] - P[j], axis=1)))
+        for i in range(len(models))
+        for j in range(i + 1, len(models))
+    )
+    return {
+        "max_pairwise_difference_m": pairwise,
+        "max_deviation_m": max(ol["estimators"][n]["max_translation_m"] for n in models),
+        **_model_physics(ts, source),
+    }
+
+
+def analyse_open_loop(run_dir: Path) -> dict:
+    """Fig. 5 numbers of one open-loop run: deviations, the miss at p1, the model variants."""
+    ts = Timeseries.load(run_dir / "timeseries.csv")
+    summary = load_summary(run_dir / "summary.json")
+    names = ordered_estimators(ts.estimator_names)
+    ol: dict = {"estimators": _estimator_deviations(ts, names)}
+    ends = segment_ends(summary)
+    if ends:
+        ol.update(_at_p1(ts, names, ends[0].time_s))
+    models = model_estimators(names)
+    if len(models) > 1:
+        ol["model_variants"] = _model_variants(ts, models, ol, Path(summary["source"]))
+    if "image" in names:
+        ol["image_distance"] = image_noise_vs_distance(ts)
+    return ol
+
+
+def analyse_pbvs(run_dir: Path, in_loop: str) -> dict:
+    """Fig. 7 numbers of one PBVS run: the in-loop estimate's deviation, the others' noise."""
+    ts = Timeseries.load(run_dir / "timeseries.csv")
+    s = load_summary(run_dir / "summary.json")
+    dt, dr = ts.deviation(in_loop)
+    return {
+        "status": s["status"],
+        "max_translation_m": float(np.nanmax(dt)),
+        "max_rotation_deg": float(np.degrees(np.nanmax(dr))),
+        "roughness_m": roughness(ts, in_loop),
+        "final_tag_error": s.get("pbvs", {}).get("final_tag_error"),
+        "others_roughness_m": {
+            m: roughness(ts, m) for m in ordered_estimators(ts.estimator_names) if m != in_loop
+        },
+    }
+
+
+def _accuracy(ok: list[dict], p1: SegmentEnd | None) -> dict[str, dict[str, list[float]]]:
+    """Fig. 8: final error at p1 per group (open loop, all PBVS, PBVS per in-loop estimator)."""
+    acc: dict[str, dict[str, list[float]]] = {}
+    for r in ok:
+        if r["kind"] == "pbvs" and r["status"] != PBVS_CONVERGED:
+            continue
+        a = accuracy_at_p1(Path(r["dir"]), r["kind"], None if p1 is None else p1.T_waypoint)
+        if a is None:
+            continue
+        keys = ["open loop"] if r["kind"] == "open_loop" else ["PBVS (all)", f"PBVS {r['in_loop']}"]
+        for key in keys:
+            g = acc.setdefault(key, {"translation_m": [], "rotation_deg": []})
+            g["translation_m"].append(a["translation_m"])
+            g["rotation_deg"].append(a["rotation_deg"])
+    return acc
+
+
+def _robot_scenario(records: list[dict]) -> str | Path:
+    """The scenario file the runs' robot is drawn from (PBVS first: the camera matters)."""
+    for kind in ("pbvs", "open_loop"):
+        for r in records:
+            if r["kind"] == kind:
+                return r["scenario"]
+    return PBVS_SCENARIO
+
+
+def analyse(out: Path, records: list[dict]) -> dict:
+    """Every number of the report, from the runs' files. Writes ``report.json``.
+
+    Args:
+        out: the study's output directory.
+        records: the runs, as :func:`cdpr_twin.study.run_study` returns them (``runs.json``).
+    """
+    ok = [r for r in records if r["ok"]]
+    rep: dict = {
+        "runs": {
+            "total": len(records),
+            "ok": len(ok),
+            "failed": [{"name": r["name"], "status": r["status"]} for r in records if not r["ok"]],
+        }
+    }
+    p1 = reference_p1(records)
+    if p1 is not None:
+        rep["p1"] = {"time_s": p1.time_s, "waypoint": list(p1.waypoint)}
+    main_ol, main_pbvs = figure_runs(records)
+    if main_ol is not None:
+        rep["open_loop"] = analyse_open_loop(main_ol)
+    rep["pbvs"] = {n: analyse_pbvs(d, n) for n, d in main_pbvs.items()}
+    acc = _accuracy(ok, p1)
+    rep["accuracy"] = acc
+    if "open loop" in acc and "PBVS (all)" in acc:
+        rep["ratios"] = {
+            k: float(np.mean(acc["open loop"][k]) / np.mean(acc["PBVS (all)"][k]))
+            for k in ("translation_m", "rotation_deg")
+        }
+    rep["robot"] = _camera_tag_errors(_robot_scenario(records))
+    rep["findings"] = evaluate(rep)
+    (out / "report.json").write_text(json.dumps(rep, indent=2) + "\n", encoding="utf-8")
+    return rep

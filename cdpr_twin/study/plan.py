@@ -1,0 +1,162 @@
+"""Which runs the study makes, and running them in parallel (spawned processes).
+
+The open-loop runs come from one scenario file, the PBVS runs from another: one set of PBVS
+runs per estimator of that file (its ``in_loop`` and ``passive`` estimators), each in the loop
+in turn, so an estimator added to the scenario file gets its own runs.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import multiprocessing
+import traceback
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import NamedTuple
+
+from cdpr_twin import MODELS_DIR
+
+SCENARIOS_DIR = MODELS_DIR.parent / "scenarios"
+"""The scenario files shipped with the checkout."""
+OPEN_LOOP_SCENARIO = SCENARIOS_DIR / "paper_open_loop.toml"
+"""The paper's open-loop experiment (Fig. 5)."""
+PBVS_SCENARIO = SCENARIOS_DIR / "paper_pbvs.toml"
+"""The paper's PBVS experiment (Fig. 7)."""
+OPEN_LOOP_RUNS = 10
+"""Open-loop repetitions of the paper's Fig. 8."""
+PBVS_RUNS_PER_ESTIMATOR = 5
+"""PBVS repetitions per in-loop estimator (Fig. 8: 30 runs for 6 estimators)."""
+
+Progress = Callable[[int, int, dict], None]
+"""``progress(done, total, record)``, called as each run ends."""
+
+
+class Scenarios(NamedTuple):
+    """The study's two scenario files.
+
+    Attributes:
+        open_loop: the open-loop experiment (Fig. 5; its first waypoint is p1).
+        pbvs: the PBVS experiment (Fig. 7); its estimators are the study's.
+    """
+
+    open_loop: str | Path = OPEN_LOOP_SCENARIO
+    pbvs: str | Path = PBVS_SCENARIO
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run of the study.
+
+    Attributes:
+        name: unique name (its output directory under ``runs/``).
+        kind: ``"open_loop"`` or ``"pbvs"``.
+        scenario: scenario file.
+        seed: run seed (sensor noise).
+        in_loop: estimator closing the loop (PBVS).
+        duration: duration override [s], or ``None``.
+        record_rrd: write a Rerun recording (the figure runs only).
+    """
+
+    name: str
+    kind: str
+    scenario: str
+    seed: int
+    in_loop: str | None = None
+    duration: float | None = None
+    record_rrd: bool = False
+
+
+def plan(
+    runs_scale: float = 1.0,
+    duration: float | None = None,
+    open_loop: str | Path = OPEN_LOOP_SCENARIO,
+    pbvs: str | Path = PBVS_SCENARIO,
+) -> list[RunSpec]:
+    """The runs of the study; ``runs_scale`` scales the repetition counts (at least one each).
+
+    Args:
+        runs_scale: factor on :data:`OPEN_LOOP_RUNS` and :data:`PBVS_RUNS_PER_ESTIMATOR`.
+        duration: duration override of every run [s], or ``None``.
+        open_loop: the open-loop scenario file.
+        pbvs: the PBVS scenario file; one set of runs per estimator it lists.
+
+    Raises:
+        ValueError: ``runs_scale`` is not a positive number.
+        cdpr_twin.scenario.ScenarioError: a scenario file is invalid.
+    """
+    from cdpr_twin.scenario import load_scenario
+
+    if not (math.isfinite(runs_scale) and runs_scale > 0):
+        raise ValueError(f"--runs-scale must be > 0, got {runs_scale}")
+    n_open = max(1, round(OPEN_LOOP_RUNS * runs_scale))
+    n_pbvs = max(1, round(PBVS_RUNS_PER_ESTIMATOR * runs_scale))
+    ol, pb = str(open_loop), str(pbvs)
+    estimators = load_scenario(pb).estimators.names
+    specs = [
+        RunSpec(f"open_loop_seed{k}", "open_loop", ol, k, None, duration, k == 1)
+        for k in range(1, n_open + 1)
+    ]
+    specs += [
+        RunSpec(f"pbvs_{name}_seed{k}", "pbvs", pb, k, name, duration, k == 1)
+        for name in estimators
+        for k in range(1, n_pbvs + 1)
+    ]
+    return specs
+
+
+def _run_one(spec: RunSpec, runs_dir: str) -> dict:
+    """Worker (a spawned process): run one spec; never raise, report instead."""
+    from cdpr_twin.runner import run
+    from cdpr_twin.scenario import load_scenario
+
+    out = Path(runs_dir) / spec.name
+    try:
+        s = load_scenario(spec.scenario).with_overrides(
+            seed=spec.seed, in_loop=spec.in_loop, duration=spec.duration
+        )
+        result = run(s, out, record_rrd=spec.record_rrd)
+        return {
+            **asdict(spec),
+            "ok": True,
+            "status": result.summary["status"],
+            "wall_time_s": result.wall_time,
+            "dir": str(out),
+        }
+    except Exception as exc:  # keep the others' results: this one is reported as failed
+        return {
+            **asdict(spec),
+            "ok": False,
+            "status": f"failed: {type(exc).__name__}: {exc}",
+            "traceback": traceback.format_exc(),
+            "dir": str(out),
+        }
+
+
+def run_study(
+    specs: list[RunSpec], out: Path, workers: int, progress: Progress | None = None
+) -> list[dict]:
+    """Run every spec in ``workers`` spawned processes; writes ``runs.json``.
+
+    Returns:
+        One record per run, in the order of ``specs``: the spec's fields, ``ok``, ``status``,
+        ``dir`` (the run's output directory), and ``wall_time_s`` or ``traceback``.
+    """
+    runs_dir = out / "runs"
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    records = []
+    # spawn: a forked child would inherit the parent's Rerun/EGL threads' locks
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        futures = [pool.submit(_run_one, s, str(runs_dir)) for s in specs]
+        for done, fut in enumerate(as_completed(futures), 1):
+            record = fut.result()
+            records.append(record)
+            if progress is not None:
+                progress(done, len(specs), record)
+    order = {s.name: i for i, s in enumerate(specs)}
+    records.sort(key=lambda r: order[r["name"]])
+    (out / "runs.json").write_text(json.dumps(records, indent=2) + "\n", encoding="utf-8")
+    return records
