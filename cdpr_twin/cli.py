@@ -94,6 +94,28 @@ def _table(summary: dict) -> str:
     return "\n".join(lines)
 
 
+def _print_ends(s: dict) -> None:
+    """Where the platform ended: vs its goal, at each checkpoint, and the tag error (PBVS)."""
+    if s["final_error_vs_goal"] is not None:
+        err = s["final_error_vs_goal"]
+        print(
+            f"platform ended {err['translation_m'] * 1e3:.2f} mm / {err['rotation_deg']:.3f}° "
+            f"from its goal {np.round(s['goal_pose'], 4).tolist()}"
+        )
+    for end in s["segment_ends"]:
+        err = end["truth_vs_waypoint"]
+        print(
+            f"  t = {end['time_s']:5.2f} s: {err['translation_m'] * 1e3:7.2f} mm / "
+            f"{err['rotation_deg']:.3f}° from waypoint {np.round(end['waypoint'], 4).tolist()}"
+        )
+    if "pbvs" in s and s["pbvs"]["final_tag_error"] is not None:
+        e = s["pbvs"]["final_tag_error"]
+        print(
+            f"final tag pose error (detected): {e['translation_m'] * 1e3:.2f} mm / "
+            f"{e['rotation_deg']:.3f}°"
+        )
+
+
 def _run(args: argparse.Namespace) -> int:
     from cdpr_twin.runner import run
     from cdpr_twin.scenario import ScenarioError, load_scenario
@@ -137,24 +159,7 @@ def _run(args: argparse.Namespace) -> int:
         f"{result.wall_time:.1f} s ({result.real_time_factor:.1f}× real time)"
     )
     print(_table(s))
-    if s["final_error_vs_goal"] is not None:
-        err = s["final_error_vs_goal"]
-        print(
-            f"platform ended {err['translation_m'] * 1e3:.2f} mm / {err['rotation_deg']:.3f}° "
-            f"from its goal {np.round(s['goal_pose'], 4).tolist()}"
-        )
-    for end in s["segment_ends"]:
-        err = end["truth_vs_waypoint"]
-        print(
-            f"  t = {end['time_s']:5.2f} s: {err['translation_m'] * 1e3:7.2f} mm / "
-            f"{err['rotation_deg']:.3f}° from waypoint {np.round(end['waypoint'], 4).tolist()}"
-        )
-    if "pbvs" in s and s["pbvs"]["final_tag_error"] is not None:
-        e = s["pbvs"]["final_tag_error"]
-        print(
-            f"final tag pose error (detected): {e['translation_m'] * 1e3:.2f} mm / "
-            f"{e['rotation_deg']:.3f}°"
-        )
+    _print_ends(s)
     print(f"outputs: {out}/recording.rrd, timeseries.csv, summary.json")
     return 0
 

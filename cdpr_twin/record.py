@@ -1,5 +1,7 @@
-"""Run outputs: ``recording.rrd`` (Rerun), ``summary.json``, and the fan-out of each tick to
-them and to ``timeseries.csv`` (whose schema :mod:`cdpr_twin.timeseries` owns).
+"""Run outputs: ``recording.rrd`` (Rerun), ``summary.json``, and each tick's fan-out.
+
+:class:`Recorders` sends a tick to ``timeseries.csv`` (whose schema :mod:`cdpr_twin.timeseries`
+owns) and to the Rerun recording.
 
 Each file is written as ``<name>.partial`` and renamed when complete, so a file under its final
 name is never half-written; ``summary.json`` says whether the run completed or was interrupted.
@@ -51,7 +53,7 @@ class SceneInfo:
         b_platform: (m, 3) anchor points [m].
         platform_half_size: (3,) platform box half-sizes [m].
         T_platform_cam: (4, 4) camera mounting (OpenCV frame).
-        intrinsics: camera intrinsics.
+        intrinsics: camera intrinsics, or ``None`` without camera.
         T_base_tag: (4, 4) tag pose (pupil frame), or ``None``.
         tag_size: tag edge [m].
         frame_min: (3,) frame lower corner [m].
@@ -62,7 +64,7 @@ class SceneInfo:
     b_platform: np.ndarray
     platform_half_size: np.ndarray
     T_platform_cam: np.ndarray
-    intrinsics: CameraIntrinsics
+    intrinsics: CameraIntrinsics | None
     T_base_tag: np.ndarray | None
     tag_size: float
     frame_min: np.ndarray
@@ -142,20 +144,8 @@ class RerunRecorder:
         corners = np.array(
             [[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])]
         )
-        edges = [
-            (0, 1),
-            (2, 3),
-            (4, 5),
-            (6, 7),
-            (0, 2),
-            (1, 3),
-            (4, 6),
-            (5, 7),
-            (0, 4),
-            (1, 5),
-            (2, 6),
-            (3, 7),
-        ]
+        edges = [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5),
+                 (2, 6), (3, 7)]  # fmt: skip
         rec.log(
             "world/frame",
             rr.LineStrips3D([corners[list(e)] for e in edges], colors=[150, 150, 160]),
@@ -179,18 +169,33 @@ class RerunRecorder:
                 ),
                 static=True,
             )
+        self._log_platform()
+        for name in self.estimators:
+            rec.log(f"world/estimates/{name}", rr.TransformAxes3D(0.06), static=True)
+        rec.log("world/plan", rr.TransformAxes3D(0.04), static=True)
+        cables = [f"cable {i + 1}" for i in range(len(s.a_base))]
+        rec.log("tension", rr.SeriesLines(names=cables), static=True)
+        rec.log("length", rr.SeriesLines(names=cables), static=True)
+        for kind in ("translation_mm", "rotation_deg"):
+            rec.log(f"deviation/{kind}", rr.SeriesLines(names=list(self.estimators)), static=True)
+
+    def _log_platform(self) -> None:
+        """The platform box, and the camera's mounting and pinhole when there is a camera."""
+        rr, rec, s = self.rr, self.rec, self.scene
         rec.log(
             "world/platform/box",
             rr.Boxes3D(half_sizes=s.platform_half_size, colors=[70, 90, 130]),
             static=True,
         )
+        K = s.intrinsics
+        if K is None:
+            return
         T = s.T_platform_cam
         rec.log(
             "world/platform/cam",
             rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]),
             static=True,
         )
-        K = s.intrinsics
         rec.log(
             "world/platform/cam",
             rr.Pinhole(
@@ -201,14 +206,6 @@ class RerunRecorder:
             ),
             static=True,
         )
-        for name in self.estimators:
-            rec.log(f"world/estimates/{name}", rr.TransformAxes3D(0.06), static=True)
-        rec.log("world/plan", rr.TransformAxes3D(0.04), static=True)
-        cables = [f"cable {i + 1}" for i in range(len(s.a_base))]
-        rec.log("tension", rr.SeriesLines(names=cables), static=True)
-        rec.log("length", rr.SeriesLines(names=cables), static=True)
-        for kind in ("translation_mm", "rotation_deg"):
-            rec.log(f"deviation/{kind}", rr.SeriesLines(names=list(self.estimators)), static=True)
 
     def tick(
         self,
@@ -287,27 +284,7 @@ class RerunRecorder:
                 [rr.TimeColumn("sim_time", duration=np.array(b["plan_time"]))],
             )
         tau = np.array(b["tension"])
-        m = tau.shape[1]
-        # B_i in F_b for every buffered tick, (n, m, 3)
-        anchors = np.einsum("nij,kj->nki", platform[:, :3, :3], self.scene.b_platform)
-        anchors += platform[:, None, :3, 3]
-        strips = np.stack([np.broadcast_to(self.scene.a_base, (n, m, 3)), anchors], axis=2).reshape(
-            n * m, 2, 3
-        )
-        taut = (tau > SLACK_TENSION).ravel()
-        level = np.clip(tau.ravel() / 30.0, 0.0, 1.0)
-        colors = np.where(
-            taut[:, None],
-            np.column_stack([40 + 215 * level, 200 - 150 * level, 255 - 215 * level]),
-            [[120, 120, 120]],
-        ).astype(np.uint8)
-        rec.send_columns(
-            "world/cables",
-            indexes=index,
-            columns=rr.LineStrips3D.columns(
-                strips=strips, colors=colors, radii=np.where(taut, 0.003, 0.001)
-            ).partition(lengths=[m] * n),
-        )
+        self._send_cables(index, platform, tau)
         rec.send_columns("tension", indexes=index, columns=rr.Scalars.columns(scalars=tau))
         rec.send_columns(
             "length", indexes=index, columns=rr.Scalars.columns(scalars=np.array(b["length"]))
@@ -324,6 +301,30 @@ class RerunRecorder:
             columns=rr.Scalars.columns(scalars=np.degrees(dev[:, :, 1])),
         )
         self._buf = self._new_buffer()
+
+    def _send_cables(self, index: list, platform: np.ndarray, tau: np.ndarray) -> None:
+        """Cables A_i → B_i for every buffered tick, coloured by tension, slack ones grey."""
+        rr, n, m = self.rr, len(platform), tau.shape[1]
+        # B_i in F_b for every buffered tick, (n, m, 3)
+        anchors = np.einsum("nij,kj->nki", platform[:, :3, :3], self.scene.b_platform)
+        anchors += platform[:, None, :3, 3]
+        strips = np.stack([np.broadcast_to(self.scene.a_base, (n, m, 3)), anchors], axis=2).reshape(
+            n * m, 2, 3
+        )
+        taut = (tau > SLACK_TENSION).ravel()
+        level = np.clip(tau.ravel() / 30.0, 0.0, 1.0)
+        colors = np.where(
+            taut[:, None],
+            np.column_stack([40 + 215 * level, 200 - 150 * level, 255 - 215 * level]),
+            [[120, 120, 120]],
+        ).astype(np.uint8)
+        self.rec.send_columns(
+            "world/cables",
+            indexes=index,
+            columns=rr.LineStrips3D.columns(
+                strips=strips, colors=colors, radii=np.where(taut, 0.003, 0.001)
+            ).partition(lengths=[m] * n),
+        )
 
     def close(self) -> None:
         """Send what is buffered, flush, and give the file its final name."""
