@@ -116,6 +116,9 @@ def test_ctrl_c_leaves_valid_flushed_partial_outputs(tmp_path):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        # a shell that started us in the background may ignore SIGINT, and Python keeps an
+        # ignored SIGINT ignored: give the child the default disposition, as a terminal would
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     partial = out / "timeseries.csv.partial"
     deadline = time.monotonic() + 120

@@ -43,8 +43,9 @@ def test_only_the_sim_layer_imports_mujoco(path):
         assert not any(n == "mujoco" or n.startswith("mujoco.") for n in names), path
 
 
-def _loaded_after(statement: str) -> set[str]:
-    code = f"import os, sys\n{statement}\nprint(sorted(sys.modules)); print(os.environ.get('MUJOCO_GL'))"
+def _loaded_after(statement: str) -> tuple[set[str], str]:
+    report = "print(sorted(sys.modules)); print(os.environ.get('MUJOCO_GL'))"
+    code = f"import os, sys\n{statement}\n{report}"
     env = {k: v for k, v in __import__("os").environ.items() if k != "MUJOCO_GL"}
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
