@@ -4,12 +4,12 @@ Measures, in one run:
 
 (a) a realistic input stream: ``Twin(camera=True, tension_noise_std=0.24, noise_seed=1)`` reset
     at p0 = [0.112, -0.032, 0.301 m, -12, -10, 0°], one measurement there, then ``--ticks`` ticks
-    of ``twin.advance(0.04, rates, twist_platform=xi)`` + ``twin.sense()`` (render + AprilTag
+    of ``twin.advance(0.04, rates)`` + ``twin.sense(Command(rates, xi))`` (render + AprilTag
     detection, so the image estimator gets real detections), xi = [0.01, -0.005, -0.01 m/s,
     0, 0, 0.02 rad/s] in F_p and rates = A(T) · xi, A the nominal platform-frame pulley
     Jacobian at the current true pose;
-(b) for each estimator of ``cdpr_twin.estimators.ESTIMATORS`` (built with ``make_estimator``),
-    the median over replays of µs per ``estimator.update(measurement)``: each replay resets the
+(b) for each registered estimator (``cdpr_twin.plugins.registry("estimator")``, built with
+    ``make_estimator``), the median over replays of µs per ``estimator.update(measurement)``: each replay resets the
     estimator to p0 and feeds every recorded measurement in order; only the update calls are
     timed (garbage collector off during a replay, as ``timeit`` does). One untimed warm-up replay
     precedes the timed ones; there are at least ``--repeats`` timed replays, more for the cheap
@@ -46,7 +46,7 @@ import statistics
 import time
 
 # isort: off
-import cdpr_twin  # noqa: F401  (first: it sets MUJOCO_GL=egl, read when mujoco is imported)
+import cdpr_twin.sim  # noqa: F401  (first: it defaults MUJOCO_GL=egl, read by mujoco)
 import mujoco
 
 # isort: on
@@ -54,14 +54,15 @@ import numpy as np
 import scipy
 from scipy.optimize import least_squares
 
-from cdpr_twin.estimators import ESTIMATORS, make_estimator
+from cdpr_twin.estimators import make_estimator
 from cdpr_twin.estimators.base import Estimator, PoseEstimate
 from cdpr_twin.estimators.model import ModelEstimator, _cable_tuples, _kernel
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import jacobian
-from cdpr_twin.measurement import Measurement
+from cdpr_twin.plugins import registry
 from cdpr_twin.se3 import pose_distance, pose_from_vector, quat_wxyz_from_matrix
 from cdpr_twin.sim.twin import Twin
+from cdpr_twin.types import Command, Measurement
 
 P0 = pose_from_vector([0.112, -0.032, 0.301, -12.0, -10.0, 0.0])
 XI = np.array([0.01, -0.005, -0.01, 0.0, 0.0, 0.02])  # ᵖv_p: 1.5 cm/s, 1.1°/s
@@ -110,7 +111,7 @@ def solve_scipy_kernel(
 
 def make_kernel_estimator(name: str, geometry: CdprGeometry) -> ModelEstimator:
     """The ``name`` model estimator with its solve replaced by :func:`solve_scipy_kernel`."""
-    base = ESTIMATORS[name]
+    base = registry("estimator")[name]
     if not issubclass(base, ModelEstimator):
         raise TypeError(f"{name} is not a model-based estimator")
 
@@ -137,8 +138,8 @@ def record(ticks: int) -> tuple[list[Measurement], Twin]:
     measurements = [twin.sense()]
     for _ in range(ticks):
         rates = jacobian(twin.nominal_geometry, twin.T_base_platform, "platform", "pulley") @ XI
-        twin.advance(TICK, rates, twist_platform=XI)
-        measurements.append(twin.sense())
+        twin.advance(TICK, rates)
+        measurements.append(twin.sense(Command(rates, XI)))
     return measurements, twin
 
 
@@ -186,14 +187,14 @@ def main() -> None:
     t_record = time.perf_counter() - t_start
     n_meas = len(measurements)
     n_tags = sum(m.tag is not None for m in measurements)
-    travel, turn = pose_distance(P0, measurements[-1].T_base_platform_true)
+    travel, turn = pose_distance(P0, twin.T_base_platform)
     min_tension = min(float(m.tensions.min()) for m in measurements)
     geometry = twin.nominal_geometry
     twin.close()
 
     # rows: (estimator, backend, µs/update, replays, valid updates, estimates)
     rows: list[tuple[str, str, float, int, int, list[PoseEstimate]]] = []
-    for name, cls in ESTIMATORS.items():
+    for name, cls in registry("estimator").items():
         variants: list[tuple[str, Estimator]]
         if issubclass(cls, ModelEstimator):
             variants = [
@@ -246,7 +247,7 @@ def main() -> None:
     )
     print(header)
     print("-" * len(header))
-    model_names = [n for n, c in ESTIMATORS.items() if issubclass(c, ModelEstimator)]
+    model_names = [n for n, c in registry("estimator").items() if issubclass(c, ModelEstimator)]
     for name in model_names:
         fast, sp, ker = (by_key[(name, b)][2] for b in ("fast", "scipy", KERNEL))
         ratio = sp / fast

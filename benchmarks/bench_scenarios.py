@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-import cdpr_twin  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
+import cdpr_twin.sim  # noqa: F401  (defaults MUJOCO_GL=egl before mujoco is imported)
 from cdpr_twin.runner import run
 from cdpr_twin.scenario import load_scenario
 from cdpr_twin.sim import Twin

@@ -38,7 +38,6 @@ import numpy as np
 
 from cdpr_twin.kinematics import jacobian
 from cdpr_twin.se3 import pose_distance, pose_from_vector
-from cdpr_twin.sim.model import N_CABLES
 from cdpr_twin.sim.twin import Twin
 
 P1 = pose_from_vector([0.284, -0.197, 0.08, 0.0, 0.0, 0.0])
@@ -68,8 +67,8 @@ def make_twin(align_every: int = 10, camera: bool = False) -> Twin:
 def bench_bare(twin: Twin, n: int, repeats: int) -> tuple[float, float]:
     """(a) and (b): µs per bare mj_step, Python loop and native nstep."""
     model, data = twin.model, twin.data
-    if model.nu != N_CABLES:
-        raise RuntimeError(f"expected {N_CABLES} winch actuators, the model has {model.nu}")
+    if model.nu != twin.physics.n_cables:
+        raise RuntimeError(f"expected only winch actuators, the model has {model.nu}")
 
     def setup() -> None:
         twin.reset(P1)
@@ -90,7 +89,7 @@ def bench_bare(twin: Twin, n: int, repeats: int) -> tuple[float, float]:
 
 def bench_advance(twin: Twin, n: int, repeats: int) -> float:
     """(c): µs per physics step of Twin.advance."""
-    rates = np.full(N_CABLES, SMALL_RATE)
+    rates = np.full(twin.physics.n_cables, SMALL_RATE)
     duration = n * twin.timestep
     return (
         median_time(lambda: twin.advance(duration, rates), lambda: twin.reset(P1), repeats)

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+
 @dataclass(frozen=True, eq=False)
 class TruthDeviations:
     """Concrete calibration errors of one simulated robot (all zero: the nominal robot).

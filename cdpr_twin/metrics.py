@@ -108,7 +108,9 @@ def _segment_end(
         "estimates_vs_truth": {
             n: pose_error(e.T_base_platform, T_true) for n, e in estimates.items()
         },
-        "estimates_vs_plan": {n: pose_error(e.T_base_platform, waypoint) for n, e in estimates.items()},
+        "estimates_vs_plan": {
+            n: pose_error(e.T_base_platform, waypoint) for n, e in estimates.items()
+        },
     }
 
 

@@ -30,6 +30,7 @@ __all__ = [
 APRILTAG_PIXEL_OFFSET = 0.5
 """AprilTag's pixel-centre coordinate minus OpenCV's [px]."""
 
+
 class _Detector(Detector):
     """pupil-apriltags' Detector with its destructor's use-after-free fixed.
 

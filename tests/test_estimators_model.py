@@ -11,8 +11,8 @@ from cdpr_twin import se3
 from cdpr_twin.estimators import make_estimator
 from cdpr_twin.estimators.base import FEW_TAUT_CABLES, NON_FINITE_INPUT
 from cdpr_twin.estimators.model import solve_fast, solve_scipy
-from cdpr_twin.types import Measurement
 from cdpr_twin.statics import InfeasibleTensionError, tension_distribution
+from cdpr_twin.types import Measurement
 
 MODELS = ["model_simple", "model_elastic", "model_pulley", "model_elastic_pulley"]
 OFFSET = se3.se3_exp([0.004, -0.003, 0.002, 0.01, -0.008, 0.012])  # warm start ≈ 5 mm / 1°
@@ -124,7 +124,7 @@ def _synthetic_cases(geom, n, seed):
 def test_fast_and_scipy_backends_agree(twin):
     geom = twin.nominal_geometry
     worst_t = worst_r = 0.0
-    for T, lengths, tensions, T0 in _synthetic_cases(geom, 110, seed=3):
+    for _T, lengths, tensions, T0 in _synthetic_cases(geom, 110, seed=3):
         m = Measurement(0.0, lengths, tensions)
         for name in MODELS:
             fast, slow = (make_estimator(name, geom, backend=b) for b in ("fast", "scipy"))

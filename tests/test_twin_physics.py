@@ -78,7 +78,9 @@ def test_jacobian_matches_mujoco_tendon_jacobian_and_finite_differences(twin):
     geom = twin.true_geometry
     for T in random_workspace_poses(30, seed=2):
         twin.place(T)
-        J = np.array(twin.data.ten_J).reshape(twin.model.ntendon, twin.model.nv)[twin.physics._tendons]
+        J = np.array(twin.data.ten_J).reshape(twin.model.ntendon, twin.model.nv)[
+            twin.physics._tendons
+        ]
         # free joint: qvel = [v of the origin in F_b, ω in F_p]
         R = T[:3, :3]
         A_p = kin.jacobian(geom, T, "platform", "pulley")

@@ -192,7 +192,5 @@ class OpenLoopController(Controller):
         """The end of each segment reached within ``duration``, with its waypoint."""
         ends = np.cumsum(self.durations)
         return [
-            (float(t), w)
-            for t, w in zip(ends, self.waypoints, strict=True)
-            if t <= duration + 1e-9
+            (float(t), w) for t, w in zip(ends, self.waypoints, strict=True) if t <= duration + 1e-9
         ]

@@ -35,9 +35,7 @@ class ImageOptions:
 
     def __post_init__(self) -> None:
         if self.reference not in ("previous", "first"):
-            raise OptionError(
-                "reference", f"must be 'previous' or 'first', got {self.reference!r}"
-            )
+            raise OptionError("reference", f"must be 'previous' or 'first', got {self.reference!r}")
 
 
 @register

@@ -133,6 +133,7 @@ class Twin:
     cable_lengths = _truth("cable_lengths", "True stretched cable lengths (m,) [m].")
     rest_lengths = _truth("rest_lengths", "Unstretched lengths paid out (m,) [m].")
     T_cam_tag = _truth("T_cam_tag", "Ground-truth tag pose in the camera frame (4, 4).")
+    timestep = _truth("timestep", "Physics step [s].")
     settle_error = _truth("settle_error", "Pose error after the last reset's settle [m, rad].")
 
     def close(self) -> None:
