@@ -9,8 +9,8 @@ Measures, in one run:
     0, 0, 0.02 rad/s] in F_p and rates = A(T) · xi, A the nominal platform-frame pulley
     Jacobian at the current true pose;
 (b) for each registered estimator (``cdpr_twin.plugins.registry("estimator")``, built with
-    ``make_estimator``), the median over replays of µs per ``estimator.update(measurement)``: each replay resets the
-    estimator to p0 and feeds every recorded measurement in order; only the update calls are
+    ``make_estimator``), the median over replays of µs per ``estimator.update(measurement)``:
+    each replay resets the estimator to p0 and feeds every recorded measurement in order; only the update calls are
     timed (garbage collector off during a replay, as ``timeit`` does). One untimed warm-up replay
     precedes the timed ones; there are at least ``--repeats`` timed replays, more for the cheap
     estimators (up to about 0.5 s of replays each);

@@ -44,8 +44,10 @@ ESTIMATOR_ORDER = PAPER_ESTIMATORS
 
 
 def ordered_estimators(names: Iterable[str]) -> tuple[str, ...]:
-    """``names`` in display order: the paper's estimators first, in its order, then any other
-    in the given order (each once)."""
+    """``names`` in display order (each once).
+
+    The paper's estimators come first, in its order, then any other in the given order.
+    """
     names = list(dict.fromkeys(names))
     return (
         *(n for n in PAPER_ESTIMATORS if n in names),

@@ -159,18 +159,20 @@ def _estimator_deviations(ts: Timeseries, names: tuple[str, ...]) -> dict:
 
 
 def _at_p1(ts: Timeseries, names: tuple[str, ...], t1: float) -> dict:
-    """The robot's miss of the plan at p1 (time t1), and each estimate's distance to plan and
-    truth there."""
+    """The robot's miss of the plan at p1 (time t1); each estimate's distance to plan and truth."""
     miss_t, miss_r = ts.deviation("true", "plan")
     follow = {}
     for n in names:
         vs_plan, _ = ts.deviation(n, "plan")
         vs_truth, _ = ts.deviation(n)
-        follow[n] = {"vs_plan_m": value_at(ts, t1, vs_plan), "vs_truth_m": value_at(ts, t1, vs_truth)}
+        follow[n] = {
+            "vs_plan_m": value_at(ts, t1, vs_plan),
+            "vs_truth_m": value_at(ts, t1, vs_truth),
+        }
     miss = {
-        "time_s": t1,
         "translation_m": value_at(ts, t1, miss_t),
         "rotation_deg": float(np.degrees(value_at(ts, t1, miss_r))),
+        "time_s": t1,
     }
     return {"miss_at_p1": miss, "follow_plan": follow}
 
