@@ -10,9 +10,9 @@ Measures, in one run:
     Jacobian at the current true pose;
 (b) for each registered estimator (``cdpr_twin.plugins.registry("estimator")``, built with
     ``make_estimator``), the median over replays of µs per ``estimator.update(measurement)``:
-    each replay resets the estimator to p0 and feeds every recorded measurement in order; only the update calls are
-    timed (garbage collector off during a replay, as ``timeit`` does). One untimed warm-up replay
-    precedes the timed ones; there are at least ``--repeats`` timed replays, more for the cheap
+    each replay resets the estimator to p0 and feeds every recorded measurement in order; only
+    the update calls are timed (garbage collector off during a replay, as ``timeit`` does). One
+    untimed warm-up replay precedes the timed ones; there are at least ``--repeats`` timed replays, more for the cheap
     estimators (up to about 0.5 s of replays each);
 (c) for the four ``model_*`` estimators, three solvers on the identical measurements:
     ``backend="fast"`` (Newton on SE(3), analytic Jacobian, scalar kernel), ``backend="scipy"``

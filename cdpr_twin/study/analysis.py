@@ -133,8 +133,10 @@ def _model_physics(ts: Timeseries, scenario_file: Path) -> dict:
 def _camera_tag_errors(scenario_file: str | Path) -> dict:
     """Magnitude of the drawn robot's camera-mount and tag-placement rotation errors."""
     from cdpr_twin.scenario import load_scenario
+    from cdpr_twin.sim import build_model, cable_count
 
-    dev = load_scenario(scenario_file).truth.draw()
+    scenario = load_scenario(scenario_file)
+    dev = scenario.truth.draw(cable_count(build_model(scenario.model.file)))  # as the twin does
     return {
         "camera_rotation_deg": float(np.degrees(np.linalg.norm(dev.camera_offset[3:]))),
         "camera_position_m": float(np.linalg.norm(dev.camera_offset[:3])),
