@@ -12,8 +12,8 @@ Measures, in one run:
     ``make_estimator``), the median over replays of µs per ``estimator.update(measurement)``:
     each replay resets the estimator to p0 and feeds every recorded measurement in order; only
     the update calls are timed (garbage collector off during a replay, as ``timeit`` does). One
-    untimed warm-up replay precedes the timed ones; there are at least ``--repeats`` timed replays, more for the cheap
-    estimators (up to about 0.5 s of replays each);
+    untimed warm-up replay precedes the timed ones; there are at least ``--repeats`` timed
+    replays, more for the cheap estimators (up to about 0.5 s of replays each);
 (c) for the four ``model_*`` estimators, three solvers on the identical measurements:
     ``backend="fast"`` (Newton on SE(3), analytic Jacobian, scalar kernel), ``backend="scipy"``
     (the paper's ``least_squares`` formulation, numpy residuals), and ``scipy+kernel``, defined
