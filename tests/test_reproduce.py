@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cdpr_twin.reproduce import reproduce
-from cdpr_twin.results import ESTIMATOR_ORDER
+from cdpr_twin.study import reproduce
+from cdpr_twin.results import PAPER_ESTIMATORS
 
 ROOT = Path(__file__).resolve().parent.parent
 P1 = np.array([0.284, -0.197, 0.08])
@@ -65,7 +65,7 @@ def test_report_numbers_are_recomputed_from_the_run_files(small):
     assert f"{miss * 100:.2f} cm" in report_md
     # accuracy at p1: open loop at t = 10 s, PBVS at the end of each run
     expected = {"open loop": [np.linalg.norm(_xyz(at10, "true") - P1)]}
-    for name in ESTIMATOR_ORDER:
+    for name in PAPER_ESTIMATORS:
         run_dir = out / "runs" / f"pbvs_{name}_seed1"
         summary = json.loads((run_dir / "summary.json").read_text())
         if summary["status"] != "converged":
