@@ -173,7 +173,8 @@ def prepare(scenario: Scenario) -> RunSetup:
             raise
         raise ScenarioError(f"{src}: start.pose: {exc}") from None
     events = EventSchedule(s.events, physics, sensors)
-    physics.add_hook(events)
+    if s.events:  # no hook, no per-chunk cost, when nothing is scheduled
+        physics.add_hook(events)
     goal = controller.goal_pose(nominal.T_base_tag)
     return RunSetup(s, physics, sensors, nominal, estimators, order, controller, goal, events)
 
