@@ -17,7 +17,6 @@ import numpy as np
 from cdpr_twin.timeseries import Timeseries, load_timeseries
 
 __all__ = [
-    "ESTIMATOR_ORDER",
     "PAPER_ESTIMATORS",
     "Timeseries",
     "image_noise_vs_distance",
@@ -39,8 +38,6 @@ PAPER_ESTIMATORS = (
 )
 """The paper's six estimators in its order (Est. 1 … Est. 6): display order and colours only.
 Which estimators a run has comes from the run (``summary.json`` or ``timeseries.csv``)."""
-ESTIMATOR_ORDER = PAPER_ESTIMATORS
-"""Deprecated alias of :data:`PAPER_ESTIMATORS`."""
 
 
 def ordered_estimators(names: Iterable[str]) -> tuple[str, ...]:

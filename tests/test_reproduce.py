@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cdpr_twin.study import reproduce
 from cdpr_twin.results import PAPER_ESTIMATORS
+from cdpr_twin.study import reproduce
 
 ROOT = Path(__file__).resolve().parent.parent
 P1 = np.array([0.284, -0.197, 0.08])
@@ -107,3 +107,41 @@ def test_notebook_executes_against_the_output(small):
     assert not [o for o in outputs if o["output_type"] == "error"]
     images = [o for o in outputs if "image/png" in o.get("data", {})]
     assert len(images) == 5
+
+
+def test_the_plan_follows_the_pbvs_scenario_estimators(tmp_path):
+    from cdpr_twin.study import plan
+
+    text = (ROOT / "scenarios" / "paper_pbvs.toml").read_text()
+    text = text.replace('"../models/', f'"{ROOT}/models/')
+    text = text.replace('passive = ["image", "model_simple", ', "passive = [")
+    pbvs = tmp_path / "pbvs.toml"
+    pbvs.write_text(text)
+    specs = plan(0.4, pbvs=pbvs)
+    assert [s.name for s in specs if s.kind == "open_loop"] == [
+        "open_loop_seed1",
+        "open_loop_seed2",
+        "open_loop_seed3",
+        "open_loop_seed4",
+    ]
+    in_loop = [s.in_loop for s in specs if s.kind == "pbvs"]
+    assert in_loop == [
+        n for n in PAPER_ESTIMATORS if n not in ("image", "model_simple") for _ in range(2)
+    ]
+    assert all(s.record_rrd == (s.seed == 1) for s in specs)
+
+
+def test_findings_and_report_take_any_estimator(tmp_path):
+    from cdpr_twin.study import evaluate, write_report
+
+    run = {"status": "converged", "max_translation_m": 0.002, "max_rotation_deg": 0.1}
+    rep = {
+        "runs": {"total": 2, "ok": 2, "failed": []},
+        "pbvs": {"control": {**run, "max_translation_m": 0.003}, "fused": run},
+    }
+    rep["findings"] = evaluate(rep)
+    (best,) = rep["findings"]
+    assert best["verdict"] == "disagrees" and "fused 2.0 mm" in best["twin"]
+    assert set(best) == {"finding", "paper", "twin", "threshold", "verdict", "why"}
+    report = write_report(tmp_path, rep, [], 1.0).read_text()
+    assert "| PBVS, fused in the loop: max deviation | — | 0.20 cm / 0.10° |" in report

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from cdpr_twin.deviations import DeviationSpec
-from cdpr_twin.results import ESTIMATOR_ORDER
+from cdpr_twin.estimators import PAPER_ESTIMATORS
 from cdpr_twin.runner import run
 from cdpr_twin.scenario import load_scenario
 
@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = sorted((ROOT / "scenarios").glob("*.toml"))
 OPEN_LOOP = ROOT / "scenarios" / "paper_open_loop.toml"
 PBVS = ROOT / "scenarios" / "paper_pbvs.toml"
-ESTIMATORS = list(ESTIMATOR_ORDER)
+ESTIMATORS = list(PAPER_ESTIMATORS)
 # rerun-sdk (a dependency) installs the `rerun` CLI beside the interpreter
 RERUN = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
 

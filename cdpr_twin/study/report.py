@@ -1,0 +1,159 @@
+"""The study's outputs: Fig. 5/7/8 and ``report.md`` (the numbers come from :mod:`.analysis`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from cdpr_twin.results import load_summary, model_estimators
+from cdpr_twin.study.analysis import figure_runs, segment_ends
+from cdpr_twin.timeseries import Timeseries
+
+PAPER_PBVS = {
+    "control": "≤ 0.9 cm / 2°",
+    "model_simple": "≤ 1.29 cm / 2°",
+    "model_elastic": "≤ 1.29 cm / 2°",
+    "model_pulley": "≤ 1.56 cm",
+    "model_elastic_pulley": "≤ 1.56 cm",
+    "image": "noisiest",
+}
+"""The paper's max deviation with each estimator in the PBVS loop (§IV-C, Fig. 7)."""
+NOT_IN_PAPER = "—"
+"""The paper's value of a quantity it does not have (e.g. an estimator it did not test)."""
+
+
+def make_figures(out: Path, rep: dict, records: list[dict]) -> list[Path]:
+    """Fig. 5a/5b, 7a/7b and 8 into ``out``, from the seed-1 runs and the report's accuracy."""
+    from cdpr_twin import figures
+
+    open_loop, pbvs = figure_runs(records)
+    paths: list[Path] = []
+    if open_loop is not None:
+        ts = Timeseries.load(open_loop / "timeseries.csv")
+        ends = segment_ends(load_summary(open_loop / "summary.json"))
+        # the segment ends inside the run; one at its last row would only draw the right edge
+        marks = tuple(e.time_s for e in ends if e.time_s < ts.t[-1])
+        paths += figures.open_loop_figures(ts, out, marks=marks)
+    if pbvs:
+        runs = {n: Timeseries.load(d / "timeseries.csv") for n, d in pbvs.items()}
+        paths += figures.pbvs_figures(runs, out)
+    if rep.get("accuracy"):
+        paths.append(figures.accuracy_bars(rep["accuracy"], out / "fig8.png"))
+    return paths
+
+
+def _mm(v: float) -> str:
+    return f"{v * 1e3:.2f} mm"
+
+
+def _intro(rep: dict, wall_time_s: float) -> list[str]:
+    lines = [
+        "# cdpr-twin: the paper's study, reproduced",
+        "",
+        f"{rep['runs']['ok']} of {rep['runs']['total']} runs completed "
+        f"({wall_time_s / 60:.1f} min). Every number below is computed from the runs' "
+        "`timeseries.csv` and `summary.json` files (also in `report.json`).",
+        "",
+    ]
+    if rep["runs"]["failed"]:
+        lines += ["Failed runs:", ""]
+        lines += [f"- `{f['name']}`: {f['status']}" for f in rep["runs"]["failed"]]
+        lines += [""]
+    return lines
+
+
+def _findings(rep: dict) -> list[str]:
+    lines = [
+        "## Findings",
+        "",
+        "| finding | paper | twin | verdict | why |",
+        "|---|---|---|---|---|",
+    ]
+    return lines + [
+        f"| {f['finding']} | {f['paper']} | {f['twin']} | **{f['verdict']}** | {f['why']} |"
+        for f in rep["findings"]
+    ]
+
+
+def _open_loop_rows(ol: dict) -> list[str]:
+    """The open-loop rows of the paper-beside-twin table."""
+    lines = []
+    e = ol.get("estimators", {})
+    if "control" in e:
+        c = e["control"]
+        lines.append(
+            f"| open loop, control-based: max deviation | 1.4 cm / 1.6° | "
+            f"{c['max_translation_m'] * 100:.2f} cm / {c['max_rotation_deg']:.2f}° |"
+        )
+        lines.append(
+            f"| open loop, control-based: final deviation | 1.3 mm / 0.55° | "
+            f"{_mm(c['final_translation_m'])} / {c['final_rotation_deg']:.2f}° |"
+        )
+    models = model_estimators(e)
+    if models:
+        worst = max(e[n]["max_translation_m"] for n in models)
+        lines.append(
+            f"| open loop, model-based: max translational deviation | 1.21 cm | "
+            f"{worst * 100:.2f} cm |"
+        )
+    if "miss_at_p1" in ol:
+        lines.append(
+            f"| open loop: MP error at p1 | ≈ 1 cm | "
+            f"{ol['miss_at_p1']['translation_m'] * 100:.2f} cm |"
+        )
+    return lines
+
+
+def _paper_table(rep: dict) -> list[str]:
+    lines = [
+        "",
+        "## The paper's numbers beside the twin's",
+        "",
+        "| quantity | paper | twin |",
+        "|---|---|---|",
+        *_open_loop_rows(rep.get("open_loop", {})),
+    ]
+    for n, v in rep.get("pbvs", {}).items():
+        lines.append(
+            f"| PBVS, {n} in the loop: max deviation | {PAPER_PBVS.get(n, NOT_IN_PAPER)} | "
+            f"{v['max_translation_m'] * 100:.2f} cm / {v['max_rotation_deg']:.2f}° |"
+        )
+    if "ratios" in rep:
+        lines.append(
+            f"| PBVS / open-loop accuracy at p1, translation | 5× | "
+            f"{rep['ratios']['translation_m']:.1f}× |"
+        )
+        lines.append(
+            f"| PBVS / open-loop accuracy at p1, rotation | 4× | "
+            f"{rep['ratios']['rotation_deg']:.1f}× |"
+        )
+    return lines
+
+
+def _accuracy(rep: dict) -> list[str]:
+    if not rep.get("accuracy"):
+        return []
+    lines = [
+        "",
+        "## Accuracy at p1 (Fig. 8)",
+        "",
+        "| runs | n | translation mean ± std | rotation mean ± std |",
+        "|---|---|---|---|",
+    ]
+    for k, g in rep["accuracy"].items():
+        t, r = np.array(g["translation_m"]), np.array(g["rotation_deg"])
+        lines.append(
+            f"| {k} | {len(t)} | {_mm(t.mean())} ± {_mm(t.std())} | "
+            f"{r.mean():.3f}° ± {r.std():.3f}° |"
+        )
+    return lines
+
+
+def write_report(out: Path, rep: dict, figures: list[Path], wall_time_s: float) -> Path:
+    """``report.md``: the paper's numbers beside the twin's, and the findings with verdicts."""
+    lines = [*_intro(rep, wall_time_s), *_findings(rep), *_paper_table(rep), *_accuracy(rep)]
+    lines += ["", "## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figures]
+    path = out / "report.md"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
