@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cdpr_twin.estimators import PAPER_ESTIMATORS  # display order and colours only
 from cdpr_twin.timeseries import Timeseries, load_timeseries
 
 __all__ = [
@@ -28,16 +29,6 @@ __all__ = [
     "value_at",
 ]
 
-PAPER_ESTIMATORS = (
-    "control",
-    "image",
-    "model_simple",
-    "model_elastic",
-    "model_pulley",
-    "model_elastic_pulley",
-)
-"""The paper's six estimators in its order (Est. 1 … Est. 6): display order and colours only.
-Which estimators a run has comes from the run (``summary.json`` or ``timeseries.csv``)."""
 
 
 def ordered_estimators(names: Iterable[str]) -> tuple[str, ...]:
