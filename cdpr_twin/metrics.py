@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from cdpr_twin.se3 import pose_distance, pose_distances, vector_from_pose
+from cdpr_twin.se3 import pose_distance, vector_from_pose
 from cdpr_twin.types import PoseEstimate
 
 
@@ -81,7 +81,7 @@ class RunMetrics:
         self, time: float, T_true: np.ndarray, estimates: dict[str, PoseEstimate]
     ) -> dict[str, tuple[float, float]]:
         """Account one tick; returns each estimator's (translation [m], rotation [rad])."""
-        dts, drs = pose_distances(
+        dts, drs = pose_distance(
             np.array([e.T_base_platform for e in estimates.values()]), T_true[None]
         )
         deviations = {}

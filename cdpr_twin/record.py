@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_twin.se3 import quat_xyzw_from_matrices
+from cdpr_twin.se3 import quat_xyzw_from_matrix
 from cdpr_twin.timeseries import TimeseriesWriter
 from cdpr_twin.types import CameraIntrinsics, Command, Measurement, PoseEstimate
 
@@ -269,7 +269,7 @@ class RerunRecorder:
                 path,
                 indexes=idx,
                 columns=rr.Transform3D.columns(
-                    translation=A[:, :3, 3], quaternion=quat_xyzw_from_matrices(A[:, :3, :3])
+                    translation=A[:, :3, 3], quaternion=quat_xyzw_from_matrix(A[:, :3, :3])
                 ),
             )
 

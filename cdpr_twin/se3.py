@@ -1,5 +1,10 @@
 """SO(3)/SE(3) helpers: exp/log, adjoint, θu, quaternions, file poses, pose distance.
 
+Quaternion conversions and the pose distance take one pose or any stack (leading axes), with
+one implementation each (jaxlie's style). The scalar kernels of the model-based estimators'
+Newton solve (:mod:`cdpr_twin.estimators.model`) repeat exp and Rodrigues in plain floats for
+speed; a test holds them to these.
+
 Conventions (DESIGN §3): homogeneous transforms are 4×4 arrays named ``T_<to>_<from>``;
 twists are ``[v, ω]`` (linear first); quaternions are ``quat_wxyz`` (scalar first, the MuJoCo
 order); poses in files are ``[x, y, z, rx, ry, rz]`` in metres and degrees with
@@ -133,90 +138,81 @@ def so3_exp(theta_u: np.ndarray) -> np.ndarray:
     return np.array(_rodrigues(wx, wy, wz, a, b))
 
 
-def quat_wxyz_from_matrix(R: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w ≥ 0) of a rotation matrix, by Shepperd's method.
+def _shepperd(R: np.ndarray) -> np.ndarray:
+    """Unnormalised quaternions (n, 4) wxyz of rotations (n, 3, 3) by Shepperd's method.
 
-    Args:
-        R: (3, 3) rotation matrix.
-
-    Returns:
-        (4,) ``quat_wxyz``.
+    Branch by branch on the largest of (trace, R00, R11, R22): no cancellation in any branch.
     """
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
+    r00, r01, r02 = R[:, 0, 0], R[:, 0, 1], R[:, 0, 2]
+    r10, r11, r12 = R[:, 1, 0], R[:, 1, 1], R[:, 1, 2]
+    r20, r21, r22 = R[:, 2, 0], R[:, 2, 1], R[:, 2, 2]
     tr = r00 + r11 + r22
-    k = max(range(4), key=(tr, r00, r11, r22).__getitem__)
-    if k == 0:
-        s = 2.0 * math.sqrt(1.0 + tr)
-        q = (0.25 * s, (r21 - r12) / s, (r02 - r20) / s, (r10 - r01) / s)
-    elif k == 1:
-        s = 2.0 * math.sqrt(1.0 + r00 - r11 - r22)
-        q = ((r21 - r12) / s, 0.25 * s, (r01 + r10) / s, (r02 + r20) / s)
-    elif k == 2:
-        s = 2.0 * math.sqrt(1.0 - r00 + r11 - r22)
-        q = ((r02 - r20) / s, (r01 + r10) / s, 0.25 * s, (r12 + r21) / s)
-    else:
-        s = 2.0 * math.sqrt(1.0 - r00 - r11 + r22)
-        q = ((r10 - r01) / s, (r02 + r20) / s, (r12 + r21) / s, 0.25 * s)
-    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    sign = -1.0 if q[0] < 0.0 else 1.0
-    return np.array(q) * (sign / n)
-
-
-def quat_xyzw_from_matrices(R: np.ndarray) -> np.ndarray:
-    """Unit quaternions (x, y, z, w) of a stack of rotation matrices (n, 3, 3), vectorised.
-
-    Shepperd's method, branch by branch on the largest of (trace, R00, R11, R22).
-    """
-    tr = R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2]
-    k = np.argmax(np.stack([tr, R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]], axis=1), axis=1)
-    q = np.empty((len(R), 4))  # w, x, y, z
-    for case in range(4):
-        m = k == case
-        r = R[m]
+    k = np.argmax(np.stack([tr, r00, r11, r22], axis=1), axis=1)
+    q = np.empty((len(R), 4))
+    for case, m in enumerate(k[None, :] == np.arange(4)[:, None]):
+        if not m.any():
+            continue
+        a00, a01, a02, a10, a11 = r00[m], r01[m], r02[m], r10[m], r11[m]
+        a12, a20, a21, a22 = r12[m], r20[m], r21[m], r22[m]
         if case == 0:
             s = 2.0 * np.sqrt(1.0 + tr[m])
-            q[m] = np.column_stack(
-                [
-                    0.25 * s,
-                    (r[:, 2, 1] - r[:, 1, 2]) / s,
-                    (r[:, 0, 2] - r[:, 2, 0]) / s,
-                    (r[:, 1, 0] - r[:, 0, 1]) / s,
-                ]
-            )
+            q[m] = np.stack([0.25 * s, (a21 - a12) / s, (a02 - a20) / s, (a10 - a01) / s], 1)
+        elif case == 1:
+            s = 2.0 * np.sqrt(1.0 + a00 - a11 - a22)
+            q[m] = np.stack([(a21 - a12) / s, 0.25 * s, (a01 + a10) / s, (a02 + a20) / s], 1)
+        elif case == 2:
+            s = 2.0 * np.sqrt(1.0 - a00 + a11 - a22)
+            q[m] = np.stack([(a02 - a20) / s, (a01 + a10) / s, 0.25 * s, (a12 + a21) / s], 1)
         else:
-            i, j, k2 = (case - 1, case % 3, (case + 1) % 3)
-            s = 2.0 * np.sqrt(1.0 + r[:, i, i] - r[:, j, j] - r[:, k2, k2])
-            v = np.empty((len(r), 4))
-            v[:, 0] = (r[:, k2, j] - r[:, j, k2]) / s
-            v[:, 1 + i] = 0.25 * s
-            v[:, 1 + j] = (r[:, j, i] + r[:, i, j]) / s
-            v[:, 1 + k2] = (r[:, k2, i] + r[:, i, k2]) / s
-            q[m] = v
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    return q[:, [1, 2, 3, 0]]
+            s = 2.0 * np.sqrt(1.0 - a00 - a11 + a22)
+            q[m] = np.stack([(a10 - a01) / s, (a02 + a20) / s, (a12 + a21) / s, 0.25 * s], 1)
+    return q
+
+
+def quat_wxyz_from_matrix(R: np.ndarray) -> np.ndarray:
+    """Unit quaternions (w ≥ 0) of rotation matrices, by Shepperd's method.
+
+    Args:
+        R: (..., 3, 3) rotation matrices (one, or any stack).
+
+    Returns:
+        (..., 4) ``quat_wxyz``.
+    """
+    R = np.asarray(R, dtype=float)
+    q = _shepperd(R.reshape(-1, 3, 3))
+    w, x, y, z = q.T
+    n = np.sqrt(w * w + x * x + y * y + z * z)
+    q = q * (np.where(w < 0.0, -1.0, 1.0) / n)[:, None]
+    return q.reshape(*R.shape[:-2], 4)
+
+
+def quat_xyzw_from_matrix(R: np.ndarray) -> np.ndarray:
+    """As :func:`quat_wxyz_from_matrix`, scalar last (scipy's and Rerun's order). (..., 4)."""
+    return quat_wxyz_from_matrix(R)[..., [1, 2, 3, 0]]
 
 
 def matrix_from_quat_wxyz(quat_wxyz: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a quaternion; the quaternion need not be normalised.
+    """Rotation matrices of quaternions; they need not be normalised.
 
     Args:
-        quat_wxyz: (4,) quaternion, scalar first. Must be non-zero.
+        quat_wxyz: (..., 4) quaternions, scalar first. Each must be non-zero and finite.
 
     Returns:
-        (3, 3) rotation matrix.
+        (..., 3, 3) rotation matrices.
     """
     q = np.asarray(quat_wxyz, dtype=float)
-    n = np.linalg.norm(q)
-    if not np.isfinite(n) or n < 1e-12:
+    n = np.linalg.norm(q) if q.ndim == 1 else np.linalg.norm(q, axis=-1, keepdims=True)
+    if not np.all(np.isfinite(n)) or np.any(n < 1e-12):
         raise ValueError(f"quaternion {q} is zero or not finite; pass a non-zero finite wxyz")
-    w, x, y, z = q / n
-    return np.array(
+    w, x, y, z = np.moveaxis(q / n, -1, 0)
+    R = np.stack(
         [
             [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
             [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
             [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
         ]
     )
+    return np.moveaxis(R, (0, 1), (-2, -1))
 
 
 def so3_log(R: np.ndarray) -> np.ndarray:
@@ -332,32 +328,29 @@ def vector_from_pose(T: np.ndarray) -> np.ndarray:
     return np.concatenate([T[:3, 3], np.rad2deg(euler_xyz_from_matrix(T[:3, :3]))])
 
 
-def pose_distance(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
-    """Translational [m] and rotational [rad] distance between two poses (paper Fig. 5b).
+def pose_distance(T_a: np.ndarray, T_b: np.ndarray) -> tuple:
+    """Translational [m] and rotational [rad] distance between poses (paper Fig. 5b).
 
-    The rotational distance is the angle θ of the axis-angle form of ``R_aᵀ R_b``.
-    """
-    d = T_a[:3, 3] - T_b[:3, 3]
-    R = T_a[:3, :3].T @ T_b[:3, :3]
-    # θ = atan2(sin θ, cos θ): accurate at every angle, unlike arccos near 0 and arcsin near π
-    sin2 = math.hypot(R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1])
-    cos2 = R[0, 0] + R[1, 1] + R[2, 2] - 1.0
-    return math.sqrt(float(d @ d)), math.atan2(sin2, cos2)
+    The rotational distance is the angle θ of the axis-angle form of ``R_aᵀ R_b``, from
+    atan2(sin θ, cos θ): accurate at every angle, unlike arccos near 0 and arcsin near π.
 
-
-def pose_distances(T_a: np.ndarray, T_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Vectorised :func:`cdpr_twin.se3.pose_distance` over stacks of poses (n, 4, 4).
+    Args:
+        T_a: (..., 4, 4) poses.
+        T_b: (..., 4, 4) poses (broadcast against ``T_a``).
 
     Returns:
-        ``(translations [m], rotations [rad])``, each (n,).
+        ``(translation, rotation)``: floats for single poses, else (...,) arrays.
     """
-    d = T_a[:, :3, 3] - T_b[:, :3, 3]
-    R = np.einsum("nji,njk->nik", T_a[:, :3, :3], T_b[:, :3, :3])  # R_aᵀ R_b
-    sin2 = np.linalg.norm(
-        np.stack(
-            [R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=1
-        ),
-        axis=1,
+    T_a, T_b = np.asarray(T_a, dtype=float), np.asarray(T_b, dtype=float)
+    d = T_a[..., :3, 3] - T_b[..., :3, 3]
+    R = np.swapaxes(T_a[..., :3, :3], -1, -2) @ T_b[..., :3, :3]
+    sin2 = np.sqrt(
+        (R[..., 2, 1] - R[..., 1, 2]) ** 2
+        + (R[..., 0, 2] - R[..., 2, 0]) ** 2
+        + (R[..., 1, 0] - R[..., 0, 1]) ** 2
     )
-    cos2 = R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2] - 1.0
-    return np.linalg.norm(d, axis=1), np.arctan2(sin2, cos2)
+    cos2 = R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2] - 1.0
+    trans, rot = np.sqrt(np.sum(d * d, axis=-1)), np.arctan2(sin2, cos2)
+    if trans.ndim == 0:
+        return float(trans), float(rot)
+    return trans, rot

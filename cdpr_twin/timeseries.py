@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_twin.se3 import matrix_from_quat_wxyz, pose_distances, quat_xyzw_from_matrices
+from cdpr_twin.se3 import matrix_from_quat_wxyz, pose_distance, quat_wxyz_from_matrix
 from cdpr_twin.types import Command, Measurement, PoseEstimate, Status
 
 POSE_FIELDS = ("x", "y", "z", "qw", "qx", "qy", "qz")
@@ -149,8 +149,8 @@ class TimeseriesWriter:
                     present[i, j] = False
                 else:
                     T[i, j] = P
-        q = quat_xyzw_from_matrices(T[:, :, :3, :3].reshape(-1, 3, 3)).reshape(*present.shape, 4)
-        return np.concatenate([T[:, :, :3, 3], q[..., [3, 0, 1, 2]]], axis=2), present
+        q = quat_wxyz_from_matrix(T[:, :, :3, :3])
+        return np.concatenate([T[:, :, :3, 3], q], axis=2), present
 
     def flush(self) -> None:
         """Write the buffered rows (floats exactly, to 17 digits) and flush the file."""
@@ -249,13 +249,13 @@ class Timeseries:
         T = np.tile(np.eye(4), (len(q), 1, 1))
         T[:, :3, 3] = np.stack([c[f"{prefix}_{k}"] for k in "xyz"], axis=1)
         ok = np.all(np.isfinite(q), axis=1)
-        T[ok, :3, :3] = [matrix_from_quat_wxyz(v) for v in q[ok]]
+        T[ok, :3, :3] = matrix_from_quat_wxyz(q[ok])
         T[~ok] = np.nan
         return T
 
     def deviation(self, prefix: str, reference: str = "true") -> tuple[np.ndarray, np.ndarray]:
         """Translational [m] and rotational [rad] distance of ``prefix`` poses to ``reference``."""
-        return pose_distances(self.poses(prefix), self.poses(reference))
+        return pose_distance(self.poses(prefix), self.poses(reference))
 
     def matrix(self, prefix: str) -> np.ndarray:
         """Per-cable columns ``<prefix>_1 … <prefix>_m`` (e.g. ``tension``) as (n, m)."""

@@ -21,7 +21,7 @@ from cdpr_twin.results import (
     roughness,
     value_at,
 )
-from cdpr_twin.se3 import pose_distances, pose_from_vector
+from cdpr_twin.se3 import pose_distance, pose_from_vector
 from cdpr_twin.study.findings import evaluate
 from cdpr_twin.study.plan import PBVS_SCENARIO
 from cdpr_twin.timeseries import Timeseries
@@ -98,7 +98,7 @@ def accuracy_at_p1(run_dir: Path, kind: str, p1: np.ndarray | None = None) -> di
             return None
         reference = p1 if p1 is not None else pose_from_vector(summary["goal_pose"])
         row = len(ts.t) - 1
-    dt, dr = pose_distances(ts.poses("true")[row : row + 1], reference[None])
+    dt, dr = pose_distance(ts.poses("true")[row : row + 1], reference[None])
     return {
         "time_s": float(ts.t[row]),
         "translation_m": float(dt[0]),
