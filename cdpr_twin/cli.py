@@ -165,7 +165,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _reproduce(args: argparse.Namespace) -> int:
-    from cdpr_twin.reproduce import reproduce
+    from cdpr_twin.study import reproduce
 
     if args.workers is not None and args.workers < 1:
         print("cdpr-twin: error: --workers must be ≥ 1", file=sys.stderr)
