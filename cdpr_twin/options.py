@@ -171,7 +171,12 @@ def _read_field(r: OptionReader, f: dataclasses.Field, hint: Any) -> Any:
         value = r.string(key, choices=tuple(args) if origin is Literal else ())
     elif origin is tuple and args[0] is float:
         items = r.list_of(key, f"numbers{' in ' + spec.unit if spec.unit else ''}")
-        value = tuple(r.number(f"{key}[{i}]", value=x, unit=spec.unit) for i, x in enumerate(items))
+        value = tuple(
+            r.number(f"{key}[{i}]", value=x, minimum=spec.minimum, exclusive=spec.exclusive,
+                     unit=spec.unit)
+            for i, x in enumerate(items)
+        )  # fmt: skip
+        value = tuple(map(math.radians, value)) if spec.unit == "deg" else value
     elif origin is tuple and args[0] is str:
         items = r.list_of(key, "strings")
         if not all(isinstance(x, str) for x in items):
@@ -214,6 +219,9 @@ def parse_options(r: OptionReader, cls: type, skip: tuple[str, ...] = ()) -> Any
         return cls(**kwargs)
     except OptionError as exc:
         raise r.fail(keys.get(exc.field, exc.field), exc.problem) from None
+    except (ValueError, TypeError) as exc:  # a plugin's own check: name the table
+        where = r.where or "top level"
+        raise ScenarioError(f"{r.source}: {where}: {type(exc).__name__}: {exc}") from None
 
 
 def _kind(hint: Any, spec: Any) -> str:

@@ -15,6 +15,7 @@ scenario file can import modules that register more (``plugins = ["my_module", "
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import importlib
 import importlib.util
 import sys
@@ -24,6 +25,8 @@ from types import MappingProxyType
 from typing import Any, TypeVar
 
 KINDS = ("estimator", "controller")
+RESERVED_NAMES = frozenset({"t", "true", "plan", "tag", "status", "tension", "length", "rate"})
+"""Column prefixes of ``timeseries.csv`` that no plugin may take as its name."""
 _REGISTRY: dict[str, dict[str, type]] = {kind: {} for kind in KINDS}
 _BUILTINS_LOADED = False
 
@@ -108,8 +111,16 @@ def register(cls: C) -> C:
     options = getattr(cls, "Options", None)
     if not (dataclasses.is_dataclass(options) and options.__dataclass_params__.frozen):
         raise TypeError(f"{cls.__name__}: Options must be a frozen dataclass")
+    if name in RESERVED_NAMES or not name.isidentifier():
+        raise ValueError(
+            f"{cls.__name__}: {name!r} cannot name a {kind} (a column prefix of run files, or "
+            f"not an identifier); reserved: {', '.join(sorted(RESERVED_NAMES))}"
+        )
     known = _REGISTRY[kind].get(name)
-    if known is not None and known.__qualname__ != cls.__qualname__:
+    if known is not None and (known.__module__, known.__qualname__) != (
+        cls.__module__,
+        cls.__qualname__,
+    ):
         raise ValueError(f"a {kind} named {name!r} is already registered ({known.__module__})")
     _REGISTRY[kind][name] = cls
     return cls
@@ -178,13 +189,18 @@ def load_modules(refs: list[str], base_dir: Path) -> None:
             path = Path(ref) if Path(ref).is_absolute() else (base_dir / ref).resolve()
             if not path.is_file():
                 raise ImportError(f"plugin file {path} not found")
-            mod_name = f"cdpr_twin_plugin_{path.stem}"
+            digest = hashlib.sha1(str(path).encode()).hexdigest()[:12]
+            mod_name = f"cdpr_twin_plugin_{path.stem}_{digest}"  # one module per file path
             if mod_name in sys.modules:
                 continue
             spec = importlib.util.spec_from_file_location(mod_name, path)
             assert spec is not None and spec.loader is not None
             module = importlib.util.module_from_spec(spec)
             sys.modules[mod_name] = module
-            spec.loader.exec_module(module)
+            try:
+                spec.loader.exec_module(module)
+            except BaseException:
+                del sys.modules[mod_name]  # a failed import is not cached half-built
+                raise
         else:
             importlib.import_module(ref)

@@ -30,7 +30,6 @@ __all__ = [
 ]
 
 
-
 def ordered_estimators(names: Iterable[str]) -> tuple[str, ...]:
     """``names`` in display order (each once).
 

@@ -15,6 +15,7 @@ checkpoints, summary fields and the status of a run that ran out of time.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -26,7 +27,7 @@ from cdpr_twin import plugins
 from cdpr_twin.controllers.base import Controller, RunEnd
 from cdpr_twin.estimators.base import Estimator
 from cdpr_twin.events import EventSchedule
-from cdpr_twin.metrics import RunMetrics, run_summary
+from cdpr_twin.metrics import RunMetrics, pose_error, run_summary
 from cdpr_twin.plugins import OptionError
 from cdpr_twin.record import Recorders, SceneInfo
 from cdpr_twin.scenario import Scenario, ScenarioError
@@ -95,8 +96,9 @@ class RunResult:
         return self.summary["simulated_time_s"] / max(self.wall_time, 1e-9)
 
 
-def _update_order(estimators: dict[str, Estimator], src: Path) -> tuple[str, ...]:
+def _update_order(estimators: dict[str, Estimator], s: Scenario) -> tuple[str, ...]:
     """Names ordered so that each estimator's inputs update before it (Kahn's algorithm)."""
+    src, dropped = s.source, set(s.overrides.get("dropped_estimators", ()))
     order: list[str] = []
     pending = dict(estimators)
     while pending:
@@ -104,6 +106,11 @@ def _update_order(estimators: dict[str, Estimator], src: Path) -> tuple[str, ...
         if not ready:
             for name, e in pending.items():
                 missing = [i for i in e.inputs if i not in estimators]
+                if missing and dropped & set(missing):
+                    raise ScenarioError(
+                        f"{src}: estimators: {name!r} reads {missing}, dropped because the "
+                        "camera is off; keep the camera on or read other estimators"
+                    )
                 if missing:
                     raise ScenarioError(
                         f"{src}: estimators: {name!r} reads {missing}, which do not run; add "
@@ -123,16 +130,16 @@ def _build_plugins(scenario: Scenario, geom) -> tuple[Controller, dict[str, Esti
         controller = cls(geom, scenario.controller.options)
     except OptionError as exc:
         raise ScenarioError(f"{src}: controller.{exc.field}: {exc.problem}") from None
-    except ValueError as exc:
-        raise ScenarioError(f"{src}: controller: {exc}") from None
+    except Exception as exc:  # a plugin's own failure: name it, no traceback
+        raise ScenarioError(f"{src}: controller: {type(exc).__name__}: {exc}") from None
     estimators = {}
     for name in scenario.estimators.names:
         est_cls = plugins.lookup("estimator", name)
         options = scenario.estimators.options.get(name) or est_cls.Options()
         try:
             estimators[name] = est_cls(geom, options)
-        except ValueError as exc:
-            raise ScenarioError(f"{src}: estimators.{name}: {exc}") from None
+        except Exception as exc:
+            raise ScenarioError(f"{src}: estimators.{name}: {type(exc).__name__}: {exc}") from None
     return controller, estimators
 
 
@@ -159,19 +166,25 @@ def prepare(scenario: Scenario) -> RunSetup:
     except ValueError as exc:
         raise ScenarioError(f"{src}: model: {exc}") from None
     try:
-        physics.reset(s.start_pose, settle_time=0.0)
-        for i, event in enumerate(s.events):
-            try:
-                event.check(physics.n_cables)
-            except OptionError as exc:
-                raise ScenarioError(f"{src}: events[{i}].{exc.field}: {exc.problem}") from None
-        controller, estimators = _build_plugins(s, nominal.geometry)
-        order = _update_order(estimators, src)
-    except (ValueError, InfeasibleTensionError) as exc:
+        return _assemble(s, physics, sensors, nominal)
+    except BaseException:  # nothing outlives a refused scenario: free the renderer
         sensors.close()
-        if isinstance(exc, ScenarioError):
-            raise
+        raise
+
+
+def _assemble(s: Scenario, physics, sensors, nominal) -> RunSetup:
+    src = s.source
+    try:
+        physics.reset(s.start_pose, settle_time=0.0)
+    except (ValueError, InfeasibleTensionError) as exc:
         raise ScenarioError(f"{src}: start.pose: {exc}") from None
+    for i, event in enumerate(s.events):  # in file order, as the file numbers them
+        try:
+            event.check(physics.n_cables)
+        except OptionError as exc:
+            raise ScenarioError(f"{src}: events[{i}].{exc.field}: {exc.problem}") from None
+    controller, estimators = _build_plugins(s, nominal.geometry)
+    order = _update_order(estimators, s)
     events = EventSchedule(s.events, physics, sensors)
     if s.events:  # no hook, no per-chunk cost, when nothing is scheduled
         physics.add_hook(events)
@@ -219,12 +232,10 @@ def run(
     setup = prepare(scenario)
     s, physics = scenario, setup.physics
     period = s.model.control_period
-    metrics = RunMetrics(s.estimators.names, setup.controller.checkpoints(s.duration), period)
-    rec_id = f"{s.name}-{s.seed}"
-    names = s.estimators.names
     try:
-        recorders = Recorders(out_dir, _scene(setup), names, physics.n_cables, rec_id,
-                              record_rrd, spawn)  # fmt: skip
+        metrics = RunMetrics(s.estimators.names, setup.controller.checkpoints(s.duration), period)
+        recorders = Recorders(out_dir, _scene(setup), s.estimators.names, physics.n_cables,
+                              f"{s.name}-{s.seed}", record_rrd, spawn)  # fmt: skip
     except BaseException:
         setup.close()
         raise
@@ -264,6 +275,7 @@ def _loop(setup: RunSetup, metrics: RunMetrics, recorders: Recorders, progress, 
         plan = controller.planned_pose(m.time)
         recorders.tick(m, T_true, estimates, deviations, command, plan)
 
+    setup.events.fire(0.5 * physics.timestep)  # what is due at t = 0, before the first read
     m = sensors.read(None)
     estimates = setup.estimate(m)
     record(m, estimates, None)
@@ -283,9 +295,16 @@ def _loop(setup: RunSetup, metrics: RunMetrics, recorders: Recorders, progress, 
 
 
 def _summary(setup: RunSetup, metrics: RunMetrics, status: str, last_tag) -> dict:
-    p = setup.physics
-    cam_tag = p.T_cam_tag if (p.has_camera and p.has_tag) else None
-    end = RunEnd(status=status, last_tag=last_tag, T_cam_tag_true=cam_tag)
+    p, view = setup.physics, setup.controller.goal_view
+    true_tag_error = None
+    if view is not None and p.has_camera and p.has_tag:  # truth stays here: only the error
+        true_tag_error = pose_error(p.T_cam_tag, view)
+    end = RunEnd(status=status, last_tag=last_tag, true_tag_error=true_tag_error)
     truth = {"time": p.time, "T_base_platform": p.T_base_platform, "tensions": p.tensions}
     extra = setup.controller.summary(end)
-    return run_summary(setup.scenario, status, metrics, truth, setup.goal_pose, extra)
+    out = run_summary(setup.scenario, status, metrics, truth, setup.goal_pose, extra)
+    if setup.events.fired:
+        out["events"] = [
+            {"time_s": t, "type": e.type, **dataclasses.asdict(e)} for t, e in setup.events.fired
+        ]
+    return out

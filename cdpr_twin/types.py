@@ -106,7 +106,7 @@ class Status(enum.StrEnum):
     TIME_LIMIT = "time_limit"
     """PBVS: the run's duration ended before convergence."""
     INTERRUPTED = "interrupted"
-    """The run was stopped by Ctrl-C (or SIGTERM)."""
+    """The run was stopped by Ctrl-C."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -127,6 +127,12 @@ class Command:
     done: bool = False
     status: Status = Status.TRACKING
     error: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("cable_rates", "twist_platform", "error"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, _frozen(np.asarray(value, dtype=float)))
 
 
 @dataclass(frozen=True, eq=False)

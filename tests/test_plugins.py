@@ -94,16 +94,30 @@ def test_inputs_that_do_not_run_or_bad_options_are_scenario_errors(tmp_path):
     from cdpr_twin.runner import prepare
 
     path = _with_midpoint("paper_open_loop.toml", tmp_path)
+    text = path.read_text()
     path.write_text(
-        path.read_text().replace(
-            'of = ["control", "model_elastic_pulley"]', 'of = ["control", "image"]'
+        text.replace('"model_simple", ', "").replace(
+            'of = ["control", "model_elastic_pulley"]', 'of = ["control", "model_simple"]'
         )
     )
-    with pytest.raises(ScenarioError, match="'midpoint' reads \\['image'\\], which do not run"):
+    with pytest.raises(ScenarioError, match=r"'midpoint' reads \['model_simple'\], which do not"):
         prepare(load_scenario(path).with_overrides(camera=False)).close()
-    path.write_text(path.read_text().replace('of = ["control", "image"]', 'of = ["control"]'))
+    path.write_text(
+        text.replace('of = ["control", "model_elastic_pulley"]', 'of = ["image", "control"]')
+    )
+    with pytest.raises(ScenarioError, match="dropped because the camera is off"):
+        prepare(load_scenario(path).with_overrides(camera=False)).close()
+    path.write_text(text.replace('of = ["control", "model_elastic_pulley"]', 'of = ["control"]'))
     with pytest.raises(ScenarioError, match=r"estimators\.midpoint\.of: must name two"):
         load_scenario(path)
+
+
+def test_plugin_names_cannot_shadow_run_file_columns():
+    with pytest.raises(ValueError, match="cannot name"):
+
+        @plugins.register
+        class Plan(MidpointEstimator):
+            name = "plan"
 
 
 @pytest.mark.slow

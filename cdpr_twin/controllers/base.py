@@ -25,13 +25,14 @@ class RunEnd:
     Attributes:
         status: how the run ended.
         last_tag: the last tag detection of the run, or ``None``.
-        T_cam_tag_true: (4, 4) ground-truth tag pose in the camera frame at the end, or
-            ``None`` without camera or tag.
+        true_tag_error: ground-truth distance of the final tag view to :attr:`Controller.
+            goal_view` (``translation_m``, ``rotation_deg``), computed by the runner; ``None``
+            without a goal view, camera or tag. The controller sees this error, never truth.
     """
 
     status: str
     last_tag: TagDetection | None
-    T_cam_tag_true: np.ndarray | None
+    true_tag_error: dict | None
 
 
 class Controller(ABC):
@@ -91,6 +92,11 @@ class Controller(ABC):
         Args:
             T_base_tag: (4, 4) the tag pose the nominal model states, or ``None``.
         """
+        return None
+
+    @property
+    def goal_view(self) -> np.ndarray | None:
+        """(4, 4) the tag pose in the camera frame the task should end at, if it has one."""
         return None
 
     def checkpoints(self, duration: float) -> list[tuple[float, np.ndarray]]:

@@ -153,21 +153,22 @@ class PbvsController(Controller):
         """Where the nominal robot sees the goal view, or ``None`` without a tag pose."""
         return None if T_base_tag is None else self.platform_goal(T_base_tag)
 
+    @property
+    def goal_view(self) -> np.ndarray:
+        """The desired tag pose in the camera frame (pupil tag frame)."""
+        return self.goal
+
     def summary(self, end: RunEnd) -> dict[str, Any]:
         """``pbvs``: convergence, detected and true final tag errors, tag-lost/saturated ticks."""
         tag_err = None
         if end.last_tag is not None:
             dt, dr = pose_distance(end.last_tag.T_cam_tag, self.goal)
             tag_err = {"translation_m": dt, "rotation_deg": float(np.degrees(dr))}
-        true_err = None
-        if end.T_cam_tag_true is not None:
-            dt, dr = pose_distance(end.T_cam_tag_true, self.goal)
-            true_err = {"translation_m": dt, "rotation_deg": float(np.degrees(dr))}
         return {
             "pbvs": {
                 "converged": end.status == Status.CONVERGED,
                 "final_tag_error": tag_err,
-                "true_final_tag_error": true_err,
+                "true_final_tag_error": end.true_tag_error,
                 "tag_lost_ticks": self._counts[Status.TAG_LOST],
                 "saturated_ticks": self._counts[Status.SATURATED],
             }

@@ -107,6 +107,7 @@ class Physics:
         self._tendons = m.actuator_trnid[actuators, 0]
         self._act_range = m.actuator_actrange[actuators].copy()
         self._anchors, self._mocap = as_slice(anchors), as_slice(mocap)
+        self._actuator_ids = actuators
         self._actuators = as_slice(actuators)
         self._gain = m.actuator_gainprm[self._actuators]  # views when the ids are contiguous
         self._bias = m.actuator_biasprm[self._actuators]
@@ -209,6 +210,8 @@ class Physics:
             raise ValueError(f"cable index {i} out of range 0…{self.n_cables - 1}")
         self.cable_enabled[i] = False
         self.refresh()
+        # and now, not only from the next step: a reading at this instant sees no force
+        self.data.actuator_force[self._actuator_ids[i]] = 0.0
 
     def refresh(self) -> None:
         """Point each swivel at its B_i (eq. 20) and set the cable stiffness E·S/l0.
