@@ -187,6 +187,47 @@ def _read_field(r: OptionReader, f: dataclasses.Field, hint: Any) -> Any:
     return spec.convert(value) if spec.convert is not None else value
 
 
+def read_options(
+    r: OptionReader, cls: type, skip: tuple[str, ...] = (), required: bool = True
+) -> dict[str, Any]:
+    """The fields of an options dataclass that a table sets, converted to SI (by field name).
+
+    Args:
+        r: the table.
+        cls: a frozen dataclass with :func:`cdpr_twin.plugins.option` fields.
+        skip: keys of the table that belong to the caller (e.g. ``type``).
+        required: refuse a table that lacks a field without default.
+
+    Raises:
+        ScenarioError: naming the file and field (unknown keys included).
+    """
+    hints = typing.get_type_hints(cls)
+    kwargs: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        key = spec_of(f).file_key(f.name)
+        if not r.has(key):
+            no_default = f.default is dataclasses.MISSING
+            if required and no_default and f.default_factory is dataclasses.MISSING:
+                r.raw(key, kind=_kind(hints[f.name], spec_of(f)))  # raises "missing"
+            continue
+        kwargs[f.name] = _read_field(r, f, hints[f.name])
+    r.used.update(skip)
+    r.done()
+    return kwargs
+
+
+def build_options(r: OptionReader, cls: type, build: Any, kwargs: dict[str, Any]) -> Any:
+    """``build(**kwargs)``, its validation errors reported under the table's file keys."""
+    keys = {f.name: spec_of(f).file_key(f.name) for f in dataclasses.fields(cls)}
+    try:
+        return build(**kwargs)
+    except OptionError as exc:
+        raise r.fail(keys.get(exc.field, exc.field), exc.problem) from None
+    except (ValueError, TypeError) as exc:  # a plugin's own check: name the table
+        where = r.where or "top level"
+        raise ScenarioError(f"{r.source}: {where}: {type(exc).__name__}: {exc}") from None
+
+
 def parse_options(r: OptionReader, cls: type, skip: tuple[str, ...] = ()) -> Any:
     """Build an options dataclass from a table, each field as its declaration says.
 
@@ -194,34 +235,10 @@ def parse_options(r: OptionReader, cls: type, skip: tuple[str, ...] = ()) -> Any
     unknown keys are refused. Validation errors of the dataclass (:class:`OptionError`) are
     reported under the field's file key.
 
-    Args:
-        r: the table.
-        cls: a frozen dataclass with :func:`cdpr_twin.plugins.option` fields.
-        skip: keys of the table that belong to the caller (e.g. ``type``).
-
     Raises:
         ScenarioError: naming the file and field.
     """
-    hints = typing.get_type_hints(cls)
-    kwargs: dict[str, Any] = {}
-    keys: dict[str, str] = {}
-    for f in dataclasses.fields(cls):
-        key = spec_of(f).file_key(f.name)
-        keys[f.name] = key
-        if not r.has(key):
-            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                r.raw(key, kind=_kind(hints[f.name], spec_of(f)))  # raises "missing"
-            continue
-        kwargs[f.name] = _read_field(r, f, hints[f.name])
-    r.used.update(skip)
-    r.done()
-    try:
-        return cls(**kwargs)
-    except OptionError as exc:
-        raise r.fail(keys.get(exc.field, exc.field), exc.problem) from None
-    except (ValueError, TypeError) as exc:  # a plugin's own check: name the table
-        where = r.where or "top level"
-        raise ScenarioError(f"{r.source}: {where}: {type(exc).__name__}: {exc}") from None
+    return build_options(r, cls, cls, read_options(r, cls, skip))
 
 
 def _kind(hint: Any, spec: Any) -> str:

@@ -154,10 +154,16 @@ def prepare(scenario: Scenario) -> RunSetup:
     s, src = scenario, scenario.source
     try:
         physics, nominal, _ = build_robot(
-            s.model.file, s.truth, s.model.timestep, s.model.align_every
+            s.model.file, s.truth, s.model.timestep, s.model.align_every, s.realism.winch
         )
         sensors = Sensors(
-            physics, nominal, s.sensors.tension_noise_std, s.seed, camera=s.sensors.camera
+            physics,
+            nominal,
+            s.sensors.tension_noise_std,
+            s.seed,
+            camera=s.sensors.camera,
+            realism=s.realism,
+            robot_seed=s.truth.seed,
         )
     except ModelError as exc:
         raise ScenarioError(f"{src}: model.file: {exc}") from None

@@ -10,6 +10,7 @@ here); errors name the file, the field and the fix. A scenario file is documente
 
 from __future__ import annotations
 
+import functools
 import math
 import tomllib
 from collections.abc import Mapping
@@ -23,7 +24,14 @@ import numpy as np
 from cdpr_twin import plugins
 from cdpr_twin.deviations import DeviationSpec
 from cdpr_twin.events import EVENT_TYPES, Event
-from cdpr_twin.options import OptionReader, ScenarioError, parse_options
+from cdpr_twin.options import (
+    OptionReader,
+    ScenarioError,
+    build_options,
+    parse_options,
+    read_options,
+)
+from cdpr_twin.realism import PARTS, PROFILES, Realism, profile
 
 
 @dataclass(frozen=True)
@@ -111,6 +119,7 @@ class Scenario:
         controller: controller configuration.
         estimators: estimator configuration.
         events: timed events (faults), in file order.
+        realism: the robot's and sensors' imperfections (``[realism]``; default: ideal).
         plugins: modules imported before the file's names were checked.
         overrides: the command-line overrides applied.
     """
@@ -128,6 +137,7 @@ class Scenario:
     estimators: EstimatorConfig
     events: tuple[Event, ...] = ()
     plugins: tuple[str, ...] = ()
+    realism: Realism = field(default_factory=Realism)
     overrides: Mapping[str, Any] = field(default_factory=dict)
 
     def with_overrides(
@@ -224,6 +234,24 @@ def _events(top: OptionReader) -> tuple[Event, ...]:
     return tuple(out)  # in file order (errors name events[i] as the file numbers them)
 
 
+def _realism(top: OptionReader) -> Realism:
+    r = top.table_of("realism", required=False)
+    name = r.string("profile", "ideal", choices=PROFILES)
+    values = {}
+    for part, cls in PARTS.items():
+        if r.has(part):
+            t = r.table_of(part)
+            v = read_options(t, cls, required=False)
+            build_options(t, cls, functools.partial(_one_part, name, part), v)  # names a bad field
+            values[part] = v
+    r.done()
+    return profile(name, **values)
+
+
+def _one_part(name: str, part: str, **values: Any) -> Realism:
+    return profile(name, **{part: values})
+
+
 def _plugins(top: OptionReader) -> tuple[str, ...]:
     refs = top.raw("plugins", [], "list of module names or .py files")
     if not isinstance(refs, list) or not all(isinstance(x, str) for x in refs):
@@ -318,9 +346,10 @@ def load_scenario(path: str | Path) -> Scenario:
     controller = _controller(top.table_of("controller"))
     estimators = _estimators(top.table_of("estimators"))
     events = _events(top)
+    realism = _realism(top)
     top.done()
     scenario = Scenario(
         name, source, description, duration, seed, start, model, truth, sensors,
-        controller, estimators, events, loaded,
+        controller, estimators, events, loaded, realism,
     )  # fmt: skip
     return scenario.with_overrides()

@@ -188,6 +188,8 @@ class Measurement:
         command: the last command sent to the winches (``None`` before the first).
         image: (H, W, 3) RGB uint8 frame of the onboard camera, or ``None`` (no camera).
         tag: the tag detected in ``image``, or ``None`` (no camera, or tag not found).
+        tensions_clipped: (m,) bool, which tension readings sit at a limit of the sensor's
+            range (the true tension may be beyond it), or ``None`` when readings never clip.
     """
 
     time: float
@@ -196,9 +198,10 @@ class Measurement:
     command: Command | None = None
     image: np.ndarray | None = None
     tag: TagDetection | None = None
+    tensions_clipped: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        for name in ("cable_lengths", "tensions", "image"):
+        for name in ("cable_lengths", "tensions", "image", "tensions_clipped"):
             value = getattr(self, name)
             if value is not None:
                 object.__setattr__(self, name, _frozen(value))

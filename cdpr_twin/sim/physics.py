@@ -27,6 +27,7 @@ import numpy as np
 from cdpr_twin.events import StepHook
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import cable_lengths, rest_lengths
+from cdpr_twin.realism import WinchRealism
 from cdpr_twin.se3 import (
     inverse,
     matrix_from_quat_wxyz,
@@ -65,12 +66,21 @@ class Physics:
         model: a compiled cable-robot model (:func:`cdpr_twin.sim.build_model`).
         align_every: physics steps between refreshes of the swivel yaws and cable stiffnesses.
         source: where the model came from, for error messages.
+        winch: the winches' servo imperfections (default: they follow commands instantly).
+        robot_seed: the truth seed (per-robot winch errors).
 
     Raises:
         ModelError: when the model is not a cable robot this core can drive.
     """
 
-    def __init__(self, model: mujoco.MjModel, align_every: int = 10, source: str = "model") -> None:
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        align_every: int = 10,
+        source: str = "model",
+        winch: WinchRealism | None = None,
+        robot_seed: int = 0,
+    ) -> None:
         if int(align_every) < 1:
             raise ValueError(f"align_every must be ≥ 1 physics step, got {align_every}")
         self.model, self.source = model, source
@@ -79,6 +89,7 @@ class Physics:
         self.cable_names = tuple(f"cable{i + 1}" for i in range(self.n_cables))
         self.geometry: CdprGeometry = read_geometry(model)
         self.align_every = int(align_every)
+        self.winch = WinchRealism() if winch is None else winch
         self._hooks: list[StepHook] = []
         self.cable_enabled = np.ones(self.n_cables, dtype=bool)
         self._index(model)

@@ -1,9 +1,10 @@
 """The robot's sensors: winch encoders (homed), tension sensors, the onboard camera.
 
 They read the :class:`~cdpr_twin.sim.physics.Physics` and produce the :class:`Measurement`
-that estimators and controllers see — never ground truth. Each run's noise comes from its own
-seeded generator. The tag detector uses the *nominal* (calibrated) intrinsics and tag size, as
-a real robot's software would, while the image is rendered from the simulated robot.
+that estimators and controllers see — never ground truth. The run's reading noise comes from
+its own seeded generators, each robot's calibration errors from the truth seed. The tag detector
+uses the *nominal* (calibrated) intrinsics and tag size, as a real robot's software would,
+while the image is rendered from the simulated robot.
 """
 
 from __future__ import annotations
@@ -13,10 +14,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.kinematics import cable_lengths, rest_lengths
-from cdpr_twin.sim import camera as cam_mod
+from cdpr_twin.realism import Realism, robot_rng, run_rng
+from cdpr_twin.sim.encoders import Encoders
 from cdpr_twin.sim.model import SimulationError
+from cdpr_twin.sim.onboard_camera import OnboardCamera
 from cdpr_twin.sim.physics import Physics
+from cdpr_twin.sim.tension import TensionSensors
 from cdpr_twin.types import CameraIntrinsics, Command, Measurement
 
 
@@ -43,13 +46,14 @@ class Sensors:
     Args:
         physics: the simulated robot.
         nominal: what the robot's software believes (for homing and tag detection).
-        tension_noise_std: std of the Gaussian noise on tension readings [N] (paper: 0.24 N
-            accuracy); 0 switches noise off.
-        noise_seed: seed of this run's sensor noise.
+        tension_noise_std: std of the Gaussian noise on each tension reading [N]; 0: none.
+        noise_seed: the run seed (reading noise).
         camera: render the onboard camera and detect the tag in :meth:`read`.
         home_encoders: :meth:`home` zeroes the encoders the way a real robot is homed at a
             known pose (they then read the nominal model's rest lengths there); without it
             they read the true rest lengths.
+        realism: the sensors' imperfections (default: none).
+        robot_seed: the truth seed (each robot's calibration errors).
     """
 
     def __init__(
@@ -60,61 +64,54 @@ class Sensors:
         noise_seed: int = 0,
         camera: bool = True,
         home_encoders: bool = True,
+        realism: Realism | None = None,
+        robot_seed: int = 0,
     ) -> None:
-        if not (np.isfinite(tension_noise_std) and tension_noise_std >= 0):
-            raise ValueError(f"tension_noise_std must be ≥ 0 N, got {tension_noise_std}")
-        self.physics, self.nominal = physics, nominal
-        self.tension_noise_std = float(tension_noise_std)
-        self._rng = np.random.default_rng(noise_seed)
-        self.home_encoders = bool(home_encoders)
-        self._encoder_offset = np.zeros(physics.n_cables)
-        self._renderer: cam_mod.CameraRenderer | None = None
-        self._detector = None
+        realism = Realism() if realism is None else realism
+        self.physics, self.nominal, self.realism = physics, nominal, realism
+        self.tension = TensionSensors(
+            physics.n_cables,
+            tension_noise_std,
+            realism.tension,
+            np.random.default_rng(noise_seed),  # the run seed's own stream, as before realism
+            robot_rng(robot_seed, "tension"),
+        )
+        self.encoders = Encoders(
+            physics, nominal.geometry, realism.winch, robot_rng(robot_seed, "winch"), home_encoders
+        )
+        self.camera: OnboardCamera | None = None
         if camera:
-            if not physics.has_camera or nominal.intrinsics is None:
-                raise SimulationError(
-                    f"{physics.source} has no camera {cam_mod.CAMERA_NAME!r}; "
-                    "run with the camera off"
-                )
-            from cdpr_twin.vision import TagDetector  # OpenCV and pupil-apriltags, on demand
-
-            self._renderer = cam_mod.CameraRenderer(physics.model)
-            self._detector = TagDetector(nominal.intrinsics, tag_size=nominal.tag_size)
-
-    @property
-    def camera(self) -> bool:
-        """Whether the camera renders."""
-        return self._renderer is not None
+            if nominal.intrinsics is None:
+                raise SimulationError(f"{physics.source} has no camera; run with the camera off")
+            self.camera = OnboardCamera(
+                physics,
+                nominal.intrinsics,
+                nominal.tag_size,
+                realism.camera,
+                robot_rng(robot_seed, "camera"),
+                run_rng(noise_seed, "camera"),
+            )
 
     def close(self) -> None:
         """Free the renderer's GL context."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        if self.camera is not None:
+            self.camera.close()
+            self.camera = None
 
     @property
     def encoder_lengths(self) -> np.ndarray:
-        """What the winch encoders read: rest lengths plus the homing offset. (m,) [m]."""
-        return self.physics.rest_lengths + self._encoder_offset
+        """What the winch encoders read now (m,) [m]."""
+        return self.encoders.read()
 
     def home(self, T_base_platform: np.ndarray) -> None:
-        """Home the encoders at a known pose (the paper's "initial pose is known").
-
-        With ``home_encoders`` they then read the rest lengths the nominal model predicts at
-        that pose with the true tensions, plus whatever the winches pay out afterwards.
-        """
-        self._encoder_offset = np.zeros(self.physics.n_cables)
-        if self.home_encoders:
-            g = self.nominal.geometry
-            l0_nominal = rest_lengths(cable_lengths(g, T_base_platform, "pulley"),
-                                      self.physics.tensions, g.es)  # fmt: skip
-            self._encoder_offset = l0_nominal - self.physics.rest_lengths
+        """Home the encoders at a known pose (the paper's "initial pose is known")."""
+        self.encoders.home(T_base_platform, self.physics.tensions)
 
     def render(self) -> np.ndarray:
         """The onboard camera's current frame, (H, W, 3) RGB uint8."""
-        if self._renderer is None:
+        if self.camera is None:
             raise SimulationError("these sensors were built with camera=False; pass camera=True")
-        return self._renderer.render(self.physics.data)
+        return self.camera.render()
 
     def read(self, command: Command | None = None, render: bool | None = None) -> Measurement:
         """Read every sensor now.
@@ -124,17 +121,15 @@ class Sensors:
             render: render the camera and detect the tag; ``None`` does so when the camera is on.
 
         Returns:
-            A frozen :class:`Measurement` (tensions carry this run's seeded noise).
+            A frozen :class:`Measurement` (readings carry this run's seeded noise).
         """
-        render = self._renderer is not None if render is None else render
-        tensions = self.physics.tensions
-        if self.tension_noise_std > 0:
-            noise = self._rng.normal(0.0, self.tension_noise_std, self.physics.n_cables)
-            tensions = tensions + noise
+        render = self.camera is not None if render is None else render
+        tensions, clipped = self.tension.read(self.physics.tensions)
         image = tag = None
         if render:
-            image = self.render()
-            tag = self._detector.detect(image)
+            if self.camera is None:
+                raise SimulationError("these sensors were built with camera=False")
+            image, tag = self.camera.read()
         return Measurement(
             time=self.physics.time,
             cable_lengths=self.encoder_lengths,
@@ -142,4 +137,5 @@ class Sensors:
             command=command,
             image=image,
             tag=tag,
+            tensions_clipped=clipped,
         )

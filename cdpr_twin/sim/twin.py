@@ -19,6 +19,7 @@ import numpy as np
 
 from cdpr_twin import DEFAULT_SCENE
 from cdpr_twin.deviations import DeviationSpec, TruthDeviations
+from cdpr_twin.realism import WinchRealism
 from cdpr_twin.se3 import matrix_from_quat_wxyz, transform
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim.model import TAG_BODY, build_model, cable_count, numeric, read_geometry
@@ -54,6 +55,7 @@ def build_robot(
     deviations: DeviationSpec | TruthDeviations | None = None,
     timestep: float | None = None,
     align_every: int = 10,
+    winch: WinchRealism | None = None,
 ) -> tuple[Physics, NominalRobot, TruthDeviations]:
     """The simulated robot (with its calibration errors) and what its software believes.
 
@@ -63,12 +65,14 @@ def build_robot(
             concrete :class:`TruthDeviations`, or ``None`` for the nominal robot.
         timestep: physics step [s]; ``None`` keeps the model file's.
         align_every: physics steps between swivel/stiffness refreshes.
+        winch: the winches' servo imperfections (default: none); per-robot draws use the
+            deviations' seed.
 
     Raises:
         ModelError: when the model file is missing, malformed or not a cable robot.
         ValueError: for a bad timestep or refresh interval.
     """
-    path = Path(model_path)
+    path, deviations_in = Path(model_path), deviations
     nominal_model = build_model(path)
     nominal = _nominal_robot(nominal_model)
     n = cable_count(nominal_model)
@@ -80,7 +84,9 @@ def build_robot(
         if not (np.isfinite(timestep) and 0 < timestep <= 0.002):
             raise ValueError(f"timestep must be in (0, 0.002] s for stiff cables, got {timestep}")
         model.opt.timestep = float(timestep)
-    return Physics(model, align_every, source=str(path)), nominal, deviations
+    robot_seed = spec_seed if (spec_seed := getattr(deviations_in, "seed", None)) else 0
+    physics = Physics(model, align_every, str(path), winch=winch, robot_seed=robot_seed)
+    return physics, nominal, deviations
 
 
 class Twin:

@@ -1,0 +1,208 @@
+"""How imperfect the simulated robot is: the scenario's ``[realism]`` profile (numpy only).
+
+Each effect is *generated* by the simulation layer (rendered, integrated, quantised), with a
+magnitude from ``models/acrobot/README.md`` (its source named there), and each can be switched
+off: ``profile = "ideal"`` is the twin before realism, bit for bit. Magnitudes come in two
+kinds, as physics dictates:
+
+- per robot (drawn from the truth seed, fixed across repetitions, like one physical robot):
+  intrinsics calibration error, drum radius error, tension-sensor bias and gain;
+- per run (drawn from the run seed): pixel noise, tension repeatability noise, the homing offset
+  of the start pose.
+
+A scenario overrides any field: ``[realism.camera] exposure_s = 0.004``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+import numpy as np
+
+from cdpr_twin.plugins import OptionError, option
+
+PROFILES = ("ideal", "acrobot")
+
+
+@dataclass(frozen=True)
+class CameraRealism:
+    """The onboard camera's imperfections (all off: an ideal pinhole, noise-free, instantaneous).
+
+    Attributes:
+        noise: simulate photon shot noise and read noise on a linear signal, then gamma and
+            8-bit quantisation.
+        full_well_e: electrons at the brightest rendered level [e⁻].
+        read_noise_e: read noise std [e⁻].
+        gamma: encoding gamma from the linear signal to 8-bit values.
+        exposure_s: exposure time [s]; 0 renders one instant (no motion blur).
+        blur_subframes: frames rendered at the true poses during the exposure and averaged.
+        distortion: true Brown–Conrady coefficients (k1, k2, p1, p2) of the lens.
+        focal_error_std: per-robot relative std of the calibrated fx, fy.
+        center_error_std_px: per-robot std of the calibrated cx, cy [px].
+        distortion_error_std: per-robot std of each calibrated distortion coefficient.
+        latency_ticks: the tag pose available at tick k comes from the frame exposed at k − d.
+    """
+
+    noise: bool = option(False)
+    full_well_e: float = option(10_000.0, minimum=1.0, unit="e-")
+    read_noise_e: float = option(0.0, minimum=0.0, unit="e-")
+    gamma: float = option(1.0, minimum=0.1)
+    exposure_s: float = option(0.0, minimum=0.0, unit="s")
+    blur_subframes: int = option(1, minimum=1)
+    distortion: tuple[float, ...] = option((0.0, 0.0, 0.0, 0.0))
+    focal_error_std: float = option(0.0, minimum=0.0)
+    center_error_std_px: float = option(0.0, minimum=0.0, unit="px")
+    distortion_error_std: float = option(0.0, minimum=0.0)
+    latency_ticks: int = option(0, minimum=0)
+
+    def __post_init__(self) -> None:
+        if len(self.distortion) != 4:
+            raise OptionError("distortion", "must list k1, k2, p1, p2")
+
+
+@dataclass(frozen=True)
+class WinchRealism:
+    """Winch servo and encoder imperfections (all off: rates applied instantly, exact encoders).
+
+    Attributes:
+        bandwidth_hz: velocity-loop bandwidth (first order, time constant 1/(2π f)); ``inf``
+            follows the commanded rate instantly.
+        max_accel: acceleration limit of the cable rate [m/s²] (``inf``: none).
+        encoder_counts: encoder counts per drum revolution (0: exact encoders).
+        drum_radius: nominal drum radius [m] (the length the encoder reports uses it).
+        drum_radius_error_std: per-robot relative std of the true drum radius.
+    """
+
+    bandwidth_hz: float = option(math.inf, minimum=0.0, exclusive=True, unit="Hz")
+    max_accel: float = option(math.inf, minimum=0.0, exclusive=True, unit="m/s2")
+    encoder_counts: int = option(0, minimum=0)
+    drum_radius: float = option(0.02, minimum=0.0, exclusive=True, unit="m")
+    drum_radius_error_std: float = option(0.0, minimum=0.0)
+
+
+@dataclass(frozen=True)
+class TensionRealism:
+    """Tension-sensor imperfections beyond the per-reading noise ``[sensors] tension_noise_std``.
+
+    Attributes:
+        bias_std: per-robot std of each sensor's offset [N] (the datasheet's accuracy).
+        gain_error_std: per-robot relative std of each sensor's gain.
+        clip: clip readings to the sensor range, and say so in the measurement.
+        range_min: lowest reading [N].
+        range_max: highest reading [N].
+    """
+
+    bias_std: float = option(0.0, minimum=0.0, unit="N")
+    gain_error_std: float = option(0.0, minimum=0.0)
+    clip: bool = option(False)
+    range_min: float = option(-25.0, unit="N")
+    range_max: float = option(75.0, unit="N")
+
+    def __post_init__(self) -> None:
+        if not self.range_min < self.range_max:
+            raise OptionError("range_max", f"must exceed range_min = {self.range_min} N")
+
+
+@dataclass(frozen=True)
+class HomingRealism:
+    """Repeatability of the start pose between repetitions (per run).
+
+    Attributes:
+        position_std: per-axis std of the true start position's offset [m].
+        rotation_std: per-axis std of the true start orientation's offset [rad] (file: deg).
+    """
+
+    position_std: float = option(0.0, minimum=0.0, unit="m")
+    rotation_std: float = option(0.0, minimum=0.0, unit="deg")
+
+
+@dataclass(frozen=True)
+class Realism:
+    """The whole profile.
+
+    Attributes:
+        profile: the named profile the fields start from.
+        camera: camera imperfections.
+        winch: winch and encoder imperfections.
+        tension: tension-sensor imperfections.
+        homing: start-pose repeatability.
+    """
+
+    profile: str = "ideal"
+    camera: CameraRealism = field(default_factory=CameraRealism)
+    winch: WinchRealism = field(default_factory=WinchRealism)
+    tension: TensionRealism = field(default_factory=TensionRealism)
+    homing: HomingRealism = field(default_factory=HomingRealism)
+
+    @property
+    def is_ideal(self) -> bool:
+        """Whether every effect is off."""
+        return self == Realism(profile=self.profile)
+
+
+PARTS: dict[str, type] = {
+    "camera": CameraRealism,
+    "winch": WinchRealism,
+    "tension": TensionRealism,
+    "homing": HomingRealism,
+}
+"""The profile's parts, by their table name in ``[realism.<part>]``."""
+
+
+ACROBOT: dict[str, dict[str, Any]] = {
+    "camera": {},
+    "winch": {},
+    "tension": {},
+    "homing": {},
+}
+"""The ``acrobot`` profile: each magnitude and its source in ``models/acrobot/README.md``."""
+
+
+def profile(name: str, **parts: dict[str, Any]) -> Realism:
+    """A named profile with some fields overridden (SI units).
+
+    Args:
+        name: one of :data:`PROFILES`.
+        **parts: per part (``camera=…``), the fields to override.
+
+    Raises:
+        ValueError: for an unknown profile, part or field.
+    """
+    if name not in PROFILES:
+        raise ValueError(f"unknown realism profile {name!r}; choose one of {', '.join(PROFILES)}")
+    base = ACROBOT if name == "acrobot" else {}
+    out = Realism(profile=name)
+    for part, cls in PARTS.items():
+        values = {**base.get(part, {}), **parts.get(part, {})}
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"realism.{part}: unknown field {unknown[0]!r}")
+        out = replace(out, **{part: cls(**values)})
+    return out
+
+
+_STREAMS = {"camera": 1, "winch": 2, "tension": 3, "homing": 4}
+
+
+def robot_rng(robot_seed: int, part: str) -> np.random.Generator:
+    """The generator of one part's per-robot draws, from the truth seed.
+
+    Independent of the truth deviations' own stream and of the other parts'.
+    """
+    return np.random.default_rng(np.random.SeedSequence([int(robot_seed), 1, _STREAMS[part]]))
+
+
+def run_rng(run_seed: int, part: str) -> np.random.Generator:
+    """The generator of one part's per-run draws, from the run seed.
+
+    The tension sensors' reading noise keeps the run seed's own stream, as before realism.
+    """
+    return np.random.default_rng(np.random.SeedSequence([int(run_seed), 2, _STREAMS[part]]))
+
+
+def draw_homing_offset(h: HomingRealism, rng: np.random.Generator) -> np.ndarray:
+    """A start-pose offset twist [δp (m), δθ (rad)] in the base frame. Returns (6,)."""
+    return np.concatenate([rng.normal(0.0, h.position_std, 3), rng.normal(0.0, h.rotation_std, 3)])
