@@ -179,7 +179,17 @@ def _reproduce(args: argparse.Namespace) -> int:
         print(f"[{done:3d}/{total}] {record['name']}: {mark} ({record['status']})", file=sys.stderr)
 
     try:
-        rep = reproduce(args.out, args.workers, args.runs_scale, args.duration, progress)
+        from cdpr_twin.realism import RUN_SOURCES
+
+        rep = reproduce(
+            args.out,
+            args.workers,
+            args.runs_scale,
+            args.duration,
+            progress,
+            decompose=RUN_SOURCES if args.decompose else (),
+            other_goal=args.other_goal,
+        )
     except ValueError as exc:
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
         return 2
@@ -241,6 +251,17 @@ def main(argv: list[str] | None = None) -> int:
     )
     rep.add_argument(
         "--duration", type=float, default=None, help="cap every run's duration [s] (quick checks)"
+    )
+    rep.add_argument(
+        "--decompose",
+        action="store_true",
+        help="repeat the repeatability runs with each per-run source of variation off",
+    )
+    rep.add_argument(
+        "--other-goal",
+        choices=("nominal", "taught"),
+        default=None,
+        help="also run PBVS (control in the loop) with this goal",
     )
     rep.set_defaults(func=_reproduce)
     args = parser.parse_args(argv)

@@ -86,10 +86,27 @@ class WinchRealism:
 class TensionRealism:
     """Tension-sensor imperfections beyond the per-reading noise ``[sensors] tension_noise_std``.
 
+    Sensor i reads ``(1 + g_i)·τ_i + b_i + n`` (:class:`cdpr_twin.sim.tension.TensionSensors`):
+    b_i and g_i are fixed per robot (truth seed), n is drawn at each reading (run seed).
+
+    How a datasheet maps onto these fields. A stated *accuracy* (the paper's 0.24 N) is a bound
+    on the total error, not a standard deviation: accuracy itself is qualitative (JCGM 200:2012,
+    VIM 2.13), and a number given for it is the half-width a of an interval ±a that the error
+    stays within. Its random part is the *repeatability* (VIM 2.21; the paper's 0.01 N), so a
+    24:1 ratio leaves the error budget almost wholly systematic: an offset that stays put
+    between readings, drawn once per sensor, not redrawn per reading. With nothing known but
+    the bound, GUM (JCGM 100:2008) 4.3.7 gives the standard uncertainty of a ±a rectangular
+    distribution as u = a/√3, so ``bias_std`` = 0.24/√3 ≈ 0.139 N, not 0.24 N (which would
+    treat the bound as 1σ and let a third of the sensors exceed their own datasheet).
+    ``gain_error_std`` adds a load-proportional part (e.g. 0.1 %: 0.075 N at 75 N), small
+    beside the offset. The repeatability 0.01 N is taken as 1σ of the reading noise (the
+    conservative reading; as an ISO 5725 repeatability limit r = 2.8 σ it would be 0.004 N).
+
     Attributes:
-        bias_std: per-robot std of each sensor's offset [N] (the datasheet's accuracy).
-        gain_error_std: per-robot relative std of each sensor's gain.
-        clip: clip readings to the sensor range, and say so in the measurement.
+        bias_std: per-robot std of each sensor's offset b_i [N] (accuracy a → a/√3).
+        gain_error_std: per-robot relative std of each sensor's gain error g_i.
+        clip: clip readings to [``range_min``, ``range_max``], and say which did in
+            ``Measurement.tensions_clipped`` (and per cable in ``summary.json``).
         range_min: lowest reading [N].
         range_max: highest reading [N].
     """
@@ -107,11 +124,17 @@ class TensionRealism:
 
 @dataclass(frozen=True)
 class HomingRealism:
-    """Repeatability of the start pose between repetitions (per run).
+    """Repeatability of the start pose between repetitions (per run, from the run seed).
+
+    Each run places the *true* platform at the start pose moved by a drawn offset
+    (:func:`draw_homing_offset`), while the encoders are homed as if it stood at the nominal
+    start pose and every estimator and the controller start from the nominal start pose: the
+    robot believes it is where it always starts.
 
     Attributes:
         position_std: per-axis std of the true start position's offset [m].
-        rotation_std: per-axis std of the true start orientation's offset [rad] (file: deg).
+        rotation_std: per-axis std of the true start orientation's offset [rad] (file:
+            ``rotation_std_deg``).
     """
 
     position_std: float = option(0.0, minimum=0.0, unit="m")
@@ -204,5 +227,34 @@ def run_rng(run_seed: int, part: str) -> np.random.Generator:
 
 
 def draw_homing_offset(h: HomingRealism, rng: np.random.Generator) -> np.ndarray:
-    """A start-pose offset twist [δp (m), δθ (rad)] in the base frame. Returns (6,)."""
+    """A start-pose offset [δp (m), δθ (rad)] in the base frame. Returns (6,).
+
+    The true start pose is ᵇT_p0' = (exp([δθ]×) ᵇR_p0, ᵇp_p0 + δp) (:func:`apply_homing_offset`).
+    Draws, in order: 3 positions (``position_std``), 3 rotations (``rotation_std``).
+
+    Args:
+        h: the homing repeatability.
+        rng: the run's homing generator (``run_rng(seed, "homing")``).
+    """
     return np.concatenate([rng.normal(0.0, h.position_std, 3), rng.normal(0.0, h.rotation_std, 3)])
+
+
+RUN_SOURCES = ("pixel_noise", "tension_noise", "homing")
+"""What changes between repetitions of a run on one robot: the camera's pixel noise, the
+tension sensors' reading noise (``[sensors] tension_noise_std``) and the homing offset."""
+
+
+def without_source(realism: Realism, source: str) -> Realism:
+    """The profile with one per-run source of variation off.
+
+    ``tension_noise`` lives in the scenario's ``[sensors]`` table: see
+    :meth:`cdpr_twin.scenario.Scenario.without`.
+
+    Raises:
+        ValueError: for an unknown source.
+    """
+    if source == "pixel_noise":
+        return replace(realism, camera=replace(realism.camera, noise=False))
+    if source == "homing":
+        return replace(realism, homing=HomingRealism())
+    raise ValueError(f"unknown source of variation {source!r}; choose one of {RUN_SOURCES}")

@@ -31,7 +31,7 @@ from cdpr_twin.options import (
     parse_options,
     read_options,
 )
-from cdpr_twin.realism import PARTS, PROFILES, Realism, profile
+from cdpr_twin.realism import PARTS, PROFILES, Realism, profile, without_source
 
 
 @dataclass(frozen=True)
@@ -174,6 +174,44 @@ class Scenario:
         if not s.sensors.camera:
             s = _without_camera(s, done)
         return replace(s, overrides=MappingProxyType(done))
+
+    def without(self, *sources: str) -> Scenario:
+        """A copy with per-run sources of variation switched off (the decomposition's runs).
+
+        Args:
+            *sources: names from :data:`cdpr_twin.realism.RUN_SOURCES`.
+
+        Raises:
+            ScenarioError: for an unknown source.
+        """
+        s = self
+        for source in sources:
+            if source == "tension_noise":
+                s = replace(s, sensors=replace(s.sensors, tension_noise_std=0.0))
+            else:
+                try:
+                    s = replace(s, realism=without_source(s.realism, source))
+                except ValueError as exc:
+                    raise ScenarioError(str(exc)) from None
+        done = {**self.overrides, "without": [*self.overrides.get("without", ()), *sources]}
+        return replace(s, overrides=MappingProxyType(done))
+
+    def with_controller_options(self, **options: Any) -> Scenario:
+        """A copy with some controller options replaced (SI units), validated.
+
+        Raises:
+            ScenarioError: for an unknown option or an invalid value.
+        """
+        try:
+            opts = replace(self.controller.options, **options)
+        except (TypeError, ValueError) as exc:
+            raise ScenarioError(f"{self.source}: controller: {exc}") from None
+        done = {**self.overrides, "controller": {**options}}
+        return replace(
+            self,
+            controller=replace(self.controller, options=opts),
+            overrides=MappingProxyType(done),
+        )
 
 
 def _needs_camera(kind: str, name: str) -> bool:

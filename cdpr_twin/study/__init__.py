@@ -20,7 +20,7 @@ from pathlib import Path
 
 from cdpr_twin.study.analysis import accuracy_at_p1, analyse
 from cdpr_twin.study.findings import FINDINGS, Finding, evaluate
-from cdpr_twin.study.plan import Progress, RunSpec, Scenarios, plan, run_study
+from cdpr_twin.study.plan import Progress, RunSpec, Scenarios, extra_runs, plan, run_study
 from cdpr_twin.study.report import make_figures, write_report
 
 __all__ = [
@@ -46,6 +46,8 @@ def reproduce(
     duration: float | None = None,
     progress: Progress | None = None,
     scenarios: Scenarios | tuple[str | Path, str | Path] | None = None,
+    decompose: tuple[str, ...] = (),
+    other_goal: str | None = None,
 ) -> dict:
     """Run the study and write ``runs/``, ``runs.json``, figures, ``report.json``, ``report.md``.
 
@@ -56,6 +58,9 @@ def reproduce(
         duration: duration override of every run [s], or ``None``.
         progress: ``progress(done, total, record)``, called as each run ends.
         scenarios: the (open-loop, PBVS) scenario files; default the paper's.
+        decompose: per-run sources of variation (:data:`cdpr_twin.realism.RUN_SOURCES`) to
+            switch off in turn, repeating the open-loop and control-in-the-loop PBVS runs.
+        other_goal: a second PBVS goal (``"nominal"``/``"taught"``) for the control runs.
 
     Returns:
         The report numbers (as in ``report.json``), plus ``"wall_time_s"``.
@@ -63,6 +68,7 @@ def reproduce(
     scenarios = Scenarios(*scenarios) if scenarios is not None else Scenarios()
     workers = workers or max(1, multiprocessing.cpu_count())
     specs = plan(runs_scale, duration, scenarios.open_loop, scenarios.pbvs)
+    specs += extra_runs(specs, decompose, other_goal)
     start = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     records = run_study(specs, out, workers, progress)

@@ -7,6 +7,7 @@ run's ``timeseries.csv``, the robot from the scenario file the runs were made wi
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,10 +25,8 @@ from cdpr_twin.results import (
 from cdpr_twin.se3 import pose_distance, pose_from_vector
 from cdpr_twin.study.findings import evaluate
 from cdpr_twin.study.plan import PBVS_SCENARIO
+from cdpr_twin.study.spread import PBVS_CONVERGED, is_main, spread
 from cdpr_twin.timeseries import Timeseries
-
-PBVS_CONVERGED = "converged"
-"""A PBVS run's final status when it converged (only those count for accuracy)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,7 +62,7 @@ def figure_runs(records: list[dict]) -> tuple[Path | None, dict[str, Path]]:
         ``(open-loop run directory or None, {in-loop estimator: PBVS run directory})``, the
         estimators in display order; failed runs are left out.
     """
-    ok = [r for r in records if r["ok"] and r["seed"] == 1]
+    ok = [r for r in records if r["ok"] and r["seed"] == 1 and is_main(r)]
     open_loop = next((Path(r["dir"]) for r in ok if r["kind"] == "open_loop"), None)
     pbvs = {r["in_loop"]: Path(r["dir"]) for r in ok if r["kind"] == "pbvs"}
     return open_loop, {n: pbvs[n] for n in ordered_estimators(pbvs)}
@@ -232,7 +231,7 @@ def _accuracy(ok: list[dict], p1: SegmentEnd | None) -> dict[str, dict[str, list
     """Fig. 8: final error at p1 per group (open loop, all PBVS, PBVS per in-loop estimator)."""
     acc: dict[str, dict[str, list[float]]] = {}
     for r in ok:
-        if r["kind"] == "pbvs" and r["status"] != PBVS_CONVERGED:
+        if not is_main(r) or (r["kind"] == "pbvs" and r["status"] != PBVS_CONVERGED):
             continue
         a = accuracy_at_p1(Path(r["dir"]), r["kind"], None if p1 is None else p1.T_waypoint)
         if a is None:
@@ -252,6 +251,23 @@ def _robot_scenario(records: list[dict]) -> str | Path:
             if r["kind"] == kind:
                 return r["scenario"]
     return PBVS_SCENARIO
+
+
+def _realism(scenario_file: str | Path) -> tuple[dict, str]:
+    """The runs' realism profile (JSON-ready: ``inf`` → ``None``) and the PBVS goal option."""
+    from cdpr_twin.scenario import load_scenario
+
+    s = load_scenario(scenario_file)
+
+    def clean(v):
+        if isinstance(v, dict):
+            return {k: clean(x) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [clean(x) for x in v]
+        return None if isinstance(v, float) and not np.isfinite(v) else v
+
+    goal = getattr(s.controller.options, "goal", "nominal")
+    return clean(dataclasses.asdict(s.realism)), goal
 
 
 def analyse(out: Path, records: list[dict]) -> dict:
@@ -283,7 +299,9 @@ def analyse(out: Path, records: list[dict]) -> dict:
             k: float(np.mean(acc["open loop"][k]) / np.mean(acc["PBVS (all)"][k]))
             for k in ("translation_m", "rotation_deg")
         }
+    rep["spread"] = spread(ok, accuracy_at_p1, None if p1 is None else p1.T_waypoint)
     rep["robot"] = _camera_tag_errors(_robot_scenario(records))
+    rep["realism"], rep["pbvs_goal"] = _realism(_robot_scenario(records))
     rep["findings"] = evaluate(rep)
     (out / "report.json").write_text(json.dumps(rep, indent=2) + "\n", encoding="utf-8")
     return rep

@@ -13,7 +13,7 @@ import multiprocessing
 import traceback
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -58,6 +58,8 @@ class RunSpec:
         in_loop: estimator closing the loop (PBVS).
         duration: duration override [s], or ``None``.
         record_rrd: write a Rerun recording (the figure runs only).
+        without: per-run sources of variation switched off (the decomposition's runs).
+        goal: the PBVS goal option (``"nominal"``/``"taught"``), or ``None``: the file's.
     """
 
     name: str
@@ -67,6 +69,15 @@ class RunSpec:
     in_loop: str | None = None
     duration: float | None = None
     record_rrd: bool = False
+    without: tuple[str, ...] = ()
+    goal: str | None = None
+
+    @property
+    def group(self) -> str:
+        """The campaign the run belongs to (``"main"``, ``"without <source>"``, ``"goal …"``)."""
+        if self.without:
+            return "without " + "+".join(self.without)
+        return f"goal {self.goal}" if self.goal else "main"
 
 
 def plan(
@@ -107,6 +118,35 @@ def plan(
     return specs
 
 
+def extra_runs(
+    specs: list[RunSpec],
+    decompose: tuple[str, ...] = (),
+    goal: str | None = None,
+    in_loop: str = "control",
+) -> list[RunSpec]:
+    """More runs for the repeatability decomposition and the other PBVS goal.
+
+    Args:
+        specs: the main runs (:func:`plan`).
+        decompose: per-run sources of variation; each repeats the main open-loop runs and the
+            ``in_loop`` PBVS runs with that source off.
+        goal: the other PBVS goal: repeats the ``in_loop`` PBVS runs with it.
+        in_loop: the PBVS runs repeated (the paper's best in-loop estimator).
+    """
+    base = [s for s in specs if s.kind == "open_loop" or s.in_loop == in_loop]
+    out = [
+        replace(s, name=f"{s.name}_without_{source}", without=(source,), record_rrd=False)
+        for source in decompose
+        for s in base
+    ]
+    out += [
+        replace(s, name=f"{s.name}_goal_{goal}", goal=goal, record_rrd=False)
+        for s in base
+        if goal is not None and s.kind == "pbvs"
+    ]
+    return out
+
+
 def _run_one(spec: RunSpec, runs_dir: str) -> dict:
     """Worker (a spawned process): run one spec; never raise, report instead."""
     from cdpr_twin.runner import run
@@ -117,6 +157,9 @@ def _run_one(spec: RunSpec, runs_dir: str) -> dict:
         s = load_scenario(spec.scenario).with_overrides(
             seed=spec.seed, in_loop=spec.in_loop, duration=spec.duration
         )
+        s = s.without(*spec.without)
+        if spec.goal is not None:
+            s = s.with_controller_options(goal=spec.goal)
         result = run(s, out, record_rrd=spec.record_rrd)
         return {
             **asdict(spec),
