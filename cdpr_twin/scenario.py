@@ -10,7 +10,6 @@ here); errors name the file, the field and the fix. A scenario file is documente
 
 from __future__ import annotations
 
-import functools
 import math
 import tomllib
 from collections.abc import Mapping
@@ -23,15 +22,14 @@ import numpy as np
 
 from cdpr_twin import plugins
 from cdpr_twin.deviations import DeviationSpec
-from cdpr_twin.events import EVENT_TYPES, Event
+from cdpr_twin.events import Event
 from cdpr_twin.options import (
     OptionReader,
     ScenarioError,
-    build_options,
     parse_options,
-    read_options,
 )
-from cdpr_twin.realism import PARTS, PROFILES, Realism, profile, without_source
+from cdpr_twin.realism import Realism, profile, without_source
+from cdpr_twin.scenario_tables import read_events, read_plugins, read_realism, read_truth
 
 
 @dataclass(frozen=True)
@@ -196,6 +194,19 @@ class Scenario:
         done = {**self.overrides, "without": [*self.overrides.get("without", ()), *sources]}
         return replace(s, overrides=MappingProxyType(done))
 
+    def with_realism(self, name: str) -> Scenario:
+        """A copy with a named realism profile (no field overridden): ``--realism ideal``.
+
+        Raises:
+            ScenarioError: for an unknown profile.
+        """
+        try:
+            realism = profile(name)
+        except ValueError as exc:
+            raise ScenarioError(f"--realism: {exc}") from None
+        done = {**self.overrides, "realism": name}
+        return replace(self, realism=realism, overrides=MappingProxyType(done))
+
     def with_controller_options(self, **options: Any) -> Scenario:
         """A copy with some controller options replaced (SI units), validated.
 
@@ -260,47 +271,6 @@ def _estimators(r: OptionReader) -> EstimatorConfig:
     return EstimatorConfig(in_loop, passive_t, MappingProxyType(options))
 
 
-def _events(top: OptionReader) -> tuple[Event, ...]:
-    raw = top.raw("events", [], "array of tables [[events]]")
-    if not isinstance(raw, list) or not all(isinstance(e, dict) for e in raw):
-        raise top.fail("events", "must be an array of tables [[events]] (type, time, …)")
-    out = []
-    for i, table in enumerate(raw):
-        r = OptionReader(top.source, table, f"events[{i}]")
-        cls = EVENT_TYPES.get(r.string("type", choices=tuple(EVENT_TYPES)))
-        out.append(parse_options(r, cls, skip=("type",)))
-    return tuple(out)  # in file order (errors name events[i] as the file numbers them)
-
-
-def _realism(top: OptionReader) -> Realism:
-    r = top.table_of("realism", required=False)
-    name = r.string("profile", "ideal", choices=PROFILES)
-    values = {}
-    for part, cls in PARTS.items():
-        if r.has(part):
-            t = r.table_of(part)
-            v = read_options(t, cls, required=False)
-            build_options(t, cls, functools.partial(_one_part, name, part), v)  # names a bad field
-            values[part] = v
-    r.done()
-    return profile(name, **values)
-
-
-def _one_part(name: str, part: str, **values: Any) -> Realism:
-    return profile(name, **{part: values})
-
-
-def _plugins(top: OptionReader) -> tuple[str, ...]:
-    refs = top.raw("plugins", [], "list of module names or .py files")
-    if not isinstance(refs, list) or not all(isinstance(x, str) for x in refs):
-        raise top.fail("plugins", f"must be a list of module names or .py files, got {refs!r}")
-    try:
-        plugins.load_modules(refs, top.source.parent)
-    except Exception as exc:  # an import error in the user's module: say which and why
-        raise top.fail("plugins", f"cannot import: {type(exc).__name__}: {exc}") from None
-    return tuple(refs)
-
-
 def _model(top: OptionReader, source: Path) -> ModelConfig:
     m = top.table_of("model", required=False)
     file = Path(m.string("file", "../models/acrobot/scene.xml"))
@@ -318,30 +288,6 @@ def _model(top: OptionReader, source: Path) -> ModelConfig:
             " choose a rate or timestep that divide evenly",
         )
     return ModelConfig(file, timestep, control_rate, align_every)
-
-
-def _truth(top: OptionReader, source: Path) -> DeviationSpec:
-    t = top.table_of("truth", required=False)
-    try:
-        truth = DeviationSpec(
-            exit_point_std=t.number("exit_point_std", 0.0, minimum=0, unit="m"),
-            anchor_point_std=t.number("anchor_point_std", 0.0, minimum=0, unit="m"),
-            es_scale_std=t.number("es_scale_std", 0.0, minimum=0),
-            pulley_radius_std=t.number("pulley_radius_std", 0.0, minimum=0, unit="m"),
-            camera_position_std=t.number("camera_position_std", 0.0, minimum=0, unit="m"),
-            camera_rotation_std=math.radians(
-                t.number("camera_rotation_std_deg", 0.0, minimum=0, unit="deg")
-            ),
-            tag_position_std=t.number("tag_position_std", 0.0, minimum=0, unit="m"),
-            tag_rotation_std=math.radians(
-                t.number("tag_rotation_std_deg", 0.0, minimum=0, unit="deg")
-            ),
-            seed=t.integer("seed", 0, minimum=0),
-        )
-    except ValueError as exc:
-        raise ScenarioError(f"{source}: truth: {exc}") from None
-    t.done()
-    return truth
 
 
 def _read(source: Path) -> OptionReader:
@@ -365,14 +311,14 @@ def load_scenario(path: str | Path) -> Scenario:
     """
     source = Path(path)
     top = _read(source)
-    loaded = _plugins(top)  # first: the file may name what they register
+    loaded = read_plugins(top)  # first: the file may name what they register
     name = top.string("name", source.stem)
     if not name or any(c in name for c in "/\\") or name in (".", ".."):
         raise top.fail("name", f"must be a plain name usable as a directory, got {name!r}")
     description = top.string("description", "")
     duration = top.number("duration", minimum=0, exclusive=True, unit="s")
     seed = top.integer("seed", 0, minimum=0)
-    model, truth = _model(top, source), _truth(top, source)
+    model, truth = _model(top, source), read_truth(top, source)
     s = top.table_of("sensors", required=False)
     sensors = SensorConfig(
         s.number("tension_noise_std", 0.24, minimum=0, unit="N"), s.boolean("camera", True)
@@ -383,8 +329,8 @@ def load_scenario(path: str | Path) -> Scenario:
     st.done()
     controller = _controller(top.table_of("controller"))
     estimators = _estimators(top.table_of("estimators"))
-    events = _events(top)
-    realism = _realism(top)
+    events = read_events(top)
+    realism = read_realism(top)
     top.done()
     scenario = Scenario(
         name, source, description, duration, seed, start, model, truth, sensors,

@@ -1,0 +1,93 @@
+"""Tables of a scenario file that are values of their own: truth, realism, events, plugins.
+
+Read by :func:`cdpr_twin.scenario.load_scenario`; each function takes the top-level reader and
+returns the table's value in SI units, with errors naming the file and field.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from pathlib import Path
+from typing import Any
+
+from cdpr_twin import plugins
+from cdpr_twin.deviations import DeviationSpec
+from cdpr_twin.events import EVENT_TYPES, Event
+from cdpr_twin.options import (
+    OptionReader,
+    ScenarioError,
+    build_options,
+    parse_options,
+    read_options,
+)
+from cdpr_twin.realism import PARTS, PROFILES, Realism, profile
+
+
+def read_events(top: OptionReader) -> tuple[Event, ...]:
+    """``[[events]]``: timed events, in file order."""
+    raw = top.raw("events", [], "array of tables [[events]]")
+    if not isinstance(raw, list) or not all(isinstance(e, dict) for e in raw):
+        raise top.fail("events", "must be an array of tables [[events]] (type, time, …)")
+    out = []
+    for i, table in enumerate(raw):
+        r = OptionReader(top.source, table, f"events[{i}]")
+        cls = EVENT_TYPES.get(r.string("type", choices=tuple(EVENT_TYPES)))
+        out.append(parse_options(r, cls, skip=("type",)))
+    return tuple(out)  # in file order (errors name events[i] as the file numbers them)
+
+
+def read_realism(top: OptionReader) -> Realism:
+    """``[realism]``: a named profile and its overridden fields (``[realism.<part>]``)."""
+    r = top.table_of("realism", required=False)
+    name = r.string("profile", "ideal", choices=PROFILES)
+    values = {}
+    for part, cls in PARTS.items():
+        if r.has(part):
+            t = r.table_of(part)
+            v = read_options(t, cls, required=False)
+            build_options(t, cls, functools.partial(_one_part, name, part), v)  # names a bad field
+            values[part] = v
+    r.done()
+    return profile(name, **values)
+
+
+def _one_part(name: str, part: str, **values: Any) -> Realism:
+    return profile(name, **{part: values})
+
+
+def read_plugins(top: OptionReader) -> tuple[str, ...]:
+    """``plugins``: import them (they register estimators or controllers) and list them."""
+    refs = top.raw("plugins", [], "list of module names or .py files")
+    if not isinstance(refs, list) or not all(isinstance(x, str) for x in refs):
+        raise top.fail("plugins", f"must be a list of module names or .py files, got {refs!r}")
+    try:
+        plugins.load_modules(refs, top.source.parent)
+    except Exception as exc:  # an import error in the user's module: say which and why
+        raise top.fail("plugins", f"cannot import: {type(exc).__name__}: {exc}") from None
+    return tuple(refs)
+
+
+def read_truth(top: OptionReader, source: Path) -> DeviationSpec:
+    """``[truth]``: the robot's calibration errors (standard deviations) and its seed."""
+    t = top.table_of("truth", required=False)
+    try:
+        truth = DeviationSpec(
+            exit_point_std=t.number("exit_point_std", 0.0, minimum=0, unit="m"),
+            anchor_point_std=t.number("anchor_point_std", 0.0, minimum=0, unit="m"),
+            es_scale_std=t.number("es_scale_std", 0.0, minimum=0),
+            pulley_radius_std=t.number("pulley_radius_std", 0.0, minimum=0, unit="m"),
+            camera_position_std=t.number("camera_position_std", 0.0, minimum=0, unit="m"),
+            camera_rotation_std=math.radians(
+                t.number("camera_rotation_std_deg", 0.0, minimum=0, unit="deg")
+            ),
+            tag_position_std=t.number("tag_position_std", 0.0, minimum=0, unit="m"),
+            tag_rotation_std=math.radians(
+                t.number("tag_rotation_std_deg", 0.0, minimum=0, unit="deg")
+            ),
+            seed=t.integer("seed", 0, minimum=0),
+        )
+    except ValueError as exc:
+        raise ScenarioError(f"{source}: truth: {exc}") from None
+    t.done()
+    return truth
