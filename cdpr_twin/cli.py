@@ -128,6 +128,8 @@ def _run(args: argparse.Namespace) -> int:
             duration=args.duration,
             camera=False if args.no_camera else None,
         )
+        if args.realism is not None:
+            scenario = scenario.with_realism(args.realism)
     except ScenarioError as exc:
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
         return 2
@@ -234,6 +236,12 @@ def main(argv: list[str] | None = None) -> int:
     runp.add_argument("--duration", type=float, default=None, help="run length [s]")
     runp.add_argument("--no-camera", action="store_true", help="no rendering (drops 'image')")
     runp.add_argument("--spawn", action="store_true", help="also stream to a live Rerun viewer")
+    runp.add_argument(
+        "--realism",
+        choices=("ideal", "acrobot"),
+        default=None,
+        help="realism profile instead of the scenario's (its [realism] overrides are dropped)",
+    )
     runp.set_defaults(func=_run)
     rep = sub.add_parser("reproduce", help="run the paper's study: runs, figures, report")
     rep.add_argument(

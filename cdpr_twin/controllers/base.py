@@ -1,5 +1,9 @@
 """The controllers' common interface: reset at the start pose, command at each control tick.
 
+Before a run the runner lets a controller learn its task by being shown (:meth:`Controller.
+teach`, teach-by-showing): the experimenters place the real robot at a pose and the controller
+records what the sensors measure there — a measurement, never the pose's truth.
+
 A controller also describes its own task to the runner — its goal pose, the checkpoints at
 which the run records where the platform is, its extra summary fields and how a run that
 ran out of time ended — so the runner needs no knowledge of any controller.
@@ -8,6 +12,7 @@ ran out of time ended — so the runner needs no knowledge of any controller.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -63,6 +68,21 @@ class Controller(ABC):
 
         Raises:
             cdpr_twin.plugins.OptionError: naming the option at fault.
+        """
+
+    def teach(self, show: Callable[[np.ndarray], Measurement]) -> None:  # noqa: B027
+        """Learn the task by being shown, once before the run (optional hook: nothing to learn).
+
+        The runner calls it after :meth:`check`, before the robot is homed at the start pose and
+        :meth:`reset` is called; what it learns survives :meth:`reset`.
+
+        Args:
+            show: ``show(T_base_platform)`` places the true robot at a platform pose (4, 4), lets
+                it settle, and returns what the sensors measure there.
+
+        Raises:
+            cdpr_twin.plugins.OptionError: naming the option at fault (e.g. the tag is not seen
+                at the pose shown).
         """
 
     @abstractmethod

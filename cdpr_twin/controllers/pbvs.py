@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -11,8 +13,18 @@ import numpy as np
 from cdpr_twin.controllers.base import Controller, RunEnd
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import jacobian
-from cdpr_twin.plugins import OptionError, option, register
-from cdpr_twin.se3 import adjoint, inverse, pose_distance, skew, so3_log
+from cdpr_twin.metrics import pose_error
+from cdpr_twin.plugins import OptionError, OptionSpec, option, register
+from cdpr_twin.se3 import (
+    adjoint,
+    check_rigid,
+    inverse,
+    pose_distance,
+    pose_from_vector,
+    skew,
+    so3_log,
+    vector_from_pose,
+)
 from cdpr_twin.types import T_TAGPUPIL_TAGVISP, Command, Measurement, PoseEstimate, Status
 
 
@@ -54,6 +66,16 @@ def _visp_goal(T_cam_tagvisp: np.ndarray) -> np.ndarray:
     return goal
 
 
+P1 = (0.284, -0.197, 0.08, 0.0, 0.0, 0.0)
+"""The paper's p1 ``[x, y, z, rx, ry, rz]`` (m, deg): where the nominal goal view is seen."""
+
+
+def _p1() -> np.ndarray:
+    out = pose_from_vector(P1)
+    out.flags.writeable = False
+    return out
+
+
 @dataclass(frozen=True)
 class PbvsOptions:
     """The PBVS task and gains.
@@ -69,6 +91,15 @@ class PbvsOptions:
         converged_translation: ‖ᶜt_o − ᶜ*t_o‖ below which translation has converged [m].
         converged_rotation: θ below which rotation has converged [rad] (file: deg).
         jacobian_model: cable model of Â (``"straight"``: eq. 6, as in the paper).
+        goal: where the desired feature s* comes from. ``"nominal"``: ``goal_T_cam_tag``, the
+            view the nominal model predicts at the goal pose. ``"taught"``: teach-by-showing,
+            the usual visual-servoing practice — before the run the true robot is placed at
+            ``teach_pose`` (as experimenters do with their tracker), the camera measures the
+            tag there (a real detection: noise, calibration errors and all), and that
+            measured ᶜT_o is s* (``goal_T_cam_tag`` is then only reported beside it).
+        teach_pose: (4, 4) true platform pose shown with ``goal = "taught"`` (file:
+            ``[x, y, z, rx, ry, rz]``, m and degrees; default the paper's p1); it is the
+            run's reported goal pose.
     """
 
     goal_T_cam_tag: np.ndarray = option(  # noqa: RUF009  (a field, required: no default)
@@ -80,6 +111,10 @@ class PbvsOptions:
     converged_translation: float = option(5e-4, minimum=0.0, exclusive=True, unit="m")
     converged_rotation: float = option(_TENTH_DEGREE, minimum=0.0, exclusive=True, unit="deg")
     jacobian_model: Literal["straight", "pulley"] = option("straight")
+    goal: Literal["nominal", "taught"] = option("nominal")
+    teach_pose: np.ndarray = dataclasses.field(
+        default_factory=_p1, metadata={"option": OptionSpec(pose=True)}
+    )
 
     def __post_init__(self) -> None:
         goal = np.asarray(self.goal_T_cam_tag, dtype=float)
@@ -101,6 +136,12 @@ class PbvsOptions:
             raise OptionError(
                 "jacobian_model", f"must be 'straight' or 'pulley', got {self.jacobian_model!r}"
             )
+        if self.goal not in ("nominal", "taught"):
+            raise OptionError("goal", f"must be 'nominal' or 'taught', got {self.goal!r}")
+        try:
+            check_rigid(np.asarray(self.teach_pose, dtype=float), "teach_pose")
+        except ValueError as exc:
+            raise OptionError("teach_pose", str(exc)) from None
 
 
 @register

@@ -27,7 +27,7 @@ import numpy as np
 from cdpr_twin.events import StepHook
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import cable_lengths, rest_lengths
-from cdpr_twin.realism import WinchRealism
+from cdpr_twin.realism import WinchRealism, robot_rng
 from cdpr_twin.se3 import (
     inverse,
     matrix_from_quat_wxyz,
@@ -48,6 +48,7 @@ from cdpr_twin.sim.model import (
     read_geometry,
     swivel_body,
 )
+from cdpr_twin.sim.winch import WinchServos, check_lengths, checked_rates, draw_drum_radii
 from cdpr_twin.statics import tension_distribution
 
 TAG_SITE = "tag_center"
@@ -90,6 +91,9 @@ class Physics:
         self.geometry: CdprGeometry = read_geometry(model)
         self.align_every = int(align_every)
         self.winch = WinchRealism() if winch is None else winch
+        self._servos = WinchServos.of(self.winch, self.n_cables)  # None: rates act instantly
+        rng = robot_rng(robot_seed, "winch")  # per robot; the encoders read the same radii
+        self.drum_radius_true = draw_drum_radii(self.winch, rng, self.n_cables)
         self._hooks: list[StepHook] = []
         self.cable_enabled = np.ones(self.n_cables, dtype=bool)
         self._index(model)
@@ -165,8 +169,9 @@ class Physics:
 
     @property
     def winch_rates(self) -> np.ndarray:
-        """The winch rates being applied dl0/dt (m,) [m/s]."""
-        return self.data.ctrl[self._actuators].copy()
+        """The winches' actual rates dl0/dt now (m,) [m/s] (the commanded ones if ideal)."""
+        s = self._servos
+        return (self.data.ctrl[self._actuators] if s is None else s.rate).copy()
 
     @property
     def has_camera(self) -> bool:
@@ -255,6 +260,8 @@ class Physics:
             if self._hooks:
                 chunk = self._fire_hooks(chunk)
             self.refresh()
+            if self._servos is not None:  # the chunk's exact mean rate: l0 exact at its end
+                self.data.ctrl[self._actuators] = self._servos.run(chunk * self.timestep)
             mujoco.mj_step(self.model, self.data, nstep=chunk)
             n -= chunk
         self._check_state()
@@ -284,31 +291,20 @@ class Physics:
     def set_winch_rates(self, rates: np.ndarray, steps: int) -> None:
         """Command winch rates for the next ``steps`` physics steps (checked against limits).
 
+        Ideal winches apply them at once, servos (``winch``) through their velocity loops.
+
         Raises:
             ValueError: non-finite or out-of-range rates, or rates that would run a winch past
-                its range within those steps.
+                its range within those steps (the exact lengths the loops reach).
         """
-        rates = np.array(rates, dtype=float)
-        if rates.shape != (self.n_cables,):
-            raise ValueError(f"cable_rates must have shape ({self.n_cables},), got {rates.shape}")
-        if not math.isfinite(rates.sum()):
-            raise ValueError(
-                f"cable_rates must be finite, got {rates.tolist()} (NaN or inf from the "
-                "controller?)"
-            )
-        lo, hi = self._ctrl_lo, self._ctrl_hi
-        if (rates < lo).any() or (rates > hi).any():
-            raise ValueError(
-                f"cable rates {np.round(rates, 4).tolist()} m/s exceed the winches' "
-                f"range [{lo.min()}, {hi.max()}] m/s"
-            )
-        l0_end = self.rest_lengths + rates * steps * self.timestep
-        if np.any(l0_end < self._act_range[:, 0]) or np.any(l0_end > self._act_range[:, 1]):
-            raise ValueError(
-                f"these rates would run winch lengths to {np.round(l0_end, 4)} m, "
-                f"outside the winch range {self._act_range[0].tolist()} m"
-            )
-        self.data.ctrl[self._actuators] = rates
+        rates, s = checked_rates(rates, self.n_cables, self._ctrl_lo, self._ctrl_hi), self._servos
+        h = steps * self.timestep
+        paid = rates * steps * self.timestep if s is None else s.paid_out(rates, h)
+        check_lengths(self.rest_lengths + paid, self._act_range)
+        if s is None:
+            self.data.ctrl[self._actuators] = rates
+        else:
+            s.command = rates
 
     def steps_in(self, duration: float) -> int:
         """The whole number of physics steps in ``duration`` seconds.
@@ -395,6 +391,8 @@ class Physics:
         tau = tension_distribution(geom, T, tau_min, tau_max, model="pulley")
         l0 = rest_lengths(cable_lengths(geom, T, "pulley"), tau, self._es)
         mujoco.mj_resetData(self.model, self.data)
+        if self._servos is not None:
+            self._servos.reset()  # winches at rest
         self.cable_enabled[:] = True
         self.data.act[self._actuators] = l0
         self.place(T)

@@ -1,5 +1,11 @@
 """Tension sensors at the anchor points B_i.
 
+Sensor i reads ``(1 + g_i)·τ_i + b_i + n``: a gain error g_i and an offset b_i that belong to
+the sensor (drawn once per robot, from the truth seed: the datasheet's *accuracy*, a systematic
+error), plus white noise n of ``noise_std`` drawn at every reading from the run's generator (the
+datasheet's *repeatability*); with ``clip`` the reading saturates at the sensor's range, and
+the measurement says which readings did (see :class:`~cdpr_twin.realism.TensionRealism`).
+
 Ideal (``TensionRealism()``): the true tension plus Gaussian noise of ``noise_std`` per reading,
 drawn from the run's generator (the twin's behaviour before realism, bit for bit).
 """
@@ -14,12 +20,21 @@ from cdpr_twin.realism import TensionRealism
 class TensionSensors:
     """The tension sensors of one robot.
 
+    The per-robot errors are drawn at construction, in this order: the m offsets b ~ N(0,
+    ``bias_std``²) [N], then the m gain errors g ~ N(0, ``gain_error_std``²). Each reading
+    draws ``normal(0, noise_std, m)`` once from the run's generator (nothing when
+    ``noise_std`` is 0), as the twin did before realism.
+
     Args:
         n_cables: cable count m.
         noise_std: per-reading noise std [N] (``[sensors] tension_noise_std``).
         realism: bias, gain and range of the sensors.
         run_rng: the run's generator of reading noise.
         robot_rng: the per-robot generator (bias and gain errors).
+
+    Attributes:
+        bias: (m,) each sensor's offset b_i [N].
+        gain_error: (m,) each sensor's relative gain error g_i.
     """
 
     def __init__(
@@ -34,10 +49,27 @@ class TensionSensors:
             raise ValueError(f"tension_noise_std must be ≥ 0 N, got {noise_std}")
         self.n_cables, self.noise_std, self.realism = n_cables, float(noise_std), realism
         self._rng = run_rng
+        self.bias = robot_rng.normal(0.0, realism.bias_std, n_cables)
+        self.gain_error = robot_rng.normal(0.0, realism.gain_error_std, n_cables)
+        self._calibration_error = realism.bias_std > 0 or realism.gain_error_std > 0
 
     def read(self, true_tensions: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """Readings (m,) [N], and which of them clipped at the range (``None``: no clipping)."""
+        """The sensors' readings of the true tensions.
+
+        Args:
+            true_tensions: (m,) true cable tensions at B_i [N].
+
+        Returns:
+            The readings (m,) [N], and (m,) bool: which readings sit at a limit of the range
+            (the true value may lie beyond it); ``None`` when the sensors do not clip.
+        """
         tensions = true_tensions
+        if self._calibration_error:
+            tensions = (1.0 + self.gain_error) * tensions + self.bias
         if self.noise_std > 0:
             tensions = tensions + self._rng.normal(0.0, self.noise_std, self.n_cables)
-        return tensions, None
+        if not self.realism.clip:
+            return tensions, None
+        lo, hi = self.realism.range_min, self.realism.range_max
+        clipped = (tensions <= lo) | (tensions >= hi)
+        return np.clip(tensions, lo, hi), clipped
