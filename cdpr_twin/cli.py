@@ -211,6 +211,11 @@ def _reproduce(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``cdpr-twin`` command."""
+    args = _parser().parse_args(argv)
+    return args.func(args)
+
+
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="cdpr-twin", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="settle the twin at a pose, print tensions and the tag")
@@ -243,6 +248,12 @@ def main(argv: list[str] | None = None) -> int:
         help="realism profile instead of the scenario's (its [realism] overrides are dropped)",
     )
     runp.set_defaults(func=_run)
+    _reproduce_parser(sub)
+    return parser
+
+
+def _reproduce_parser(sub) -> None:
+    """The ``reproduce`` subcommand's arguments."""
     rep = sub.add_parser("reproduce", help="run the paper's study: runs, figures, report")
     rep.add_argument(
         "--out",
@@ -272,8 +283,6 @@ def main(argv: list[str] | None = None) -> int:
         help="also run PBVS (control in the loop) with this goal",
     )
     rep.set_defaults(func=_reproduce)
-    args = parser.parse_args(argv)
-    return args.func(args)
 
 
 if __name__ == "__main__":
