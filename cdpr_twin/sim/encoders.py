@@ -2,9 +2,18 @@
 
 Ideal (``WinchRealism()``): the encoder reads the winch's unstretched paid-out length l0 plus
 the homing offset, exactly.
+
+Otherwise each encoder counts its drum's angle θ from where it was homed, with
+``encoder_counts`` counts per revolution (a counter: the count is floor(θ·N/2π), zeroed at
+homing), and reports the length the *nominal* drum radius r would pay out over the counted
+angle, while the cable actually paid out is the *true* radius r' times θ
+(:attr:`Physics.drum_radius_true`, drawn per robot). After paying out L the reading has moved by
+L·r/r' (less up to one count, 2π·r/N): an error ≈ −L·δr/r' that grows with paid-out cable.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -18,10 +27,11 @@ class Encoders:
     """The winch encoders of one robot.
 
     Args:
-        physics: the simulated robot.
+        physics: the simulated robot (its true drum radii).
         nominal: the nominal geometry (homing reads its rest lengths at the home pose).
         realism: winch and encoder imperfections.
-        robot_rng: the per-robot generator (drum radius errors).
+        robot_rng: the per-robot winch generator; unused: the drum radii are drawn once, by
+            the physics (:func:`cdpr_twin.sim.winch.draw_drum_radii`), so both see the same.
         home: home at :meth:`home` (else read the true rest lengths).
     """
 
@@ -40,14 +50,24 @@ class Encoders:
             home,
         )
         self._offset = np.zeros(physics.n_cables)
+        self.ideal = realism.encoder_counts == 0 and realism.drum_radius_error_std == 0.0
+        self._l0_home = np.zeros(physics.n_cables)  # true paid-out lengths when homed [m]
+
+    @property
+    def quantum(self) -> float:
+        """The length one count stands for, 2π·r/N [m] (0 for exact encoders)."""
+        n = self.realism.encoder_counts
+        return 2.0 * math.pi * self.realism.drum_radius / n if n else 0.0
 
     def home(self, T_base_platform: np.ndarray, tensions: np.ndarray) -> None:
         """Zero the encoders at a known pose (the paper's "initial pose is known").
 
         They then read the rest lengths the nominal model predicts at that pose with the given
-        tensions, plus whatever the winches pay out afterwards.
+        tensions, plus whatever the winches pay out afterwards (as the encoders measure it).
+        Without homing (``home=False``) they read the true rest lengths now, plus the same.
         """
         self._offset = np.zeros(self.physics.n_cables)
+        self._l0_home = self.physics.rest_lengths
         if self.home_enabled:
             g = self.nominal
             l0_nominal = rest_lengths(cable_lengths(g, T_base_platform, "pulley"), tensions, g.es)
@@ -55,4 +75,19 @@ class Encoders:
 
     def read(self) -> np.ndarray:
         """The lengths the encoders report (m,) [m]."""
-        return self.physics.rest_lengths + self._offset
+        if self.ideal:
+            return self.physics.rest_lengths + self._offset
+        return self._l0_home + self._offset + self.measured_payout()
+
+    def measured_payout(self) -> np.ndarray:
+        """The length the encoders count as paid out since homing (m,) [m].
+
+        The drum angle θ = ΔL/r' (ΔL the true paid-out length, r' the true radius), counted
+        as floor(θ·N/2π) counts and reported as nominal radius × counted angle.
+        """
+        w = self.realism
+        theta = (self.physics.rest_lengths - self._l0_home) / self.physics.drum_radius_true
+        if w.encoder_counts:
+            step = 2.0 * math.pi / w.encoder_counts
+            theta = np.floor(theta / step) * step
+        return w.drum_radius * theta

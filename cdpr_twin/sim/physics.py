@@ -2,7 +2,7 @@
 
 Physics (DESIGN §5). Each cable is a spatial tendon entry site → sheave (cylinder wrap) → B_i.
 Its winch actuator carries the unstretched length l0_i as activation state (``dyntype=
-integrator``: MuJoCo integrates the commanded rate exactly every step) and pulls with
+integrator``: MuJoCo integrates ctrl, the rate of :mod:`~cdpr_twin.sim.winch`) and pulls with
 
     τ_i = (E·S / l0_i) · (L_i − l0_i) + c_i · L̇_i,   clamped to τ_i ≥ 0 (a cable never pushes),
 
@@ -91,7 +91,7 @@ class Physics:
         self.geometry: CdprGeometry = read_geometry(model)
         self.align_every = int(align_every)
         self.winch = WinchRealism() if winch is None else winch
-        self._servos = WinchServos.of(self.winch, self.n_cables)  # None: rates act instantly
+        self._servos = WinchServos(self.winch, self.n_cables)
         rng = robot_rng(robot_seed, "winch")  # per robot; the encoders read the same radii
         self.drum_radius_true = draw_drum_radii(self.winch, rng, self.n_cables)
         self._hooks: list[StepHook] = []
@@ -170,8 +170,7 @@ class Physics:
     @property
     def winch_rates(self) -> np.ndarray:
         """The winches' actual rates dl0/dt now (m,) [m/s] (the commanded ones if ideal)."""
-        s = self._servos
-        return (self.data.ctrl[self._actuators] if s is None else s.rate).copy()
+        return self._servos.rate.copy()
 
     @property
     def has_camera(self) -> bool:
@@ -260,7 +259,7 @@ class Physics:
             if self._hooks:
                 chunk = self._fire_hooks(chunk)
             self.refresh()
-            if self._servos is not None:  # the chunk's exact mean rate: l0 exact at its end
+            if not self._servos.ideal:  # the chunk's exact mean rate: l0 exact at its end
                 self.data.ctrl[self._actuators] = self._servos.run(chunk * self.timestep)
             mujoco.mj_step(self.model, self.data, nstep=chunk)
             n -= chunk
@@ -291,20 +290,16 @@ class Physics:
     def set_winch_rates(self, rates: np.ndarray, steps: int) -> None:
         """Command winch rates for the next ``steps`` physics steps (checked against limits).
 
-        Ideal winches apply them at once, servos (``winch``) through their velocity loops.
-
         Raises:
             ValueError: non-finite or out-of-range rates, or rates that would run a winch past
-                its range within those steps (the exact lengths the loops reach).
+                its range within those steps (servos: the exact lengths their loops reach).
         """
-        rates, s = checked_rates(rates, self.n_cables, self._ctrl_lo, self._ctrl_hi), self._servos
-        h = steps * self.timestep
-        paid = rates * steps * self.timestep if s is None else s.paid_out(rates, h)
+        rates = checked_rates(rates, self.n_cables, self._ctrl_lo, self._ctrl_hi)
+        paid = self._servos.paid_out(rates, steps, self.timestep)
         check_lengths(self.rest_lengths + paid, self._act_range)
-        if s is None:
+        self._servos.set_command(rates)
+        if self._servos.ideal:
             self.data.ctrl[self._actuators] = rates
-        else:
-            s.command = rates
 
     def steps_in(self, duration: float) -> int:
         """The whole number of physics steps in ``duration`` seconds.
@@ -391,8 +386,7 @@ class Physics:
         tau = tension_distribution(geom, T, tau_min, tau_max, model="pulley")
         l0 = rest_lengths(cable_lengths(geom, T, "pulley"), tau, self._es)
         mujoco.mj_resetData(self.model, self.data)
-        if self._servos is not None:
-            self._servos.reset()  # winches at rest
+        self._servos.reset()  # winches at rest
         self.cable_enabled[:] = True
         self.data.act[self._actuators] = l0
         self.place(T)

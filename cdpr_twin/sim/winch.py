@@ -1,0 +1,181 @@
+"""Winch servos and drums: how the cable rate follows its command (numpy only).
+
+Each winch's velocity loop makes its actual cable rate r follow the commanded rate u (constant
+over a control period) as a first-order system with time constant τ = 1/(2π·bandwidth), its
+acceleration bounded by a slew limit a:
+
+    ṙ = clip((u − r)/τ, −a, a).
+
+For a constant u the solution is closed-form: while |u − r| > a·τ the rate ramps at ±a
+(slew-limited), then the error decays as exp(−t/τ). :class:`WinchServos` advances that solution
+over each physics chunk and returns the chunk's *exact mean rate*, which MuJoCo's integrator
+actuator (ctrl = rate, act = l0) turns into the exact paid-out length at the chunk's end.
+
+The drum: the cable paid out is the *true* drum radius times the drum angle, while the encoder
+reports the *nominal* radius times the angle it counts (:mod:`cdpr_twin.sim.encoders`); each
+robot's true radii are drawn once, by :func:`draw_drum_radii`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cdpr_twin.realism import WinchRealism
+
+
+def draw_drum_radii(winch: WinchRealism, rng: np.random.Generator, n: int) -> np.ndarray:
+    """One robot's true drum radii, r·(1 + N(0, σ)) per winch.
+
+    Args:
+        winch: the nominal radius r [m] and the relative std σ.
+        rng: the robot's winch generator (:func:`cdpr_twin.realism.robot_rng`).
+        n: number of winches.
+
+    Returns:
+        (n,) true drum radii [m].
+    """
+    return winch.drum_radius * (1.0 + rng.normal(0.0, winch.drum_radius_error_std, n))
+
+
+def time_constant(bandwidth_hz: float) -> float:
+    """The velocity loop's time constant τ = 1/(2π f) [s] (0 for an infinite bandwidth)."""
+    return 0.0 if math.isinf(bandwidth_hz) else 1.0 / (2.0 * math.pi * bandwidth_hz)
+
+
+def loop_response(
+    r0: np.ndarray, u: np.ndarray, h: float, tau: float, accel: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The velocity loop's exact response to a constant command over h seconds.
+
+    Args:
+        r0: (m,) rates at the start [m/s].
+        u: (m,) commanded rates [m/s].
+        h: duration [s].
+        tau: time constant [s] (0: no first-order lag).
+        accel: acceleration limit [m/s²] (``inf``: none); τ = 0 needs a finite one.
+
+    Returns:
+        (rates at h [m/s], lengths paid out over [0, h] [m]), each (m,).
+    """
+    err = u - r0
+    if tau > 0.0 and (math.isinf(accel) or np.abs(err).max() <= accel * tau):
+        # no slew phase (the usual case after the first chunks): one exponential, scalar decay
+        grow = -math.expm1(-h / tau)  # 1 − e^(−h/τ)
+        return r0 + err * grow, u * h - err * (tau * grow)
+    sign = np.sign(err)
+    if math.isinf(accel):
+        t1, slope = np.zeros_like(err), np.zeros_like(err)
+    else:  # slew phase: |u − r| > a·τ, the rate ramps at ±a
+        t1 = np.minimum(np.maximum(np.abs(err) - accel * tau, 0.0) / accel, h)
+        slope = sign * accel
+    r1 = r0 + slope * t1
+    paid = (r0 + 0.5 * slope * t1) * t1
+    t2 = h - t1
+    if tau > 0.0:  # then the error decays exponentially
+        decay = np.exp(-t2 / tau)
+        err2 = u - r1
+        return u - err2 * decay, paid + u * t2 + err2 * tau * np.expm1(-t2 / tau)
+    return np.where(t2 > 0.0, u, r1), paid + u * t2
+
+
+class WinchServos:
+    """The velocity loops of a robot's winches: their actual rates, persistent across ticks.
+
+    Ideal winches (infinite bandwidth and acceleration) have no loop: their rate is the
+    command, which the physics applies directly (bit for bit as before servo models).
+
+    Args:
+        winch: bandwidth and acceleration limit.
+        n: number of winches.
+
+    Attributes:
+        ideal: whether the winches follow commands instantly.
+        tau: time constant [s].
+        accel: acceleration limit [m/s²].
+        rate: (n,) actual cable rates now [m/s].
+        command: (n,) commanded rates [m/s], constant until the next command.
+    """
+
+    def __init__(self, winch: WinchRealism, n: int) -> None:
+        self.ideal = math.isinf(winch.bandwidth_hz) and math.isinf(winch.max_accel)
+        self.tau, self.accel = time_constant(winch.bandwidth_hz), float(winch.max_accel)
+        self.rate, self.command = np.zeros(n), np.zeros(n)
+
+    def reset(self) -> None:
+        """Winches at rest, no command."""
+        self.rate = np.zeros_like(self.rate)
+        self.command = np.zeros_like(self.command)
+
+    def set_command(self, rates: np.ndarray) -> None:
+        """Command rates (m,) [m/s] (ideal winches run at them at once)."""
+        self.command = rates
+        if self.ideal:
+            self.rate = rates
+
+    def paid_out(self, rates: np.ndarray, steps: int, dt: float) -> np.ndarray:
+        """Length each winch would pay out under a command (m,) [m].
+
+        Args:
+            rates: (m,) commanded rates [m/s].
+            steps: for how many physics steps.
+            dt: physics step [s].
+        """
+        if self.ideal:
+            return rates * steps * dt
+        return loop_response(self.rate, rates, steps * dt, self.tau, self.accel)[1]
+
+    def run(self, duration: float) -> np.ndarray:
+        """Advance the loops by ``duration`` s under the current command (not for ideal ones).
+
+        Returns:
+            (n,) the mean rate over that time [m/s]: an integrator fed it for ``duration``
+            ends at the exact paid-out length.
+        """
+        self.rate, paid = loop_response(self.rate, self.command, duration, self.tau, self.accel)
+        return paid / duration
+
+
+def checked_rates(rates: np.ndarray, n: int, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Commanded winch rates as a float array, checked for shape, finiteness and range.
+
+    Args:
+        rates: the commanded rates [m/s].
+        n: number of winches.
+        lo: (n,) lowest rates [m/s].
+        hi: (n,) highest rates [m/s].
+
+    Raises:
+        ValueError: for a wrong shape, a NaN or inf, or a rate out of range.
+    """
+    rates = np.array(rates, dtype=float)
+    if rates.shape != (n,):
+        raise ValueError(f"cable_rates must have shape ({n},), got {rates.shape}")
+    if not math.isfinite(rates.sum()):
+        raise ValueError(
+            f"cable_rates must be finite, got {rates.tolist()} (NaN or inf from the controller?)"
+        )
+    if (rates < lo).any() or (rates > hi).any():
+        raise ValueError(
+            f"cable rates {np.round(rates, 4).tolist()} m/s exceed the winches' "
+            f"range [{lo.min()}, {hi.max()}] m/s"
+        )
+    return rates
+
+
+def check_lengths(l0_end: np.ndarray, act_range: np.ndarray) -> None:
+    """Check the winch lengths a command would reach against the winches' range.
+
+    Args:
+        l0_end: (n,) lengths at the end of the command [m].
+        act_range: (n, 2) lowest and highest lengths [m].
+
+    Raises:
+        ValueError: when a length leaves the range.
+    """
+    if np.any(l0_end < act_range[:, 0]) or np.any(l0_end > act_range[:, 1]):
+        raise ValueError(
+            f"these rates would run winch lengths to {np.round(l0_end, 4)} m, "
+            f"outside the winch range {act_range[0].tolist()} m"
+        )
