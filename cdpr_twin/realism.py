@@ -230,7 +230,7 @@ def draw_homing_offset(h: HomingRealism, rng: np.random.Generator) -> np.ndarray
     """A start-pose offset [δp (m), δθ (rad)] in the base frame. Returns (6,).
 
     The true start pose is ᵇT_p0' = (exp([δθ]×) ᵇR_p0, ᵇp_p0 + δp)
-    (:func:`cdpr_twin.runner.true_start_pose`).
+    (:func:`cdpr_twin.procedure.true_start_pose`).
     Draws, in order: 3 positions (``position_std``), 3 rotations (``rotation_std``).
 
     Args:

@@ -11,6 +11,11 @@ One tick (:func:`_loop`)::
 
 The runner knows no controller or estimator by name: each controller supplies its goal pose,
 checkpoints, summary fields and the status of a run that ran out of time.
+
+Before the loop (:func:`prepare`, :func:`start`): the controller may learn its task by being
+shown a pose (teach-by-showing, :meth:`Controller.teach`); then the true robot is put at the
+start pose moved by this run's homing offset (``[realism.homing]``), while the encoders are
+homed, and the estimators and controller reset, at the *nominal* start pose.
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ from cdpr_twin.estimators.base import Estimator
 from cdpr_twin.events import EventSchedule
 from cdpr_twin.metrics import RunMetrics, pose_error, run_summary
 from cdpr_twin.plugins import OptionError
+from cdpr_twin.procedure import homing, teach
 from cdpr_twin.record import Recorders, SceneInfo
 from cdpr_twin.scenario import Scenario, ScenarioError
 from cdpr_twin.statics import InfeasibleTensionError
@@ -50,6 +56,11 @@ class RunSetup:
         controller: the controller.
         goal_pose: (4, 4) the controller's goal, or ``None``.
         events: the scenario's timed events, hooked into the physics.
+        true_start: (4, 4) where the true platform starts: the start pose moved by the homing
+            offset (truth: metrics and tests only).
+        homing_offset: (6,) this run's homing offset [δp (m), δθ (rad)], or ``None`` (none).
+        shown_view: (4, 4) the true tag pose in the camera frame at the last pose shown to
+            the controller (truth: the summary's true tag error only), or ``None``.
     """
 
     scenario: Scenario
@@ -61,6 +72,9 @@ class RunSetup:
     controller: Controller
     goal_pose: np.ndarray | None
     events: EventSchedule
+    true_start: np.ndarray | None = None
+    homing_offset: np.ndarray | None = None
+    shown_view: np.ndarray | None = None
 
     def estimate(self, m: Measurement) -> dict[str, PoseEstimate]:
         """Update every estimator (in dependency order); returns estimates in recording order."""
@@ -180,10 +194,12 @@ def prepare(scenario: Scenario) -> RunSetup:
 
 def _assemble(s: Scenario, physics, sensors, nominal) -> RunSetup:
     src = s.source
+    offset, true_start = homing(s)
     try:
-        physics.reset(s.start_pose, settle_time=0.0)
+        physics.reset(true_start, settle_time=0.0)
     except (ValueError, InfeasibleTensionError) as exc:
-        raise ScenarioError(f"{src}: start.pose: {exc}") from None
+        where = "start.pose" if offset is None else "start.pose (moved by its homing offset)"
+        raise ScenarioError(f"{src}: {where}: {exc}") from None
     for i, event in enumerate(s.events):  # in file order, as the file numbers them
         try:
             event.check(physics.n_cables)
@@ -191,11 +207,15 @@ def _assemble(s: Scenario, physics, sensors, nominal) -> RunSetup:
             raise ScenarioError(f"{src}: events[{i}].{exc.field}: {exc.problem}") from None
     controller, estimators = _build_plugins(s, nominal.geometry)
     order = _update_order(estimators, s)
+    shown_view = teach(s, physics, sensors, controller)  # before events can act
     events = EventSchedule(s.events, physics, sensors)
     if s.events:  # no hook, no per-chunk cost, when nothing is scheduled
         physics.add_hook(events)
     goal = controller.goal_pose(nominal.T_base_tag)
-    return RunSetup(s, physics, sensors, nominal, estimators, order, controller, goal, events)
+    return RunSetup(
+        s, physics, sensors, nominal, estimators, order, controller, goal, events,
+        true_start, offset, shown_view,
+    )  # fmt: skip
 
 
 def _scene(setup: RunSetup) -> SceneInfo:
@@ -245,11 +265,11 @@ def run(
     except BaseException:
         setup.close()
         raise
-    last_tag: list = [None]
+    tally = _Tally()
     status = "running"
-    start = time.perf_counter()
+    started = time.perf_counter()
     try:
-        status = _loop(setup, metrics, recorders, progress, last_tag)
+        status = _loop(setup, metrics, recorders, progress, tally)
     except KeyboardInterrupt:
         status = Status.INTERRUPTED
         raise
@@ -257,25 +277,58 @@ def run(
         status = f"failed: {type(exc).__name__}: {exc}"
         raise
     finally:
-        wall = time.perf_counter() - start
-        summary = _summary(setup, metrics, status, last_tag[0])
+        wall = time.perf_counter() - started
+        summary = _summary(setup, metrics, status, tally)
         recorders.close(summary)
         setup.close()
     return RunResult(summary, wall, out_dir)
 
 
-def _loop(setup: RunSetup, metrics: RunMetrics, recorders: Recorders, progress, last_tag) -> str:
+@dataclass
+class _Tally:
+    """What the run keeps from its measurements for the summary.
+
+    Attributes:
+        last_tag: the last tag detection after a command, or ``None``.
+        clipped: (m,) clipped tension readings per cable (every read of the run, t = 0
+            included), or ``None`` (the sensors never clip).
+    """
+
+    last_tag: object = None
+    clipped: np.ndarray | None = None
+
+    def add(self, m: Measurement) -> None:
+        """Count one measurement's clipped tension readings."""
+        if m.tensions_clipped is not None:
+            if self.clipped is None:
+                self.clipped = np.zeros(len(m.tensions_clipped), dtype=int)
+            self.clipped += m.tensions_clipped
+
+
+def start(setup: RunSetup) -> None:
+    """Put the robot at its start and everything that believes in it at the nominal start.
+
+    The true platform settles at ``setup.true_start`` (the start pose moved by the homing
+    offset); the encoders are homed, and the controller and estimators reset, at the
+    scenario's nominal start pose.
+    """
+    s = setup.scenario
+    setup.physics.reset(s.start_pose if setup.true_start is None else setup.true_start)
+    setup.sensors.home(s.start_pose)
+    setup.controller.reset(s.start_pose)
+    for est in setup.estimators.values():
+        est.reset(s.start_pose, 0.0)
+
+
+def _loop(setup: RunSetup, metrics: RunMetrics, recorders: Recorders, progress, tally) -> str:
     """The control loop; returns the run's status."""
     s, physics, sensors, controller = setup.scenario, setup.physics, setup.sensors, setup.controller
     period, in_loop = s.model.control_period, s.estimators.in_loop
     n_ticks = round(s.duration / period)
-    physics.reset(s.start_pose)
-    sensors.home(s.start_pose)
-    controller.reset(s.start_pose)
-    for est in setup.estimators.values():
-        est.reset(s.start_pose, 0.0)
+    start(setup)
 
     def record(m: Measurement, estimates: dict[str, PoseEstimate], command) -> None:
+        tally.add(m)
         T_true = physics.T_base_platform
         deviations = metrics.add(m.time, T_true, estimates)
         plan = controller.planned_pose(m.time)
@@ -290,7 +343,7 @@ def _loop(setup: RunSetup, metrics: RunMetrics, recorders: Recorders, progress, 
         physics.advance(period, command.cable_rates)
         setup.events.fire(physics.time + 0.5 * physics.timestep)  # due before this tick's read
         m = sensors.read(command)
-        last_tag[0] = m.tag if m.tag is not None else last_tag[0]
+        tally.last_tag = m.tag if m.tag is not None else tally.last_tag
         estimates = setup.estimate(m)
         record(m, estimates, command)
         if progress is not None:
@@ -300,15 +353,25 @@ def _loop(setup: RunSetup, metrics: RunMetrics, recorders: Recorders, progress, 
     return controller.timeout_status
 
 
-def _summary(setup: RunSetup, metrics: RunMetrics, status: str, last_tag) -> dict:
+def _summary(setup: RunSetup, metrics: RunMetrics, status: str, tally: _Tally) -> dict:
     p, view = setup.physics, setup.controller.goal_view
+    if view is not None and setup.shown_view is not None:
+        view = setup.shown_view  # a taught view: what the camera truly saw when shown
     true_tag_error = None
     if view is not None and p.has_camera and p.has_tag:  # truth stays here: only the error
         true_tag_error = pose_error(p.T_cam_tag, view)
-    end = RunEnd(status=status, last_tag=last_tag, true_tag_error=true_tag_error)
+    end = RunEnd(status=status, last_tag=tally.last_tag, true_tag_error=true_tag_error)
     truth = {"time": p.time, "T_base_platform": p.T_base_platform, "tensions": p.tensions}
     extra = setup.controller.summary(end)
     out = run_summary(setup.scenario, status, metrics, truth, setup.goal_pose, extra)
+    if setup.homing_offset is not None:
+        off = setup.homing_offset
+        out["homing_offset"] = {
+            "position_m": off[:3].tolist(),
+            "rotation_deg": np.degrees(off[3:]).tolist(),
+        }
+    if tally.clipped is not None:
+        out["tension_clipped_readings"] = tally.clipped.tolist()
     if setup.events.fired:
         out["events"] = [
             {"time_s": t, "type": e.type, **dataclasses.asdict(e)} for t, e in setup.events.fired

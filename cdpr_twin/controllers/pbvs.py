@@ -149,7 +149,9 @@ class PbvsController(Controller):
     """ᶜv_c = −λ L̂⁺ e (eq. 2), ᵖv_p = Â_d ᶜv_c (eq. 3-4), l̇ = Â ᵖv_p (eq. 5-6).
 
     Â is evaluated at the in-loop estimator's pose estimate: the only place the estimate
-    enters (eq. 8). The feature is measured from the current tag detection.
+    enters (eq. 8). The feature is measured from the current tag detection. With ``goal =
+    "taught"`` the desired feature s* is the detection made when the robot is shown
+    ``teach_pose`` (:meth:`teach`).
 
     Args:
         geometry: nominal geometry (its ``T_platform_cam`` is Â_d's ᵖT_c).
@@ -173,6 +175,25 @@ class PbvsController(Controller):
         self.jacobian_model = o.jacobian_model
         self._Ad = adjoint(geometry.T_platform_cam)
         self._counts = {Status.TAG_LOST: 0, Status.SATURATED: 0}
+        self.taught = False
+
+    def teach(self, show: Callable[[np.ndarray], Measurement]) -> None:
+        """With ``goal = "taught"``: s* := the tag pose the camera measures at ``teach_pose``.
+
+        Args:
+            show: places the true robot at a pose and returns the sensors' measurement there.
+
+        Raises:
+            OptionError: ``teach_pose``, when the camera does not detect the tag there.
+        """
+        if self.options.goal != "taught":
+            return
+        m = show(np.asarray(self.options.teach_pose, dtype=float))
+        if m.tag is None:
+            raise OptionError("teach_pose", "the camera does not see the tag at this pose")
+        self.goal = np.array(m.tag.T_cam_tag, dtype=float)
+        self.goal.flags.writeable = False
+        self.taught = True
 
     def reset(self, T_base_platform0: np.ndarray) -> None:
         """Nothing to plan: PBVS reacts to each detection (the tick counts restart)."""
@@ -191,7 +212,13 @@ class PbvsController(Controller):
         return np.concatenate([T_cam_tag[:3, 3] - self.goal[:3, 3], so3_log(R_goal_cur)])
 
     def goal_pose(self, T_base_tag: np.ndarray | None) -> np.ndarray | None:
-        """Where the nominal robot sees the goal view, or ``None`` without a tag pose."""
+        """The task's end pose.
+
+        ``teach_pose`` when taught; else where the nominal robot sees the goal view (``None``
+        without a tag pose).
+        """
+        if self.options.goal == "taught":
+            return np.array(self.options.teach_pose, dtype=float)
         return None if T_base_tag is None else self.platform_goal(T_base_tag)
 
     @property
@@ -200,20 +227,28 @@ class PbvsController(Controller):
         return self.goal
 
     def summary(self, end: RunEnd) -> dict[str, Any]:
-        """``pbvs``: convergence, detected and true final tag errors, tag-lost/saturated ticks."""
+        """``pbvs``: convergence, detected and true final tag errors, tag-lost/saturated ticks.
+
+        A taught goal adds ``goal``, the taught view ``taught_tag_pose_visp`` (ViSP tag frame,
+        m and degrees, like ``goal_tag_pose_visp``) and its distance to the file's view.
+        """
         tag_err = None
         if end.last_tag is not None:
             dt, dr = pose_distance(end.last_tag.T_cam_tag, self.goal)
             tag_err = {"translation_m": dt, "rotation_deg": float(np.degrees(dr))}
-        return {
-            "pbvs": {
-                "converged": end.status == Status.CONVERGED,
-                "final_tag_error": tag_err,
-                "true_final_tag_error": end.true_tag_error,
-                "tag_lost_ticks": self._counts[Status.TAG_LOST],
-                "saturated_ticks": self._counts[Status.SATURATED],
-            }
+        out = {
+            "converged": end.status == Status.CONVERGED,
+            "final_tag_error": tag_err,
+            "true_final_tag_error": end.true_tag_error,
+            "tag_lost_ticks": self._counts[Status.TAG_LOST],
+            "saturated_ticks": self._counts[Status.SATURATED],
         }
+        if self.taught:  # nominal runs keep the summary they always had
+            file_goal = np.asarray(self.options.goal_T_cam_tag, dtype=float)
+            out["goal"] = "taught"
+            out["taught_tag_pose_visp"] = vector_from_pose(self.goal @ T_TAGPUPIL_TAGVISP).tolist()
+            out["taught_vs_file_goal"] = pose_error(self.goal, file_goal)
+        return {"pbvs": out}
 
     def command(
         self, t: float, period: float, estimate: PoseEstimate, measurement: Measurement
