@@ -109,6 +109,8 @@ class TensionRealism:
             ``Measurement.tensions_clipped`` (and per cable in ``summary.json``).
         range_min: lowest reading [N].
         range_max: highest reading [N].
+        noise_std: per-reading noise std [N]; ``nan`` keeps ``[sensors] tension_noise_std``
+            (the ideal profile: the scenario's value, as before realism).
     """
 
     bias_std: float = option(0.0, minimum=0.0, unit="N")
@@ -116,8 +118,11 @@ class TensionRealism:
     clip: bool = option(False)
     range_min: float = option(-25.0, unit="N")
     range_max: float = option(75.0, unit="N")
+    noise_std: float = option(math.nan, unit="N")
 
     def __post_init__(self) -> None:
+        if not (math.isnan(self.noise_std) or self.noise_std >= 0):
+            raise OptionError("noise_std", f"must be ≥ 0 N, got {self.noise_std}")
         if not self.range_min < self.range_max:
             raise OptionError("range_max", f"must exceed range_min = {self.range_min} N")
 
@@ -175,10 +180,33 @@ PARTS: dict[str, type] = {
 
 
 ACROBOT: dict[str, dict[str, Any]] = {
-    "camera": {},
-    "winch": {},
-    "tension": {},
-    "homing": {},
+    "camera": {
+        "noise": True,
+        "full_well_e": 10_000.0,
+        "read_noise_e": 10.0,
+        "gamma": 1.0,
+        "exposure_s": 0.008,
+        "blur_subframes": 3,
+        "distortion": (-0.20, 0.08, 0.002, -0.002),
+        "focal_error_std": 0.003,
+        "center_error_std_px": 1.5,
+        "distortion_error_std": 0.01,
+        "latency_ticks": 1,
+    },
+    "winch": {
+        "bandwidth_hz": 20.0,
+        "max_accel": 2.0,
+        "encoder_counts": 4096,
+        "drum_radius": 0.02,
+        "drum_radius_error_std": 0.005,
+    },
+    "tension": {
+        "bias_std": 0.24 / math.sqrt(3.0),
+        "gain_error_std": 0.001,
+        "clip": True,
+        "noise_std": 0.01,
+    },
+    "homing": {"position_std": 0.001, "rotation_std": math.radians(0.2)},
 }
 """The ``acrobot`` profile: each magnitude and its source in ``models/acrobot/README.md``."""
 
@@ -258,4 +286,6 @@ def without_source(realism: Realism, source: str) -> Realism:
         return replace(realism, camera=replace(realism.camera, noise=False))
     if source == "homing":
         return replace(realism, homing=HomingRealism())
+    if source == "tension_noise":
+        return replace(realism, tension=replace(realism.tension, noise_std=0.0))
     raise ValueError(f"unknown source of variation {source!r}; choose one of {RUN_SOURCES}")

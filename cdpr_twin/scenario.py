@@ -186,11 +186,10 @@ class Scenario:
         for source in sources:
             if source == "tension_noise":
                 s = replace(s, sensors=replace(s.sensors, tension_noise_std=0.0))
-            else:
-                try:
-                    s = replace(s, realism=without_source(s.realism, source))
-                except ValueError as exc:
-                    raise ScenarioError(str(exc)) from None
+            try:
+                s = replace(s, realism=without_source(s.realism, source))
+            except ValueError as exc:
+                raise ScenarioError(str(exc)) from None
         done = {**self.overrides, "without": [*self.overrides.get("without", ()), *sources]}
         return replace(s, overrides=MappingProxyType(done))
 

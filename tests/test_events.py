@@ -59,7 +59,7 @@ def test_a_cable_break_from_a_scenario_file(tmp_path):
     text = text.replace("tension_noise_std = 0.24", "tension_noise_std = 0.0")
     path = tmp_path / "break.toml"
     path.write_text(text.replace('"../models/', f'"{ROOT}/models/'))
-    scenario = load_scenario(path).with_overrides(camera=False)
+    scenario = load_scenario(path).with_realism("ideal").with_overrides(camera=False)
     assert scenario.events == (CableBreak(time=1.0, cable=8),)
     run(scenario, tmp_path / "out", record_rrd=False)
     ts = Timeseries.load(tmp_path / "out" / "timeseries.csv")
@@ -72,9 +72,8 @@ def test_a_cable_break_from_a_scenario_file(tmp_path):
         {"time_s": pytest.approx(1.0, abs=1e-9), "type": "cable_break", "time": 1.0, "cable": 8}
     ]
     # without the event the same run keeps cable 8 taut, and ends elsewhere
-    intact = load_scenario(ROOT / "scenarios" / "paper_open_loop.toml").with_overrides(
-        camera=False, duration=2.0
-    )
+    intact = load_scenario(ROOT / "scenarios" / "paper_open_loop.toml").with_realism("ideal")
+    intact = intact.with_overrides(camera=False, duration=2.0)
     intact_summary = run(intact, None).summary
     assert intact_summary["final_tensions_n"][7] > 1.0
     moved = np.subtract(intact_summary["final_pose"][:3], ts.poses("true")[-1][:3, 3])

@@ -37,7 +37,7 @@ def _nominal(scenario):
 
 
 def test_open_loop_nominal_returns_to_p0_and_estimates_end_on_truth():
-    s = _nominal(load_scenario(OPEN_LOOP).with_overrides(camera=False))
+    s = _nominal(load_scenario(OPEN_LOOP).with_realism("ideal").with_overrides(camera=False))
     summary = run(s, None).summary
     assert summary["status"] == "done"
     assert summary["final_error_vs_goal"]["translation_m"] < 1e-3  # back at p0
@@ -48,7 +48,9 @@ def test_open_loop_nominal_returns_to_p0_and_estimates_end_on_truth():
 
 @pytest.fixture(scope="module")
 def open_loop_deviated():
-    return run(load_scenario(OPEN_LOOP).with_overrides(camera=False), None).summary
+    return run(
+        load_scenario(OPEN_LOOP).with_realism("ideal").with_overrides(camera=False), None
+    ).summary
 
 
 def test_open_loop_with_deviations_misses_p1_while_estimates_follow_the_plan(open_loop_deviated):
@@ -70,7 +72,9 @@ def test_open_loop_with_deviations_misses_p1_while_estimates_follow_the_plan(ope
 
 
 def _pbvs(in_loop: str) -> dict:
-    return run(load_scenario(PBVS).with_overrides(in_loop=in_loop), None).summary
+    return run(
+        load_scenario(PBVS).with_realism("ideal").with_overrides(in_loop=in_loop), None
+    ).summary
 
 
 @pytest.mark.slow
@@ -106,7 +110,7 @@ def test_every_scenario_runs_briefly_and_deterministically(path, tmp_path):
 @pytest.fixture(scope="module")
 def short_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("run")
-    s = load_scenario(OPEN_LOOP).with_overrides(duration=1.0)
+    s = load_scenario(OPEN_LOOP).with_realism("ideal").with_overrides(duration=1.0)
     result = run(s, out)
     return out, result, s
 

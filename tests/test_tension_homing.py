@@ -46,7 +46,7 @@ def _sensors(realism=SPEC, noise_std=0.01, run_seed=1, robot_seed=19):
 
 
 def _scenario(file="paper_open_loop.toml", **realism_parts):
-    s = load_scenario(ROOT / "scenarios" / file)
+    s = load_scenario(ROOT / "scenarios" / file).with_realism("ideal")
     if file == "paper_open_loop.toml":
         s = s.with_overrides(camera=False, duration=0.2)
     return dataclasses.replace(s, realism=dataclasses.replace(s.realism, **realism_parts))
@@ -243,7 +243,8 @@ def test_goal_and_teach_pose_are_read_from_the_scenario_file(tmp_path):
 
 
 def test_a_teach_pose_where_the_tag_is_not_seen_is_refused():
-    s = load_scenario(ROOT / "scenarios" / "paper_pbvs.toml").with_controller_options(
+    s = load_scenario(ROOT / "scenarios" / "paper_pbvs.toml").with_realism("ideal")
+    s = s.with_controller_options(
         goal="taught", teach_pose=pose_from_vector([-0.25, 0.25, 0.3, 0, 0, 0])
     )
     with pytest.raises(ScenarioError, match=r"controller\.teach_pose: the camera does not see"):
@@ -253,7 +254,7 @@ def test_a_teach_pose_where_the_tag_is_not_seen_is_refused():
 @pytest.mark.parametrize("latency_ticks", [0, 2])
 def test_taught_and_nominal_goals_agree_on_an_ideal_robot(latency_ticks):
     """With a camera latency the robot waits at the pose until the frame exposed there arrives."""
-    s = load_scenario(ROOT / "scenarios" / "paper_pbvs.toml")
+    s = load_scenario(ROOT / "scenarios" / "paper_pbvs.toml").with_realism("ideal")
     camera = CameraRealism(latency_ticks=latency_ticks)
     s = dataclasses.replace(
         s, truth=DeviationSpec(seed=19), realism=dataclasses.replace(s.realism, camera=camera)
@@ -274,7 +275,7 @@ def test_taught_and_nominal_goals_agree_on_an_ideal_robot(latency_ticks):
 @pytest.mark.slow
 def test_a_taught_goal_ends_pbvs_nearer_the_true_p1_on_the_deviated_robot():
     """Measured (robot seed 19, run seed 1): nominal 3.05 mm / 1.19°, taught 0.30 mm / 0.002°."""
-    s = load_scenario(ROOT / "scenarios" / "paper_pbvs.toml")
+    s = load_scenario(ROOT / "scenarios" / "paper_pbvs.toml").with_realism("ideal")
     nominal = run(s).summary
     taught = run(s.with_controller_options(goal="taught")).summary
     assert nominal["status"] == taught["status"] == "converged"

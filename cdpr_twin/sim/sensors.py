@@ -9,6 +9,7 @@ while the image is rendered from the simulated robot.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -69,9 +70,10 @@ class Sensors:
     ) -> None:
         realism = Realism() if realism is None else realism
         self.physics, self.nominal, self.realism = physics, nominal, realism
+        noise = realism.tension.noise_std
         self.tension = TensionSensors(
             physics.n_cables,
-            tension_noise_std,
+            tension_noise_std if math.isnan(noise) else noise,
             realism.tension,
             np.random.default_rng(noise_seed),  # the run seed's own stream, as before realism
             robot_rng(robot_seed, "tension"),
