@@ -41,7 +41,8 @@ class CameraRealism:
         distortion: true Brown–Conrady coefficients (k1, k2, p1, p2) of the lens.
         focal_error_std: per-robot relative std of the calibrated fx, fy.
         center_error_std_px: per-robot std of the calibrated cx, cy [px].
-        distortion_error_std: per-robot std of each calibrated distortion coefficient.
+        distortion_error_std: per-robot std of each calibrated distortion coefficient
+            (k1, k2, p1, p2).
         latency_ticks: the tag pose available at tick k comes from the frame exposed at k − d.
     """
 
@@ -54,12 +55,13 @@ class CameraRealism:
     distortion: tuple[float, ...] = option((0.0, 0.0, 0.0, 0.0))
     focal_error_std: float = option(0.0, minimum=0.0)
     center_error_std_px: float = option(0.0, minimum=0.0, unit="px")
-    distortion_error_std: float = option(0.0, minimum=0.0)
+    distortion_error_std: tuple[float, ...] = option((0.0, 0.0, 0.0, 0.0), minimum=0.0)
     latency_ticks: int = option(0, minimum=0)
 
     def __post_init__(self) -> None:
-        if len(self.distortion) != 4:
-            raise OptionError("distortion", "must list k1, k2, p1, p2")
+        for name in ("distortion", "distortion_error_std"):
+            if len(getattr(self, name)) != 4:
+                raise OptionError(name, "must list 4 values, for k1, k2, p1, p2")
 
 
 @dataclass(frozen=True)
@@ -186,11 +188,11 @@ ACROBOT: dict[str, dict[str, Any]] = {
         "read_noise_e": 10.0,
         "gamma": 1.0,
         "exposure_s": 0.008,
-        "blur_subframes": 3,
+        "blur_subframes": 2,
         "distortion": (-0.20, 0.08, 0.002, -0.002),
         "focal_error_std": 0.003,
         "center_error_std_px": 1.5,
-        "distortion_error_std": 0.01,
+        "distortion_error_std": (0.01, 0.02, 0.0005, 0.0005),
         "latency_ticks": 1,
     },
     "winch": {

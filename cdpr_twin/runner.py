@@ -178,6 +178,7 @@ def prepare(scenario: Scenario) -> RunSetup:
             camera=s.sensors.camera,
             realism=s.realism,
             robot_seed=s.truth.seed,
+            period=s.model.control_period,
         )
     except ModelError as exc:
         raise ScenarioError(f"{src}: model.file: {exc}") from None

@@ -4,11 +4,16 @@ Frames: ``cam`` is the OpenCV camera frame (x right, y down, z forward); ``tag``
 pupil-apriltags object frame (origin at the tag centre, x right and y down on the printed tag,
 z into it). Pixel coordinates follow OpenCV: the centre of the top-left pixel is (0, 0).
 AprilTag reports corners with that centre at (0.5, 0.5) (AprilRobotics/apriltag#121), so the
-detector shifts them by −0.5 px before solving the pose with the same intrinsics K that
-:mod:`cdpr_twin.sim.camera` derives from the rendering camera.
+detector shifts them by −0.5 px before solving the pose with the intrinsics K it is given (the
+robot's calibration; in the ideal twin, those :mod:`cdpr_twin.sim.camera` derives from the
+rendering camera). A lens with Brown–Conrady distortion (k1, k2, p1, p2) curves the tag's
+edges: the detector then straightens the edge points with its calibrated coefficients before it
+fits lines to them, and solves the pose on the undistorted corners.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable, Sequence
 
 import cv2
 import numpy as np
@@ -22,9 +27,11 @@ __all__ = [
     "CameraIntrinsics",
     "TagDetection",
     "TagDetector",
+    "distort_pixels",
     "project_points",
     "refine_quad",
     "tag_corners_object",
+    "undistort_pixels",
 ]
 
 APRILTAG_PIXEL_OFFSET = 0.5
@@ -78,6 +85,54 @@ def project_points(
     return uv * [intrinsics.fx, intrinsics.fy] + [intrinsics.cx, intrinsics.cy]
 
 
+UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
+"""OpenCV's iterative undistortion to convergence (its default stops after 5 iterations)."""
+
+PixelMap = Callable[[np.ndarray], np.ndarray]
+"""A map of (n, 2) pixel coordinates to (n, 2) pixel coordinates."""
+
+
+def undistort_pixels(
+    intrinsics: CameraIntrinsics, distortion: Sequence[float], pixels: np.ndarray
+) -> np.ndarray:
+    """Pixels of a distorting lens → the pixels an ideal pinhole of the same K would see.
+
+    Args:
+        intrinsics: camera intrinsics K.
+        distortion: Brown–Conrady (k1, k2, p1, p2).
+        pixels: (n, 2) observed (distorted) pixels.
+
+    Returns:
+        (n, 2) undistorted pixels.
+    """
+    K = intrinsics.K
+    src = np.asarray(pixels, dtype=float).reshape(-1, 1, 2)
+    dist = np.asarray(distortion, dtype=float)
+    out = cv2.undistortPoints(src, K, dist, R=np.eye(3), P=K, criteria=UNDISTORT_CRITERIA)
+    return out.reshape(-1, 2)
+
+
+def distort_pixels(
+    intrinsics: CameraIntrinsics, distortion: Sequence[float], pixels: np.ndarray
+) -> np.ndarray:
+    """Ideal pinhole pixels → where the distorting lens images them (inverse of the above).
+
+    Args:
+        intrinsics: camera intrinsics K.
+        distortion: Brown–Conrady (k1, k2, p1, p2).
+        pixels: (n, 2) undistorted pixels.
+
+    Returns:
+        (n, 2) distorted pixels.
+    """
+    K = intrinsics
+    uv = np.asarray(pixels, dtype=float).reshape(-1, 2)
+    xy1 = np.column_stack([(uv[:, 0] - K.cx) / K.fx, (uv[:, 1] - K.cy) / K.fy, np.ones(len(uv))])
+    zero = np.zeros(3)
+    dist = np.asarray(distortion, dtype=float)
+    return cv2.projectPoints(xy1, zero, zero, K.K, dist)[0].reshape(-1, 2)
+
+
 def _edge_line(
     img: np.ndarray,
     p0: np.ndarray,
@@ -85,11 +140,13 @@ def _edge_line(
     edge_len: float,
     centre: np.ndarray,
     steps: np.ndarray,
+    undistort: PixelMap | None = None,
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """Total-least-squares line (point, direction) through one edge's sub-pixel crossings.
 
     Profiles across the edge p0 → p1 are sampled at ``steps`` [px] along its outward normal;
-    the mid-level crossing of each is an edge point. ``None`` with fewer than 4 points.
+    the mid-level crossing of each is an edge point (mapped by ``undistort`` when given: the
+    line is then fitted where edges are straight). ``None`` with fewer than 4 points.
     """
     d = (p1 - p0) / edge_len
     n = np.array([-d[1], d[0]])
@@ -118,12 +175,17 @@ def _edge_line(
         found.append(base[k] + t * n)
     if len(found) < 4:
         return None
-    q = np.array(found)
+    q = np.array(found) if undistort is None else undistort(np.array(found))
     mean = q.mean(axis=0)
     return mean, np.linalg.svd(q - mean)[2][0]
 
 
-def refine_quad(gray: np.ndarray, corners: np.ndarray, half_width: float = 3.0) -> np.ndarray:
+def refine_quad(
+    gray: np.ndarray,
+    corners: np.ndarray,
+    half_width: float = 3.0,
+    undistort: PixelMap | None = None,
+) -> np.ndarray:
     """Sub-pixel refinement of a dark quad's corners on a light background.
 
     Along each edge, the intensity profile across the edge is sampled (bilinear) at points
@@ -136,34 +198,38 @@ def refine_quad(gray: np.ndarray, corners: np.ndarray, half_width: float = 3.0) 
         corners: (4, 2) corners in order around the quad [px, OpenCV convention].
         half_width: half-length of the profiles [px]; capped at 30 % of the shortest edge
             divided by 8 (one AprilTag border cell is 1/8 of the edge).
+        undistort: the lens's undistortion (:func:`undistort_pixels`), applied to the edge
+            points before the line fits; ``None`` for a pinhole.
 
     Returns:
-        (4, 2) refined corners, or the input corners when refinement is not possible.
+        (4, 2) refined corners (undistorted with ``undistort``), or the input corners (also
+        undistorted) when refinement is not possible.
     """
     c = np.asarray(corners, dtype=float)
+    fallback = c if undistort is None else undistort(c)
     edge_len = np.linalg.norm(np.roll(c, -1, axis=0) - c, axis=1)
     hw = min(half_width, 0.3 * edge_len.min() / 8.0)
     if hw < 1.0:
-        return c
+        return fallback
     centre = c.mean(axis=0)
     steps = np.linspace(-hw, hw, round(8 * hw) + 1)
     img = gray.astype(np.float32)
     lines = []
     for j in range(4):
-        line = _edge_line(img, c[j], c[(j + 1) % 4], edge_len[j], centre, steps)
+        line = _edge_line(img, c[j], c[(j + 1) % 4], edge_len[j], centre, steps, undistort)
         if line is None:
-            return c
+            return fallback
         lines.append(line)
     out = np.empty((4, 2))
     for j in range(4):  # corner j is the meeting point of edges j-1 and j
         (m0, d0), (m1, d1) = lines[j - 1], lines[j]
         A = np.column_stack([d0, -d1])
         if abs(np.linalg.det(A)) < 1e-6:
-            return c
+            return fallback
         s = np.linalg.solve(A, m1 - m0)
         out[j] = m0 + s[0] * d0
-    if np.max(np.abs(out - c)) > 2.0:  # refinement wandered off: keep the detector's corners
-        return c
+    if np.max(np.abs(out - fallback)) > 2.0:  # refinement wandered off: the detector's corners
+        return fallback
     return out
 
 
@@ -179,6 +245,11 @@ class TagDetector:
         nthreads: detector threads.
         refine_corners: refine pupil-apriltags' corners with :func:`refine_quad` (its quad fit
             is biased by up to 0.3 px on edges aligned with the pixel grid).
+        distortion: the lens's calibrated Brown–Conrady (k1, k2, p1, p2); ``None`` (or zeros)
+            for a pinhole. Corners are undistorted with it (and ``intrinsics``) before the pose
+            (the reprojection error is then in undistorted pixels).
+        quad_sigma: Gaussian blur of AprilTag's segmentation image [px] (0: none); noisy
+            images are found faster and more reliably with about 0.8.
     """
 
     def __init__(
@@ -190,6 +261,8 @@ class TagDetector:
         quad_decimate: float = 2.0,
         nthreads: int = 1,
         refine_corners: bool = True,
+        distortion: Sequence[float] | None = None,
+        quad_sigma: float = 0.0,
     ) -> None:
         if not tag_size > 0:
             raise ValueError(f"tag_size must be > 0 m, got {tag_size}")
@@ -197,10 +270,22 @@ class TagDetector:
         self.tag_size = float(tag_size)
         self.tag_id = int(tag_id)
         self._detector = _Detector(
-            families=family, nthreads=nthreads, quad_decimate=quad_decimate, refine_edges=True
+            families=family,
+            nthreads=nthreads,
+            quad_decimate=quad_decimate,
+            quad_sigma=quad_sigma,
+            refine_edges=True,
         )
         self._object_points = tag_corners_object(self.tag_size)
         self.refine_corners = bool(refine_corners)
+        self.distortion: tuple[float, ...] | None = None
+        if distortion is not None and np.any(np.asarray(distortion, dtype=float) != 0):
+            if len(distortion) != 4:
+                raise ValueError(f"distortion must be (k1, k2, p1, p2), got {distortion}")
+            self.distortion = tuple(float(c) for c in distortion)
+
+    def _undistort(self, pixels: np.ndarray) -> np.ndarray:
+        return undistort_pixels(self.intrinsics, self.distortion, pixels)
 
     def detect(self, image: np.ndarray) -> TagDetection | None:
         """Find the tag in an image.
@@ -228,13 +313,18 @@ class TagDetector:
             return None
         det = max(found, key=lambda d: d.decision_margin)
         corners = np.asarray(det.corners, dtype=float) - APRILTAG_PIXEL_OFFSET
+        undistort = None if self.distortion is None else self._undistort
         if self.refine_corners:
-            corners = refine_quad(gray, corners)
+            corners = refine_quad(gray, corners, undistort=undistort)
+        elif undistort is not None:
+            corners = undistort(corners)
         best = self._best_pose(det, corners)
         if best is None:
             return None
         T = best
         err = project_points(self.intrinsics, T, self._object_points) - corners
+        if self.distortion is not None:  # report them where they are in the image
+            corners = distort_pixels(self.intrinsics, self.distortion, corners)
         return TagDetection(
             tag_id=int(det.tag_id),
             corners=corners,

@@ -66,6 +66,8 @@ class CameraRenderer:
 
     def __init__(self, model: mujoco.MjModel, name: str = CAMERA_NAME) -> None:
         self.camera_id = camera_id(model, name)
+        self._model = model
+        self._scratch: mujoco.MjData | None = None
         self.intrinsics = intrinsics(model, name)
         w, h = self.intrinsics.width, self.intrinsics.height
         if model.vis.global_.offwidth < w or model.vis.global_.offheight < h:
@@ -91,6 +93,29 @@ class CameraRenderer:
         """Render the camera's view. Returns (H, W, 3) RGB uint8, top row first."""
         self._renderer.update_scene(data, camera=self.camera_id, scene_option=self._option)
         return self._renderer.render()
+
+    def render_state(
+        self, qpos: np.ndarray, mocap_pos: np.ndarray, mocap_quat: np.ndarray
+    ) -> np.ndarray:
+        """Render the view at a recorded state (the simulation's own data is not touched).
+
+        The state is loaded into a scratch ``MjData`` whose positions (bodies, camera, lights,
+        tendon paths) are computed from it, so the frame shows exactly that state.
+
+        Args:
+            qpos: (nq,) joint positions.
+            mocap_pos: (nmocap, 3) mocap body positions (the pulley swivels).
+            mocap_quat: (nmocap, 4) mocap body orientations.
+
+        Returns:
+            (H, W, 3) RGB uint8, top row first.
+        """
+        if self._scratch is None:
+            self._scratch = mujoco.MjData(self._model)
+        d = self._scratch
+        d.qpos[:], d.mocap_pos[:], d.mocap_quat[:] = qpos, mocap_pos, mocap_quat
+        mujoco.mj_fwdPosition(self._model, d)
+        return self.render(d)
 
     def close(self) -> None:
         """Free the GL context."""

@@ -2,17 +2,145 @@
 
 Ideal (``CameraRealism()``): one noise-free render of the current instant through an ideal
 pinhole, detected at once with the nominal intrinsics (the twin before realism, bit for bit).
+
+With realism (:class:`~cdpr_twin.realism.CameraRealism`), the frame is *formed* as a real
+monochrome camera forms it (:mod:`cdpr_twin.sim.imaging`):
+
+- motion blur: the sensor integrates, in linear light, sub-frames rendered at the true states
+  the robot passes through during the exposure [t − exposure, t]; an :class:`ExposureRecorder`
+  hooked into the physics records those states while it steps;
+- lens distortion: the ideal pinhole render is remapped through the true Brown–Conrady lens;
+- sensor noise: shot and read noise in electrons, the encoding gamma, 8-bit quantisation;
+- the detector uses the robot's *calibrated* intrinsics and distortion (true values plus a
+  per-robot calibration error), not the true ones;
+- latency: the frame (and tag) delivered at a read is the one exposed ``latency_ticks`` reads
+  earlier (a FIFO, full of the start view after each reset).
+
+The realistic frame is gray (the sensor is monochrome), returned in three equal channels.
 """
 
 from __future__ import annotations
 
+import math
+from collections import deque
+
+import cv2
 import numpy as np
 
 from cdpr_twin.realism import CameraRealism
 from cdpr_twin.sim import camera as cam_mod
+from cdpr_twin.sim import imaging
 from cdpr_twin.sim.model import SimulationError
 from cdpr_twin.sim.physics import Physics
 from cdpr_twin.types import CameraIntrinsics, TagDetection
+
+NOISY_QUAD_SIGMA = 0.8
+"""The detector's segmentation blur [px] for a noisy camera: AprilTag's advice for very noisy
+images (its pose comes from the unblurred image; without it, noise quadruples detection time)."""
+
+State = tuple[np.ndarray, np.ndarray, np.ndarray]
+"""A recorded state: (qpos, mocap_pos, mocap_quat) copies."""
+
+
+class ExposureRecorder:
+    """Records the robot's states at the sub-frame times of each exposure (a physics step hook).
+
+    The camera is read every ``period`` seconds of simulation time (t_k = k · period, time
+    restarting at 0 on each reset); the exposure of read k spans [t_k − exposure, t_k] and its
+    sub-frame i is taken at ``t_k − offsets[i]`` (:func:`imaging.subframe_offsets`). The physics
+    stops stepping at each of those times and calls :meth:`fire`, which copies the state.
+    Sub-frame times are rounded to the physics step.
+
+    Args:
+        physics: the simulated robot.
+        period: the time between reads [s].
+        offsets: (n,) how long before the read each sub-frame is taken [s], each in [0, period).
+    """
+
+    def __init__(self, physics: Physics, period: float, offsets: np.ndarray) -> None:
+        self.physics, self.period = physics, float(period)
+        self.offsets = np.sort(np.asarray(offsets, dtype=float))[::-1]  # earliest first
+        self._done = -math.inf  # the latest sub-frame time already recorded
+        self._states: list[tuple[float, State]] = []
+        self.active = True
+
+    def _forget_if_reset(self) -> None:
+        if self._done > self.physics.time + self.physics.timestep:  # time went back: a reset
+            self._done = -math.inf
+            self._states.clear()
+
+    def next_time(self) -> float:
+        """The next sub-frame time after those already recorded [s] (``inf`` once closed)."""
+        if not self.active:
+            return math.inf
+        self._forget_if_reset()
+        after = max(self._done, self.physics.time - 0.5 * self.physics.timestep)
+        k0 = math.floor(after / self.period)
+        times = [k * self.period - o for k in range(k0, k0 + 3) for o in self.offsets]
+        return min(t for t in times if t > after)
+
+    def fire(self, time: float) -> None:
+        """Record the current state for every sub-frame time due at or before ``time`` [s]."""
+        self._forget_if_reset()
+        while (t := self.next_time()) <= time:
+            self._done = t
+        d = self.physics.data
+        state = (d.qpos.copy(), d.mocap_pos.copy(), d.mocap_quat.copy())
+        self._states.append((self.physics.time, state))
+        horizon = self.physics.time - self.period - self.offsets[0] - self.physics.timestep
+        self._states = [(t, s) for t, s in self._states if t >= horizon]
+
+    def states(self, now: float) -> list[State]:
+        """The states of the exposure that ends at ``now`` [s], earliest first.
+
+        A sub-frame time with no recorded state (before the first step after a reset, when the
+        robot rests at its start pose, or a read off the period grid) takes the current state.
+        """
+        self._forget_if_reset()
+        d = self.physics.data
+        current = (d.qpos, d.mocap_pos, d.mocap_quat)
+        tol = 0.5 * self.physics.timestep + 1e-9
+        out = []
+        for target in now - self.offsets:
+            near = [s for t, s in self._states if abs(t - target) <= tol]
+            out.append(near[-1] if near else current)
+        return out
+
+
+def calibrate(
+    nominal: CameraIntrinsics, realism: CameraRealism, rng: np.random.Generator
+) -> tuple[CameraIntrinsics, tuple[float, ...] | None]:
+    """The robot's calibrated intrinsics and distortion: the true ones plus calibration errors.
+
+    fx, fy are each scaled by ``1 + N(0, focal_error_std)``, cx, cy shifted by
+    ``N(0, center_error_std_px)``, each distortion coefficient shifted by
+    ``N(0, distortion_error_std)`` (drawn in that order from the per-robot generator; a
+    4-sequence of stds, one per coefficient, is accepted too: a calibration pins k1, k2 and
+    p1, p2 to very different precisions).
+
+    Args:
+        nominal: the nominal intrinsics (the true ones in this model).
+        realism: the camera's imperfections.
+        rng: the per-robot generator.
+
+    Returns:
+        The calibrated intrinsics and (k1, k2, p1, p2), or ``None`` for a pinhole (no draw is
+        made when every error is off: the ideal twin keeps its nominal intrinsics as they are).
+    """
+    r = realism
+    dist_std = np.broadcast_to(np.asarray(r.distortion_error_std, dtype=float), (4,))
+    if not (r.focal_error_std or r.center_error_std_px or dist_std.any()):
+        dist = tuple(r.distortion) if any(r.distortion) else None
+        return nominal, dist
+    df = rng.normal(0.0, r.focal_error_std, 2)
+    dc = rng.normal(0.0, r.center_error_std_px, 2)
+    dd = rng.normal(0.0, dist_std)
+    K = nominal
+    calibrated = CameraIntrinsics(
+        K.width, K.height, K.fx * (1 + df[0]), K.fy * (1 + df[1]), K.cx + dc[0], K.cy + dc[1]
+    )
+    dist = tuple(float(c) for c in np.asarray(r.distortion, dtype=float) + dd)
+    return calibrated, dist if any(dist) else None
 
 
 class OnboardCamera:
@@ -20,11 +148,19 @@ class OnboardCamera:
 
     Args:
         physics: the simulated robot (the image is made with its *true* camera).
-        intrinsics: the calibrated (nominal) intrinsics the detector uses.
+        intrinsics: the nominal intrinsics (the base of the calibrated ones the detector uses;
+            equal to the true, rendered ones in this model).
         tag_size: the tag's edge the detector assumes [m].
         realism: the camera's imperfections.
         robot_rng: the per-robot generator (calibration errors).
         run_rng: the run's generator (pixel noise).
+        period: the time between reads [s] (the control period); needed for motion blur
+            (``exposure_s > 0``), whose sub-frames are recorded while the physics steps towards
+            the reads at k · period.
+
+    Raises:
+        SimulationError: without a camera in the model.
+        ValueError: motion blur without ``period``, or an exposure longer than it.
     """
 
     def __init__(
@@ -35,32 +171,89 @@ class OnboardCamera:
         realism: CameraRealism,
         robot_rng: np.random.Generator,
         run_rng: np.random.Generator,
+        period: float | None = None,
     ) -> None:
         if not physics.has_camera:
             raise SimulationError(
                 f"{physics.source} has no camera {cam_mod.CAMERA_NAME!r}; run with the camera off"
             )
+        r = realism
+        if r.exposure_s > 0 and not (period is not None and r.exposure_s <= period):
+            raise ValueError(
+                f"realism.camera.exposure_s = {r.exposure_s} s needs the camera's read period "
+                f"(got {period}) and must not exceed it"
+            )
         from cdpr_twin.vision import TagDetector  # OpenCV and pupil-apriltags, on demand
 
-        self.physics, self.realism = physics, realism
-        self._renderer = cam_mod.CameraRenderer(physics.model)
+        self.physics, self.realism, self.run_rng = physics, realism, run_rng
+        self.calibrated, self.calibrated_distortion = calibrate(intrinsics, r, robot_rng)
+        self._renderer: cam_mod.CameraRenderer | None = cam_mod.CameraRenderer(physics.model)
+        self.true_intrinsics = self._renderer.intrinsics
+        self._maps = None
+        self._formed = r.noise or r.exposure_s > 0 or any(r.distortion)
+        self._fifo: deque[tuple[np.ndarray, TagDetection | None]] = deque()
+        self._last_read = -math.inf
+        self.exposure: ExposureRecorder | None = None
         try:
-            self._detector = TagDetector(intrinsics, tag_size=tag_size)
+            if any(r.distortion):
+                self._maps = imaging.distortion_maps(self.true_intrinsics, r.distortion)
+            self._detector = TagDetector(
+                self.calibrated,
+                tag_size=tag_size,
+                distortion=self.calibrated_distortion,
+                quad_sigma=NOISY_QUAD_SIGMA if r.noise else 0.0,
+            )
         except BaseException:
             self.close()
             raise
+        if r.exposure_s > 0:
+            offsets = imaging.subframe_offsets(r.exposure_s, r.blur_subframes)
+            self.exposure = ExposureRecorder(physics, period, offsets)
+            physics.add_hook(self.exposure)
 
     def close(self) -> None:
-        """Free the GL context."""
+        """Free the GL context (and stop recording exposures)."""
+        if self.exposure is not None:
+            self.exposure.active = False
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
 
     def render(self) -> np.ndarray:
-        """The frame the camera takes now, (H, W, 3) RGB uint8."""
-        return self._renderer.render(self.physics.data)
+        """The frame the camera takes now (exposure ending now), (H, W, 3) RGB uint8."""
+        if not self._formed:
+            return self._renderer.render(self.physics.data)
+        r = self.realism
+        if self.exposure is not None:
+            renders = [
+                self._renderer.render_state(*s) for s in self.exposure.states(self.physics.time)
+            ]
+        else:
+            renders = [self._renderer.render(self.physics.data)]
+        linear = imaging.average([imaging.linear_luminance(f, r.gamma) for f in renders])
+        if self._maps is not None:
+            linear = imaging.distort(linear, self._maps)
+        if r.noise:
+            gray = imaging.expose(linear, r.full_well_e, r.read_noise_e, r.gamma, self.run_rng)
+        else:
+            gray = imaging.encode(linear, r.gamma)
+        return cv2.cvtColor(gray, cv2.COLOR_GRAY2RGB)
 
     def read(self) -> tuple[np.ndarray, TagDetection | None]:
-        """The frame and the tag detected in it (``None`` when not found)."""
+        """The frame delivered now and the tag detected in it (``None`` when not found).
+
+        With ``latency_ticks = d`` it is the frame exposed d reads ago. At the first read after
+        a reset the robot has been resting at its start pose while the camera streamed: the
+        pipeline then holds d frames of that view (the one taken now, repeated), so the first
+        d reads deliver it rather than nothing.
+        """
         image = self.render()
-        return image, self._detector.detect(image)
+        tag = self._detector.detect(image)
+        d = self.realism.latency_ticks
+        if d == 0:
+            return image, tag
+        if not self._fifo or self.physics.time < self._last_read:  # first read, or a reset
+            self._fifo = deque([(image, tag)] * d)
+        self._last_read = self.physics.time
+        self._fifo.append((image, tag))
+        return self._fifo.popleft()

@@ -55,6 +55,8 @@ class Sensors:
             they read the true rest lengths.
         realism: the sensors' imperfections (default: none).
         robot_seed: the truth seed (each robot's calibration errors).
+        period: the interval between reads [s] (the control period): frames are exposed over
+            the ``exposure_s`` before each read; needed for motion blur.
     """
 
     def __init__(
@@ -67,6 +69,7 @@ class Sensors:
         home_encoders: bool = True,
         realism: Realism | None = None,
         robot_seed: int = 0,
+        period: float | None = None,
     ) -> None:
         realism = Realism() if realism is None else realism
         self.physics, self.nominal, self.realism = physics, nominal, realism
@@ -92,6 +95,7 @@ class Sensors:
                 realism.camera,
                 robot_rng(robot_seed, "camera"),
                 run_rng(noise_seed, "camera"),
+                period=period,
             )
 
     def close(self) -> None:

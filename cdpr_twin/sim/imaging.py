@@ -1,0 +1,225 @@
+"""Image formation of a real camera from ideal renders (numpy and OpenCV, no MuJoCo).
+
+The renderer gives what an ideal pinhole sees at one instant, its 8-bit values being the
+display-encoded scene radiance (``DN = 255 · L^γ``, L the linear radiance in 0…1, γ the encoding
+gamma of :class:`~cdpr_twin.realism.CameraRealism`). A real camera's frame is made from such
+renders the way the light reaches the sensor:
+
+1. :func:`linear_luminance`: back to linear light, as a monochrome sensor sees it (Rec. 601
+   luminance weights, the same as the detector's RGB → gray conversion);
+2. :func:`average`: motion blur, the mean of sub-frames rendered during the exposure;
+3. :func:`distort`: the lens, a Brown–Conrady distortion applied by a remap;
+4. :func:`expose`: photo-electrons with shot and read noise, the encoding gamma and 8-bit
+   quantisation (or :func:`encode` for a noise-free sensor).
+
+Pixel coordinates follow OpenCV (the centre of the top-left pixel is (0, 0)).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+
+from cdpr_twin.types import CameraIntrinsics
+
+LUMA = (0.299, 0.587, 0.114)
+"""Rec. 601 luminance weights of R, G, B (OpenCV's ``COLOR_RGB2GRAY``)."""
+
+POISSON_EXACT_BELOW = 1000.0
+"""Mean electron count below which shot noise is drawn from the Poisson law itself [e⁻].
+
+Above it the Poisson law is drawn from its normal limit (same mean and variance; skewness
+1/√N < 3 %), which costs a tenth of exact draws over a whole frame.
+"""
+
+
+def linear_luminance(frame: np.ndarray, gamma: float) -> np.ndarray:
+    """Linear luminance of a display-encoded render.
+
+    Args:
+        frame: (H, W, 3) RGB uint8 render, ``DN = 255 · L^γ`` per channel.
+        gamma: the encoding gamma γ.
+
+    Returns:
+        (H, W) float32 linear luminance in 0…1.
+    """
+    lut = ((np.arange(256) / 255.0) ** (1.0 / gamma)).astype(np.float32)
+    linear = cv2.LUT(frame, lut)
+    return cv2.cvtColor(linear, cv2.COLOR_RGB2GRAY)
+
+
+def average(frames: Sequence[np.ndarray]) -> np.ndarray:
+    """Mean of linear sub-frames: what the sensor integrates over the exposure.
+
+    Args:
+        frames: N (H, W) float32 linear images.
+
+    Returns:
+        (H, W) float32 mean.
+    """
+    out = frames[0].copy()
+    for f in frames[1:]:
+        out += f
+    if len(frames) > 1:
+        out *= np.float32(1.0 / len(frames))
+    return out
+
+
+def encode(linear: np.ndarray, gamma: float) -> np.ndarray:
+    """8-bit values of a noise-free linear image: ``round(255 · L^γ)``.
+
+    Args:
+        linear: (H, W) linear luminance (clipped to 0…1).
+        gamma: the encoding gamma γ.
+
+    Returns:
+        (H, W) uint8.
+    """
+    x = np.clip(linear, 0.0, 1.0, dtype=np.float32)
+    if gamma != 1.0:
+        x = cv2.pow(x, gamma)
+    return np.rint(x * np.float32(255.0)).astype(np.uint8)
+
+
+def expose(
+    linear: np.ndarray,
+    full_well_e: float,
+    read_noise_e: float,
+    gamma: float,
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """A noisy 8-bit frame: photo-electrons, shot and read noise, gamma, quantisation.
+
+    Each pixel collects ``e = L · full_well_e`` electrons on average (L = 1 fills the well: the
+    render's brightest level saturates), draws shot noise (Poisson; its normal limit above
+    :data:`POISSON_EXACT_BELOW`) and Gaussian read noise, and is read out as
+    ``round(255 · clip(e'/full_well_e, 0, 1)^γ)``. Its std is then, to first order,
+    ``σ_DN² = (dDN/de)² (e + read²) + 1/12`` (the last term: 8-bit rounding).
+
+    Args:
+        linear: (H, W) float32 linear luminance in 0…1.
+        full_well_e: electrons at full scale [e⁻].
+        read_noise_e: read-noise std [e⁻].
+        gamma: the encoding gamma γ.
+        rng: the run's generator (it draws the Poisson counts, and seeds OpenCV's generator
+            for the normal ones).
+
+    Returns:
+        (H, W) uint8.
+    """
+    fw = np.float32(full_well_e)
+    e = np.clip(linear, 0.0, 1.0, dtype=np.float32) * fw
+    z = np.empty(e.shape, np.float32)
+    cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))  # OpenCV's normal draws: 3× numpy's speed
+    cv2.randn(z, 0.0, 1.0)
+    read2 = np.float32(read_noise_e**2)
+    out = e + np.sqrt(e + read2) * z
+    low = e < POISSON_EXACT_BELOW
+    if low.any():  # exact Poisson draws; z, independent of them, is the read noise there
+        out[low] = rng.poisson(e[low]).astype(np.float32) + np.float32(read_noise_e) * z[low]
+    out *= np.float32(1.0) / fw
+    return encode(out, gamma)
+
+
+def distort_normalized(xy: np.ndarray, coeffs: Sequence[float]) -> np.ndarray:
+    """Brown–Conrady distortion of normalized image coordinates (OpenCV's model).
+
+    Args:
+        xy: (..., 2) ideal normalized coordinates (x/z, y/z).
+        coeffs: (k1, k2, p1, p2).
+
+    Returns:
+        (..., 2) distorted normalized coordinates.
+    """
+    k1, k2, p1, p2 = (float(c) for c in coeffs)
+    x, y = xy[..., 0], xy[..., 1]
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + k2 * r2)
+    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+    return np.stack([xd, yd], axis=-1)
+
+
+def undistort_normalized(
+    xy_d: np.ndarray, coeffs: Sequence[float], tol: float = 1e-12, max_iter: int = 200
+) -> tuple[np.ndarray, np.ndarray]:
+    """Invert :func:`distort_normalized` by fixed-point iteration.
+
+    Args:
+        xy_d: (..., 2) distorted normalized coordinates.
+        coeffs: (k1, k2, p1, p2).
+        tol: stop when no point moves more than this (normalized units).
+        max_iter: iteration limit.
+
+    Returns:
+        (..., 2) ideal normalized coordinates, and a (...) bool mask of the points whose
+        inverse converged to a true pre-image (residual < 1e-9; strong barrel distortion
+        folds the outer field, whose points have none).
+    """
+    k1, k2, p1, p2 = (float(c) for c in coeffs)
+    xy = xy_d.copy()
+    for _ in range(max_iter):
+        x, y = xy[..., 0], xy[..., 1]
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + k2 * r2)
+        tx = 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+        ty = p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+        new = np.stack([(xy_d[..., 0] - tx) / radial, (xy_d[..., 1] - ty) / radial], axis=-1)
+        new = np.where(np.isfinite(new), new, xy)
+        step = np.max(np.abs(new - xy)) if new.size else 0.0
+        xy = new
+        if step < tol:
+            break
+    ok = np.linalg.norm(distort_normalized(xy, coeffs) - xy_d, axis=-1) < 1e-9
+    return xy, ok
+
+
+def distortion_maps(
+    intrinsics: CameraIntrinsics, coeffs: Sequence[float]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Remap tables of a lens with Brown–Conrady distortion, for :func:`distort`.
+
+    Each pixel (u, v) of the distorted frame sees the scene point whose ideal pinhole pixel is
+    ``K · undistort(K⁻¹ (u, v))``, with the *true* intrinsics K (the render's).
+
+    Args:
+        intrinsics: the render's pinhole intrinsics.
+        coeffs: the lens's true (k1, k2, p1, p2).
+
+    Returns:
+        Two (H, W) fixed-point maps for ``cv2.remap`` (pixels with no pre-image map outside the
+        frame, so they read black).
+    """
+    K = intrinsics
+    u, v = np.meshgrid(np.arange(K.width, dtype=float), np.arange(K.height, dtype=float))
+    xy_d = np.stack([(u - K.cx) / K.fx, (v - K.cy) / K.fy], axis=-1)
+    xy, ok = undistort_normalized(xy_d, coeffs)
+    map_x = np.where(ok, K.fx * xy[..., 0] + K.cx, -10.0).astype(np.float32)
+    map_y = np.where(ok, K.fy * xy[..., 1] + K.cy, -10.0).astype(np.float32)
+    return cv2.convertMaps(map_x, map_y, cv2.CV_16SC2)
+
+
+def distort(linear: np.ndarray, maps: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """The frame the distorting lens forms from an ideal pinhole image (bilinear sampling).
+
+    Args:
+        linear: (H, W) float32 linear image of the ideal pinhole.
+        maps: from :func:`distortion_maps`.
+
+    Returns:
+        (H, W) float32; what falls outside the rendered field of view is black.
+    """
+    return cv2.remap(
+        linear, maps[0], maps[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0
+    )
+
+
+def subframe_offsets(exposure_s: float, n: int) -> np.ndarray:
+    """How long before the end of the exposure each sub-frame is taken [s].
+
+    Sub-frame i (0…n−1) is at the centre of the i-th of n equal slices of the exposure
+    [t − exposure, t]: ``exposure · (1 − (i + 0.5)/n)`` before t. Returns (n,).
+    """
+    return exposure_s * (1.0 - (np.arange(n) + 0.5) / n)
