@@ -224,7 +224,28 @@ def analyse_pbvs(run_dir: Path, in_loop: str) -> dict:
         "others_roughness_m": {
             m: roughness(ts, m) for m in ordered_estimators(ts.estimator_names) if m != in_loop
         },
+        **_jumps(ts, [m for m in ordered_estimators(ts.estimator_names) if m != in_loop]),
     }
+
+
+def _jumps(ts: Timeseries, names: list[str], start_s: float = 0.5) -> dict:
+    """Each estimate's largest tick-to-tick change [m] and its time, and its later roughness.
+
+    The later roughness is the RMS change after the first ``start_s`` seconds: what the
+    roughness is without the start transient.
+    """
+    jumps, late = {}, {}
+    for n in names:
+        dt, _ = ts.deviation(n)
+        d = np.abs(np.diff(dt))
+        ok = np.isfinite(d)
+        if not ok.any():
+            continue
+        k = int(np.nanargmax(d))
+        jumps[n] = (float(d[k]), float(ts.t[k + 1]))
+        after = d[ok & (ts.t[1:] > start_s)]
+        late[n] = float(np.sqrt(np.mean(after**2))) if len(after) else float("nan")
+    return {"others_max_jump": jumps, "others_roughness_after_start_m": late}
 
 
 def _accuracy(ok: list[dict], p1: SegmentEnd | None) -> dict[str, dict[str, list[float]]]:
