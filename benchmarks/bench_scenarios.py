@@ -57,6 +57,7 @@ def scenario_rtf(
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--only", default="", help="run only the cases whose label has this")
     args = parser.parse_args()
     ol, pb = ROOT / "scenarios/paper_open_loop.toml", ROOT / "scenarios/paper_pbvs.toml"
     blur = load_scenario(pb).realism.camera.blur_subframes
@@ -73,13 +74,15 @@ def main() -> None:
     print(f"{'case':48s} {'sim [s]':>8s} {'RTF':>7s} {'bar':>5s} {'aim':>5s} {'vs physics':>10s}")
     with tempfile.TemporaryDirectory() as tmp:
         for i, (label, path, camera, realism, bar, aim) in enumerate(cases):
+            if args.only not in label:
+                continue
             rtfs, summary = [], {}
             for k in range(args.repeats):
                 rtf, summary = scenario_rtf(path, camera, Path(tmp) / f"case{i}-{k}", realism)
                 rtfs.append(rtf)
             rtf = statistics.median(rtfs)
             print(
-                f"{label:48s} {summary['simulated_time_s']:8.2f} {rtf:6.1f}× "
+                f"{label:48s} {summary['simulated_time_s']:8.2f} {rtf:6.2f}× "
                 f"{'PASS' if rtf >= bar else 'FAIL':>5s} {'yes' if rtf >= aim else 'no':>5s} "
                 f"{rtf / base:9.2f}×"
             )
