@@ -36,6 +36,10 @@ class CameraRealism:
         full_well_e: electrons at the brightest rendered level [e⁻].
         read_noise_e: read noise std [e⁻].
         gamma: encoding gamma from the linear signal to 8-bit values.
+        white_level: the fraction of the full well the brightest rendered level (white paper)
+            reaches: exposure keeps it below saturation.
+        black_level: the fraction of the full well the darkest rendered level (black ink)
+            reaches: ink reflects some light.
         exposure_s: exposure time [s]; 0 renders one instant (no motion blur).
         blur_subframes: frames rendered at the true poses during the exposure and averaged.
         distortion: true Brown–Conrady coefficients (k1, k2, p1, p2) of the lens.
@@ -50,6 +54,8 @@ class CameraRealism:
     full_well_e: float = option(10_000.0, minimum=1.0, unit="e-")
     read_noise_e: float = option(0.0, minimum=0.0, unit="e-")
     gamma: float = option(1.0, minimum=0.1)
+    white_level: float = option(1.0, minimum=0.0, exclusive=True)
+    black_level: float = option(0.0, minimum=0.0)
     exposure_s: float = option(0.0, minimum=0.0, unit="s")
     blur_subframes: int = option(1, minimum=1)
     distortion: tuple[float, ...] = option((0.0, 0.0, 0.0, 0.0))
@@ -59,6 +65,8 @@ class CameraRealism:
     latency_ticks: int = option(0, minimum=0)
 
     def __post_init__(self) -> None:
+        if not self.black_level < self.white_level <= 1.0:
+            raise OptionError("white_level", "need black_level < white_level ≤ 1")
         for name in ("distortion", "distortion_error_std"):
             if len(getattr(self, name)) != 4:
                 raise OptionError(name, "must list 4 values, for k1, k2, p1, p2")
@@ -187,6 +195,8 @@ ACROBOT: dict[str, dict[str, Any]] = {
         "full_well_e": 10_000.0,
         "read_noise_e": 10.0,
         "gamma": 1.0,
+        "white_level": 0.7,
+        "black_level": 0.035,
         "exposure_s": 0.008,
         "blur_subframes": 2,
         "distortion": (-0.20, 0.08, 0.002, -0.002),

@@ -252,6 +252,12 @@ def test_the_encoder_error_after_paying_out_L_is_L_dr_over_r(seed):
     quantum = 2 * math.pi * 0.02 / 4096
     assert np.all(error <= expected + 1e-12) and np.all(error > expected - quantum)
     assert np.max(np.abs(expected)) > 3 * quantum  # the radius error, not the count, dominates
+    # and which of the two is right: the servo turns the drum by the command over the nominal
+    # radius, so the encoder reads what was commanded while the cable paid out r'/r of it
+    commanded = 25 * 0.04 * 2 * u
+    np.testing.assert_allclose(paid, commanded * r_true / 0.02, rtol=1e-9, atol=1e-12)
+    reading = enc.encoder_lengths - home
+    assert np.all(reading <= commanded + 1e-12) and np.all(reading > commanded - quantum)
 
 
 def test_homing_reads_the_nominal_rest_lengths_at_the_home_pose():

@@ -201,7 +201,7 @@ class OnboardCamera:
                 self.calibrated,
                 tag_size=tag_size,
                 distortion=self.calibrated_distortion,
-                quad_sigma=NOISY_QUAD_SIGMA if r.noise else 0.0,
+                quad_sigma=NOISY_QUAD_SIGMA if self._formed else 0.0,
             )
         except BaseException:
             self.close()
@@ -233,6 +233,8 @@ class OnboardCamera:
         linear = imaging.average([imaging.linear_luminance(f, r.gamma) for f in renders])
         if self._maps is not None:
             linear = imaging.distort(linear, self._maps)
+        if (r.black_level, r.white_level) != (0.0, 1.0):  # the scene's exposure levels
+            linear = np.float32(r.black_level) + np.float32(r.white_level - r.black_level) * linear
         if r.noise:
             gray = imaging.expose(linear, r.full_well_e, r.read_noise_e, r.gamma, self.run_rng)
         else:

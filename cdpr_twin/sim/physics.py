@@ -11,10 +11,8 @@ l_f of eq. 15) and c_i = η·E·S/l0_i. The stiffness E·S/l0_i and the swivel y
 ideal swivel as mocap bodies) are refreshed from Python every ``align_every`` physics steps; a
 disabled cable (a break) gets zero stiffness at every refresh.
 
-Like dm_control's ``Physics``, this object owns ``MjModel``/``MjData`` and answers named
-ground-truth questions (``T_base_platform``, ``tensions``…); sensors and the runner ask it, and
-nothing outside :mod:`cdpr_twin.sim` touches MuJoCo. Step hooks (:class:`StepHook`, e.g. a
-scenario's timed events) act between physics steps at the times they ask for.
+Like dm_control's ``Physics`` it owns ``MjModel``/``MjData`` and answers named ground-truth
+questions (``T_base_platform``…); step hooks (timed events) act between steps when they ask.
 """
 
 from __future__ import annotations
@@ -94,6 +92,7 @@ class Physics:
         self._servos = WinchServos(self.winch, self.n_cables)
         rng = robot_rng(robot_seed, "winch")  # per robot; the encoders read the same radii
         self.drum_radius_true = draw_drum_radii(self.winch, rng, self.n_cables)
+        self._drum_ratio = self.drum_radius_true / self.winch.drum_radius  # cable per command
         self._hooks: list[StepHook] = []
         self.cable_enabled = np.ones(self.n_cables, dtype=bool)
         self._index(model)
@@ -260,7 +259,8 @@ class Physics:
                 chunk = self._fire_hooks(chunk)
             self.refresh()
             if not self._servos.ideal:  # the chunk's exact mean rate: l0 exact at its end
-                self.data.ctrl[self._actuators] = self._servos.run(chunk * self.timestep)
+                rate = self._servos.run(chunk * self.timestep)  # the drum's, in command units
+                self.data.ctrl[self._actuators] = rate * self._drum_ratio
             mujoco.mj_step(self.model, self.data, nstep=chunk)
             n -= chunk
         self._check_state()
@@ -295,11 +295,11 @@ class Physics:
                 its range within those steps (servos: the exact lengths their loops reach).
         """
         rates = checked_rates(rates, self.n_cables, self._ctrl_lo, self._ctrl_hi)
-        paid = self._servos.paid_out(rates, steps, self.timestep)
+        paid = self._servos.paid_out(rates, steps, self.timestep) * self._drum_ratio
         check_lengths(self.rest_lengths + paid, self._act_range)
         self._servos.set_command(rates)
-        if self._servos.ideal:
-            self.data.ctrl[self._actuators] = rates
+        if self._servos.ideal:  # (× 1.0 exactly without drum errors: bit for bit as before)
+            self.data.ctrl[self._actuators] = rates * self._drum_ratio
 
     def steps_in(self, duration: float) -> int:
         """The whole number of physics steps in ``duration`` seconds.

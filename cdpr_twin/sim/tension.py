@@ -12,6 +12,8 @@ drawn from the run's generator (the twin's behaviour before realism, bit for bit
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from cdpr_twin.realism import TensionRealism
@@ -20,8 +22,9 @@ from cdpr_twin.realism import TensionRealism
 class TensionSensors:
     """The tension sensors of one robot.
 
-    The per-robot errors are drawn at construction, in this order: the m offsets b ~ N(0,
-    ``bias_std``²) [N], then the m gain errors g ~ N(0, ``gain_error_std``²). Each reading
+    The per-robot errors are drawn at construction, in this order: the m offsets b, uniform on
+    ±√3·``bias_std`` [N] (a datasheet's accuracy ±a is a bound: rectangular, std a/√3), then
+    the m gain errors g ~ N(0, ``gain_error_std``²). Each reading
     draws ``normal(0, noise_std, m)`` once from the run's generator (nothing when
     ``noise_std`` is 0), as the twin did before realism.
 
@@ -49,7 +52,8 @@ class TensionSensors:
             raise ValueError(f"tension_noise_std must be ≥ 0 N, got {noise_std}")
         self.n_cables, self.noise_std, self.realism = n_cables, float(noise_std), realism
         self._rng = run_rng
-        self.bias = robot_rng.normal(0.0, realism.bias_std, n_cables)
+        half = math.sqrt(3.0) * realism.bias_std  # rectangular ±a with std a/√3 (GUM 4.3.7)
+        self.bias = robot_rng.uniform(-half, half, n_cables)
         self.gain_error = robot_rng.normal(0.0, realism.gain_error_std, n_cables)
         self._calibration_error = realism.bias_std > 0 or realism.gain_error_std > 0
 

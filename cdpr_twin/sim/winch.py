@@ -11,9 +11,12 @@ For a constant u the solution is closed-form: while |u − r| > a·τ the rate r
 over each physics chunk and returns the chunk's *exact mean rate*, which MuJoCo's integrator
 actuator (ctrl = rate, act = l0) turns into the exact paid-out length at the chunk's end.
 
-The drum: the cable paid out is the *true* drum radius times the drum angle, while the encoder
-reports the *nominal* radius times the angle it counts (:mod:`cdpr_twin.sim.encoders`); each
-robot's true radii are drawn once, by :func:`draw_drum_radii`.
+The drum: the velocity loop runs on the motor, turning the drum at the commanded cable rate
+divided by the *nominal* radius; the cable paid out is the *true* radius times the drum angle
+(:class:`~cdpr_twin.sim.physics.Physics` scales the loop's rate by r'/r), while the encoder
+reports the nominal radius times the angle it counts (:mod:`cdpr_twin.sim.encoders`): after a
+command of L it reads L, and the cable has paid out L·r'/r. Each robot's true radii are drawn
+once, by :func:`draw_drum_radii`.
 """
 
 from __future__ import annotations
