@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -73,7 +74,8 @@ class _Progress:
         self._last = pct
 
     def done(self) -> None:
-        if self.tty:
+        """End the bar's line (if one was drawn)."""
+        if self.tty and self._last >= 0:
             self.stream.write("\n")
 
 
@@ -116,7 +118,36 @@ def _print_ends(s: dict) -> None:
         )
 
 
+def _failure(exc: BaseException, out: Path) -> int:
+    """Print a run's failure in one line on stderr; returns the exit code."""
+    from cdpr_twin.outputs import OutputDirError, OutputError, Terminated
+    from cdpr_twin.scenario import ScenarioError
+
+    if isinstance(exc, ScenarioError | OutputDirError):
+        message, code = f"error: {exc}", 2
+    elif isinstance(exc, OutputError):
+        message = f"cannot write {exc.path}: {exc.cause}; what was written is left *.partial"
+        code = 1
+    elif isinstance(exc, KeyboardInterrupt):
+        how, code = ("terminated", 143) if isinstance(exc, Terminated) else ("interrupted", 130)
+        try:  # this run's summary, or an earlier run's (stopped before it wrote anything)
+            ours = json.loads((out / "summary.json").read_text())["status"] == how
+        except (OSError, ValueError, KeyError, TypeError):
+            ours = False
+        message = (
+            f'{how}; partial outputs (flushed, marked "{how}") in {out}'
+            if ours
+            else f"{how} before any output was written"
+        )
+    else:
+        message = f"the run failed: {exc} (outputs up to the failure are in {out})"
+        code = 1
+    print(f"cdpr-twin: {message}", file=sys.stderr)
+    return code
+
+
 def _run(args: argparse.Namespace) -> int:
+    from cdpr_twin.outputs import OutputDirError, OutputError, sigterm_raises
     from cdpr_twin.runner import run
     from cdpr_twin.scenario import ScenarioError, load_scenario
     from cdpr_twin.sim import SimulationError
@@ -136,24 +167,12 @@ def _run(args: argparse.Namespace) -> int:
     out = args.out if args.out is not None else Path("runs") / scenario.name
     progress = _Progress(scenario.name)
     try:
-        result = run(scenario, out, progress=progress, spawn=args.spawn)
-    except ScenarioError as exc:
-        print(f"cdpr-twin: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
+        with sigterm_raises():
+            result = run(scenario, out, progress=progress, spawn=args.spawn)
+    except (ScenarioError, OutputDirError, OutputError, SimulationError, ValueError,
+            KeyboardInterrupt) as exc:  # fmt: skip
         progress.done()
-        print(
-            f'cdpr-twin: interrupted; partial outputs (flushed, marked "interrupted") in {out}',
-            file=sys.stderr,
-        )
-        return 130
-    except (SimulationError, ValueError) as exc:
-        progress.done()
-        print(
-            f"cdpr-twin: the run failed: {exc}\n(outputs up to the failure are in {out})",
-            file=sys.stderr,
-        )
-        return 1
+        return _failure(exc, out)
     progress.done()
     s = result.summary
     print(

@@ -1,10 +1,11 @@
-"""Run outputs: ``recording.rrd`` (Rerun), ``summary.json``, and each tick's fan-out.
+"""The Rerun recording ``recording.rrd`` of a run (:class:`RerunRecorder`).
 
-:class:`Recorders` sends a tick to ``timeseries.csv`` (whose schema :mod:`cdpr_twin.timeseries`
-owns) and to the Rerun recording.
+:class:`cdpr_twin.recorders.Recorders` sends a tick to ``timeseries.csv`` (whose schema
+:mod:`cdpr_twin.timeseries` owns) and to this recording.
 
 Each file is written as ``<name>.partial`` and renamed when complete, so a file under its final
-name is never half-written; ``summary.json`` says whether the run completed or was interrupted.
+name is never half-written; ``summary.json``, renamed last, says how the run ended (the
+directory's transaction: :mod:`cdpr_twin.outputs`).
 
 Rerun entity paths (they follow the frame tree, DESIGN §9):
 
@@ -29,16 +30,21 @@ Rerun entity paths (they follow the frame tree, DESIGN §9):
 from __future__ import annotations
 
 import contextlib
-import json
+import inspect
 import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from cdpr_twin.outputs import (
+    OutputError,
+    partial_of,
+    write_json_atomic,  # noqa: F401 (its old home)
+    writing,
+)
 from cdpr_twin.se3 import quat_xyzw_from_matrix
-from cdpr_twin.timeseries import TimeseriesWriter
-from cdpr_twin.types import CameraIntrinsics, Command, Measurement, PoseEstimate
+from cdpr_twin.types import CameraIntrinsics, Measurement, PoseEstimate
 
 SLACK_TENSION = 0.5
 """Below this measured tension [N] a cable is drawn as slack."""
@@ -71,13 +77,6 @@ class SceneInfo:
     frame_max: np.ndarray
 
 
-def write_json_atomic(path: Path, data: dict) -> None:
-    """Write JSON through a temporary file and rename: never a half-written file."""
-    tmp = path.with_name(path.name + ".partial")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=False) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
-
-
 class RerunRecorder:
     """Logs the run to a ``.rrd`` file (and optionally a live viewer)."""
 
@@ -96,7 +95,7 @@ class RerunRecorder:
 
         self.rr = rr
         self.path = path
-        self._partial = path.with_name(path.name + ".partial")
+        self._partial = partial_of(path)
         self.scene, self.estimators, self.jpeg_quality = scene, estimators, jpeg_quality
         # column-wise sending costs ~0.5 ms per entity and call: batch 4 s of a file run, but
         # only 0.4 s when a live viewer watches
@@ -116,8 +115,14 @@ class RerunRecorder:
                 self.spawned = True
             except Exception:  # no viewer binary or no display: keep the file only
                 self.spawned = False
+        # a file sink that writes a footer ends the file with "RRF2FOOT" + version: its
+        # absence after disconnect is a failed write (Rerun reports those only in its log)
+        self._footer = "write_footer" in inspect.signature(self.rec.save).parameters
         if not self.spawned:
-            self.rec.save(str(self._partial), default_blueprint=blueprint)
+            try:
+                self.rec.save(str(self._partial), default_blueprint=blueprint)
+            except RuntimeError as exc:  # Rerun's words for an OSError
+                raise OutputError(self._partial, str(exc)) from None
         self._log_static()
 
     def blueprint(self):
@@ -326,72 +331,39 @@ class RerunRecorder:
             ).partition(lengths=[m] * n),
         )
 
-    def close(self) -> None:
-        """Send what is buffered, flush, and give the file its final name."""
+    def finish(self) -> None:
+        """Send what is buffered, flush (Rerun's writer thread), ``fsync`` and disconnect.
+
+        Raises:
+            OutputError: Rerun could not write the file (its own log says why). With a live
+                viewer a failed flush is not an error: the viewer may have been closed.
+        """
         self._flush()
-        with contextlib.suppress(Exception):
+        try:
             self.rec.flush()
-        self.rec.disconnect()
-        if self._partial.exists():
+        except Exception as exc:
+            if not self.spawned:
+                self.abort()
+                raise OutputError(self._partial, f"Rerun could not write it: {exc}") from None
+        self.rec.disconnect()  # writes the footer (Rerun ≥ 0.23), failing only in its log
+        with writing(self._partial), self._partial.open("rb") as f:
+            os.fsync(f.fileno())
+            f.seek(max(0, os.fstat(f.fileno()).st_size - 16))
+            whole = b"FOOT" in f.read() or not self._footer
+        if not whole:
+            raise OutputError(self._partial, "incomplete: Rerun could not write its end")
+
+    def commit(self) -> None:
+        """Give the finished file its final name."""
+        with writing(self.path):
             os.replace(self._partial, self.path)
 
+    def abort(self) -> None:
+        """Stop recording: what was written stays ``<path>.partial``."""
+        with contextlib.suppress(Exception):
+            self.rec.disconnect()
 
-class Recorders:
-    """Where each tick goes: ``timeseries.csv`` and, optionally, ``recording.rrd``.
-
-    Args:
-        out_dir: the run's output directory (created), or ``None`` to record nothing.
-        scene: the static scene (for Rerun).
-        names: the estimators, in recording order.
-        n_cables: the robot's cable count.
-        recording_id: the Rerun recording id.
-        rrd: write ``recording.rrd``.
-        spawn: also stream to a live Rerun viewer.
-    """
-
-    def __init__(
-        self,
-        out_dir: Path | None,
-        scene: SceneInfo,
-        names: tuple[str, ...],
-        n_cables: int,
-        recording_id: str,
-        rrd: bool = True,
-        spawn: bool = False,
-    ) -> None:
-        self.out_dir = out_dir
-        self.csv: TimeseriesWriter | None = None
-        self.rrd: RerunRecorder | None = None
-        if out_dir is None:
-            return
-        out_dir.mkdir(parents=True, exist_ok=True)
-        self.csv = TimeseriesWriter(out_dir / "timeseries.csv", names, n_cables)
-        if rrd:
-            self.rrd = RerunRecorder(
-                out_dir / "recording.rrd", scene, names, "cdpr-twin", recording_id, spawn=spawn
-            )
-
-    def tick(
-        self,
-        m: Measurement,
-        T_true: np.ndarray,
-        estimates: dict[str, PoseEstimate],
-        deviations: dict[str, tuple[float, float]],
-        command: Command | None,
-        plan: np.ndarray | None,
-    ) -> None:
-        """Record one control tick."""
-        if self.csv is not None:
-            self.csv.tick(m.time, T_true, estimates, m, command, plan)
-        if self.rrd is not None:
-            self.rrd.tick(m, T_true, estimates, deviations, plan)
-
-    def close(self, summary: dict) -> None:
-        """Complete every file (final names) and write ``summary.json`` last."""
-        if self.csv is not None:
-            self.csv.close()
-            summary["ticks_recorded"] = self.csv.rows
-        if self.rrd is not None:
-            self.rrd.close()
-        if self.out_dir is not None:
-            write_json_atomic(self.out_dir / "summary.json", summary)
+    def close(self) -> None:
+        """Finish and give the file its final name."""
+        self.finish()
+        self.commit()

@@ -33,9 +33,11 @@ from cdpr_twin.controllers.base import Controller, RunEnd
 from cdpr_twin.estimators.base import Estimator
 from cdpr_twin.events import EventSchedule
 from cdpr_twin.metrics import RunMetrics, pose_error, run_summary
+from cdpr_twin.outputs import OutputDir, OutputError, Terminated
 from cdpr_twin.plugins import OptionError
 from cdpr_twin.procedure import homing, teach
-from cdpr_twin.record import Recorders, SceneInfo
+from cdpr_twin.record import SceneInfo
+from cdpr_twin.recorders import Recorders
 from cdpr_twin.scenario import Scenario, ScenarioError
 from cdpr_twin.statics import InfeasibleTensionError
 from cdpr_twin.types import Measurement, PoseEstimate, Status
@@ -253,35 +255,48 @@ def run(
         record_rrd: write ``recording.rrd`` (with ``out_dir``).
 
     Returns:
-        The :class:`RunResult`. On Ctrl-C the outputs so far are completed and flushed, the
-        summary says ``"status": "interrupted"``, and KeyboardInterrupt is raised again.
+        The :class:`RunResult`. On Ctrl-C (SIGTERM) the outputs so far are completed and
+        flushed, the summary says ``"status": "interrupted"`` (``"terminated"``), and the
+        KeyboardInterrupt (:class:`~cdpr_twin.outputs.Terminated`) is raised again.
+
+    Raises:
+        ScenarioError: the scenario cannot run (before any output is written).
+        OutputDirError: ``out_dir`` cannot be used or another run owns it (nothing touched).
+        OutputError: an output could not be written (all left ``*.partial``, no summary).
     """
     setup = prepare(scenario)
     s, physics = scenario, setup.physics
-    period = s.model.control_period
+    period, owner = s.model.control_period, OutputDir(out_dir)
     try:
+        owner.claim()  # the lock, then an earlier run's files removed
         metrics = RunMetrics(s.estimators.names, setup.controller.checkpoints(s.duration), period)
         recorders = Recorders(out_dir, _scene(setup), s.estimators.names, physics.n_cables,
                               f"{s.name}-{s.seed}", record_rrd, spawn)  # fmt: skip
     except BaseException:
         setup.close()
+        owner.release()
         raise
-    tally = _Tally()
-    status = "running"
+    tally, status, commit = _Tally(), "running", True
     started = time.perf_counter()
     try:
         status = _loop(setup, metrics, recorders, progress, tally)
-    except KeyboardInterrupt:
-        status = Status.INTERRUPTED
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM as the command raises it
+        status = Status.TERMINATED if isinstance(exc, Terminated) else Status.INTERRUPTED
+        raise
+    except OutputError:  # nothing is renamed: what was written stays *.partial
+        status, commit = "failed: output", False
         raise
     except Exception as exc:  # a diverged simulation or an impossible command: keep the record
         status = f"failed: {type(exc).__name__}: {exc}"
         raise
     finally:
         wall = time.perf_counter() - started
-        summary = _summary(setup, metrics, status, tally)
-        recorders.close(summary)
-        setup.close()
+        try:
+            summary = _summary(setup, metrics, status, tally)
+            recorders.close(summary, commit)
+        finally:
+            setup.close()
+            owner.release()
     return RunResult(summary, wall, out_dir)
 
 

@@ -31,6 +31,9 @@ from cdpr_twin.options import (
 from cdpr_twin.realism import Realism, profile, without_source
 from cdpr_twin.scenario_tables import read_events, read_plugins, read_realism, read_truth
 
+MAX_TICKS = 10**9
+"""The most control periods a run may last (10⁹: 116 days at 100 Hz); more is a typo."""
+
 
 @dataclass(frozen=True)
 class ModelConfig:
@@ -157,6 +160,12 @@ class Scenario:
                 raise ScenarioError(f"--duration must be > 0 s, got {duration}")
             s = replace(s, duration=float(duration))
             done["duration"] = float(duration)
+        if not s.duration / s.model.control_period <= MAX_TICKS:
+            where = "--duration" if duration is not None else f"{s.source}: duration"
+            raise ScenarioError(
+                f"{where}: {s.duration:g} s is more than {MAX_TICKS:.0e} control periods "
+                f"({s.model.control_period:g} s each)"
+            )
         if camera is not None:
             s = replace(s, sensors=replace(s.sensors, camera=bool(camera)))
             done["camera"] = bool(camera)
@@ -296,6 +305,8 @@ def _read(source: Path) -> OptionReader:
         data = tomllib.loads(source.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ScenarioError(f"{source}: not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise ScenarioError(f"{source}: cannot read the scenario file: {exc.strerror}") from None
     return OptionReader(source, data, "")
 
 

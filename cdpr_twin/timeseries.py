@@ -20,6 +20,7 @@ Floats are written with ``%.17g``, so every value reads back exactly. The file i
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import os
 from collections.abc import Sequence
@@ -28,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cdpr_twin.outputs import partial_of, writing
 from cdpr_twin.se3 import matrix_from_quat_wxyz, pose_distance, quat_wxyz_from_matrix
 from cdpr_twin.types import Command, Measurement, PoseEstimate, Status
 
@@ -66,7 +68,8 @@ class TimeseriesWriter:
 
     Rows are buffered and written (and flushed) every ``flush_every`` ticks and at
     :meth:`close`, with quaternions converted for the whole batch at once. Until :meth:`close`
-    the file is ``<path>.partial``.
+    (or :meth:`finish` then :meth:`commit`) the file is ``<path>.partial``; an ``OSError`` is
+    raised as :class:`~cdpr_twin.outputs.OutputError` naming that file.
 
     Attributes:
         path: the final file name.
@@ -80,12 +83,13 @@ class TimeseriesWriter:
         self, path: Path, estimators: tuple[str, ...], n_cables: int, flush_every: int = 25
     ) -> None:
         self.path = Path(path)
-        self._partial = self.path.with_name(self.path.name + ".partial")
+        self._partial = partial_of(self.path)
         self.estimators = tuple(estimators)
         self.n_cables = n_cables
         self.flush_every = flush_every
-        self._file = self._partial.open("w", newline="", encoding="utf-8")
-        self._file.write(",".join(header(self.estimators, n_cables)) + "\n")
+        with writing(self._partial):
+            self._file = self._partial.open("w", newline="", encoding="utf-8")
+            self._file.write(",".join(header(self.estimators, n_cables)) + "\n")
         self._rows: list[tuple] = []
         self._formats: dict[tuple[bool, bool], str] = {}
         self.rows = 0
@@ -171,17 +175,36 @@ class TimeseriesWriter:
                 values += pose7[i, k + 2].tolist()
             values.append(status)
             lines.append(self._row_format(has_plan, has_tag) % tuple(values))
-        self._file.write("\n".join(lines) + "\n")
-        self._file.flush()
+        with writing(self._partial):
+            self._file.write("\n".join(lines) + "\n")
+            self._file.flush()
         self.rows += len(self._rows)
         self._rows = []
+
+    def finish(self) -> None:
+        """Write what is buffered, flush, ``fsync`` and close (still ``<path>.partial``)."""
+        if not self._file.closed:
+            self.flush()
+            with writing(self._partial):
+                os.fsync(self._file.fileno())
+                self._file.close()
+
+    def commit(self) -> None:
+        """Give the finished file its final name."""
+        with writing(self.path):
+            os.replace(self._partial, self.path)
+
+    def abort(self) -> None:
+        """Close without completing: what was written stays ``<path>.partial``."""
+        self._rows = []
+        with contextlib.suppress(OSError):
+            self._file.close()
 
     def close(self) -> None:
         """Write what is buffered, close, and give the file its final name."""
         if not self._file.closed:
-            self.flush()
-            self._file.close()
-            os.replace(self._partial, self.path)
+            self.finish()
+            self.commit()
 
 
 @dataclass(frozen=True, eq=False)

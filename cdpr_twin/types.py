@@ -107,6 +107,8 @@ class Status(enum.StrEnum):
     """PBVS: the run's duration ended before convergence."""
     INTERRUPTED = "interrupted"
     """The run was stopped by Ctrl-C."""
+    TERMINATED = "terminated"
+    """The run was stopped by SIGTERM (a CI timeout, ``docker stop``)."""
 
 
 @dataclass(frozen=True, eq=False)

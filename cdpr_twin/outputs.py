@@ -1,0 +1,243 @@
+"""A run's output directory as a transaction: owned while written, committed by ``summary.json``.
+
+The promises (issue 13), for any reader of an output directory:
+
+1. **One writer.** A run owns its directory while it writes: ``.lock`` in the directory, created
+   with ``O_CREAT | O_EXCL``, holds ``<pid> <host>``. A second run on the same directory is
+   refused (:class:`OutputDirError`, exit 2) and touches nothing. A lock whose process is dead on
+   this host (a killed run) is stale and taken over; checking and taking over happen under an
+   ``flock`` of the directory, so two runs cannot both take over the same stale lock. The lock
+   is removed when the run ends, however it ends (except SIGKILL: then it is stale).
+2. **One run's files.** Right after taking the lock, before anything is written, the outputs
+   of an earlier run (``timeseries.csv``, ``recording.rrd``, ``summary.json``, ``*.partial``)
+   are **removed** (not moved aside: a directory holds one run, as ``--out`` names it; keep an
+   earlier run by giving the new one another ``--out``).
+3. **Whole files only.** Each file is written as ``<name>.partial``; when the run ends every
+   file is completed, flushed and ``fsync``'ed first, then they are renamed to their final
+   names, ``summary.json`` last (the directory is ``fsync``'ed before and after it).
+   ``summary.json`` is the commit marker: present ⇔ the run ended, and its ``status`` says how
+   (``completed``, ``interrupted``, ``terminated``, ``failed: …``).
+4. **Failed writes stay partial.** An ``OSError`` while writing (disk full, permission) is an
+   :class:`OutputError` naming the path and the cause; nothing is renamed and no
+   ``summary.json`` is written: what was written stays ``*.partial``.
+
+SIGTERM is turned into :class:`Terminated` (a :class:`KeyboardInterrupt`) by
+:func:`sigterm_raises`, which the command installs around a run; a run handles it as Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+import os
+import signal
+import socket
+from collections.abc import Iterator
+from pathlib import Path
+
+LOCK_NAME = ".lock"
+"""The lock file in an output directory while a run writes it."""
+OUTPUT_NAMES = ("timeseries.csv", "recording.rrd", "summary.json")
+"""The final names of a run's files (removed with ``*.partial`` when a new run starts)."""
+
+
+class OutputDirError(Exception):
+    """The output directory cannot be used (the command's exit code 2).
+
+    It is not a directory, cannot be written, or another run owns it.
+    """
+
+
+class OutputError(Exception):
+    """Writing an output file failed (the command's exit code 1).
+
+    Attributes:
+        path: the file being written.
+        cause: what went wrong (the OS's words).
+    """
+
+    def __init__(self, path: Path, cause: str) -> None:
+        self.path, self.cause = Path(path), cause
+        super().__init__(f"{path}: {cause}")
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised by :func:`sigterm_raises`'s handler; a run handles it as Ctrl-C."""
+
+
+@contextlib.contextmanager
+def writing(path: Path) -> Iterator[None]:
+    """Turn an ``OSError`` raised inside into an :class:`OutputError` naming ``path``."""
+    try:
+        yield
+    except OSError as exc:
+        raise OutputError(path, exc.strerror or str(exc)) from None
+
+
+def fsync_dir(path: Path) -> None:
+    """Make the directory's entries (renames) durable."""
+    with writing(path):
+        fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def partial_of(path: Path) -> Path:
+    """``<path>.partial``: where ``path`` is written until it is complete."""
+    return path.with_name(path.name + ".partial")
+
+
+def write_json_partial(path: Path, data: dict) -> Path:
+    """Write JSON to ``<path>.partial``, flushed and ``fsync``'ed; returns that path."""
+    tmp = partial_of(path)
+    with writing(tmp), tmp.open("w", encoding="utf-8") as f:
+        f.write(json.dumps(data, indent=2, sort_keys=False) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+    return tmp
+
+
+def write_json_atomic(path: Path, data: dict) -> None:
+    """Write JSON through a ``fsync``'ed temporary file and rename: never a half-written file."""
+    tmp = write_json_partial(path, data)
+    with writing(path):
+        os.replace(tmp, path)
+
+
+@contextlib.contextmanager
+def _guard(directory: Path) -> Iterator[None]:
+    """An exclusive ``flock`` of the directory: lock checks and takeovers, one at a time."""
+    fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # releases the flock
+
+
+def _owner(lock: Path) -> tuple[int, str] | None:
+    """The (pid, host) a lock file names, or ``None`` when it names none (a torn lock)."""
+    try:
+        pid, host = lock.read_text(encoding="utf-8").split()
+        return int(pid), host
+    except (OSError, ValueError, UnicodeDecodeError):
+        return None
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` runs on this host (a zombie does not)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    with contextlib.suppress(OSError, IndexError):
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        return stat[stat.rindex(")") + 2] != "Z"
+    return True
+
+
+def _stale(owner: tuple[int, str] | None) -> bool:
+    """Whether a lock's owner is gone: a torn lock, or a dead process on this host."""
+    if owner is None:  # its writer died between creating and filling it (we hold the guard)
+        return True
+    pid, host = owner
+    return host == socket.gethostname() and pid != os.getpid() and not _alive(pid)
+
+
+class OutputDir:
+    """A run's claim on its output directory: :meth:`claim` it, then :meth:`release` it.
+
+    Attributes:
+        path: the directory, or ``None`` (no outputs: claiming and releasing do nothing).
+        lock: its lock file, or ``None``.
+    """
+
+    def __init__(self, path: Path | None) -> None:
+        self.path = None if path is None else Path(path)
+        self.lock = None if path is None else self.path / LOCK_NAME
+        self._held = False
+
+    def claim(self) -> None:
+        """Create the directory, take its lock and remove an earlier run's outputs.
+
+        Raises:
+            OutputDirError: the directory cannot be created or locked, or another run owns it.
+            OutputError: an earlier run's file cannot be removed.
+        """
+        if self.path is None:
+            return
+        self._acquire()
+        try:
+            self._clear()
+        except BaseException:
+            self.release()
+            raise
+
+    def _acquire(self) -> None:
+        where = f"output directory {self.path}"
+        if self.path.exists() and not self.path.is_dir():
+            raise OutputDirError(f"{where}: exists and is not a directory")
+        try:
+            self.path.mkdir(parents=True, exist_ok=True)
+            with _guard(self.path):
+                self._create_lock()
+        except OSError as exc:
+            raise OutputDirError(f"{where}: cannot write there: {exc.strerror or exc}") from None
+        self._held = True
+
+    def _create_lock(self) -> None:
+        flags = os.O_CREAT | os.O_EXCL | os.O_WRONLY
+        try:
+            fd = os.open(self.lock, flags, 0o644)
+        except FileExistsError:
+            owner = _owner(self.lock)
+            if not _stale(owner):
+                pid, host = owner
+                raise OutputDirError(
+                    f"output directory {self.path} is in use by another run (pid {pid} on "
+                    f"{host}); wait for it, or delete {self.lock} if no run uses it"
+                ) from None
+            self.lock.unlink()
+            fd = os.open(self.lock, flags, 0o644)
+        try:
+            os.write(fd, f"{os.getpid()} {socket.gethostname()}\n".encode())
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+    def _clear(self) -> None:
+        """Remove an earlier run's outputs: final names and ``*.partial``."""
+        stale = [self.path / n for n in OUTPUT_NAMES] + sorted(self.path.glob("*.partial"))
+        for path in stale:
+            with writing(path):
+                path.unlink(missing_ok=True)
+
+    def release(self) -> None:
+        """Remove the lock (if this claim still holds it)."""
+        if self._held:
+            self._held = False
+            with contextlib.suppress(OSError):
+                self.lock.unlink()
+
+
+@contextlib.contextmanager
+def sigterm_raises() -> Iterator[None]:
+    """Within: SIGTERM raises :class:`Terminated`; the previous handler is restored on leaving.
+
+    Once: a second SIGTERM is ignored while the outputs are completed. The main thread only.
+    """
+
+    def handler(signum, frame) -> None:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        raise Terminated()
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)

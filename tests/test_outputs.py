@@ -1,0 +1,270 @@
+"""Output transactions (issue 13): one run owns its directory, final names belong to one run and
+are whole, ``summary.json`` is the commit marker, SIGTERM is handled like Ctrl-C, a failed write
+is a one-line error that leaves ``*.partial`` only; bad ``--out``/scenario/duration: exit 2."""
+
+import errno
+import json
+import os
+import resource
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from cdpr_twin.cli import main
+from cdpr_twin.outputs import LOCK_NAME, OutputDir, OutputDirError
+from cdpr_twin.timeseries import TimeseriesWriter
+
+ROOT = Path(__file__).resolve().parent.parent
+OPEN_LOOP = ROOT / "scenarios" / "paper_open_loop.toml"
+FINAL = {"timeseries.csv", "recording.rrd", "summary.json"}
+
+
+def _scenario(tmp_path: Path, durations: tuple[float, float, float]) -> Path:
+    """The open-loop scenario with slower segments (a longer run), the model by absolute path."""
+    text = OPEN_LOOP.read_text()
+    old = "durations = [10.0, 5.0, 10.0]"
+    assert old in text
+    text = text.replace(old, f"durations = {list(durations)}").replace(
+        'file = "../models/acrobot/scene.xml"',
+        f'file = "{ROOT / "models" / "acrobot" / "scene.xml"}"',
+    )
+    path = tmp_path / f"slow_{int(sum(durations))}.toml"
+    path.write_text(text)
+    return path
+
+
+def _start(scenario: Path, out: Path, *args: str) -> subprocess.Popen:
+    command = [sys.executable, "-m", "cdpr_twin", "run", str(scenario), "--out", str(out)]
+    return subprocess.Popen(
+        [*command, "--no-camera", *args],
+        cwd=out.parent,
+        env={**os.environ, "MUJOCO_GL": "egl"},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+
+
+def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "cdpr_twin", "run", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        env={**os.environ, "MUJOCO_GL": "egl"},
+        timeout=300,
+    )
+
+
+def _wait_under_way(proc: subprocess.Popen, out: Path, rows: int = 50) -> None:
+    """Wait until the run has written ``rows`` CSV rows (it holds the lock by then)."""
+    partial = out / "timeseries.csv.partial"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        if partial.exists() and partial.read_text().count("\n") > rows:
+            assert (out / LOCK_NAME).exists()
+            return
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.1)
+    pytest.fail("the run did not get under way")
+
+
+def _check_csv(path: Path) -> int:
+    """Header plus rows of equal length (no torn or foreign line); returns the row count."""
+    rows = path.read_text().splitlines()
+    width = len(rows[0].split(","))
+    assert all(len(r.split(",")) == width for r in rows[1:])
+    return len(rows) - 1
+
+
+def _one_error_line(stderr: str) -> str:
+    assert "Traceback" not in stderr
+    lines = [ln for ln in stderr.splitlines() if ln.startswith("cdpr-twin:")]
+    assert len(lines) == 1, stderr
+    return lines[0]
+
+
+def test_a_second_run_on_a_locked_directory_is_refused(tmp_path):
+    out = tmp_path / "out"
+    first = _start(_scenario(tmp_path, (40.0, 20.0, 40.0)), out, "--duration", "100")
+    try:
+        _wait_under_way(first, out)
+        second = _cli(str(OPEN_LOOP), "--out", str(out), "--no-camera", cwd=tmp_path)
+        assert first.poll() is None, "the first run ended too soon for this test"
+    finally:
+        _, err = first.communicate(timeout=300)
+    assert second.returncode == 2, second.stderr
+    line = _one_error_line(second.stderr)
+    assert str(out) in line and f"pid {first.pid}" in line
+    assert first.returncode == 0, err
+    assert {p.name for p in out.iterdir()} == FINAL
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["ticks_recorded"] == _check_csv(out / "timeseries.csv") > 50
+
+
+def test_sigterm_completes_the_outputs_marked_terminated(tmp_path):
+    out = tmp_path / "out"
+    proc = _start(_scenario(tmp_path, (200.0, 100.0, 200.0)), out, "--duration", "500")
+    _wait_under_way(proc, out)
+    proc.send_signal(signal.SIGTERM)
+    _, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 143, stderr
+    assert "terminated" in _one_error_line(stderr)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "terminated"
+    assert summary["ticks_recorded"] == _check_csv(out / "timeseries.csv") > 50
+    assert {p.name for p in out.iterdir()} == FINAL  # no *.partial, no lock
+
+
+def test_sigkill_leaves_no_final_name_then_a_fresh_run_takes_the_stale_lock(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    for name in FINAL:  # an earlier run's complete outputs
+        (out / name).write_text('{"status": "completed"}\n')
+    (out / "recording.rrd.partial").write_text("older still")
+    proc = _start(_scenario(tmp_path, (200.0, 100.0, 200.0)), out, "--duration", "500")
+    _wait_under_way(proc, out, rows=5)
+    proc.kill()
+    proc.communicate(timeout=60)
+    left = {p.name for p in out.iterdir()}
+    assert not left & FINAL, left  # the earlier run's files went before this one wrote
+    assert left == {LOCK_NAME, "timeseries.csv.partial", "recording.rrd.partial"}
+    assert (out / LOCK_NAME).read_text().split()[0] == str(proc.pid)
+    fresh = _cli(str(OPEN_LOOP), "--out", str(out), "--no-camera", "--duration", "1", cwd=tmp_path)
+    assert fresh.returncode == 0, fresh.stderr
+    assert {p.name for p in out.iterdir()} == FINAL
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "completed"
+    assert summary["ticks_recorded"] == _check_csv(out / "timeseries.csv") == 26
+
+
+class _FullDisk:
+    """A file object whose writes fail as on a full disk (the rest is the real file's)."""
+
+    def __init__(self, f) -> None:
+        self._f = f
+
+    def write(self, text: str) -> int:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    def __getattr__(self, name: str):
+        return getattr(self._f, name)
+
+
+def test_a_full_disk_is_a_one_line_error_and_no_final_name(tmp_path, monkeypatch, capsys):
+    init = TimeseriesWriter.__init__
+
+    def full_disk_init(self, *args, **kwargs) -> None:
+        init(self, *args, **kwargs)
+        self._file = _FullDisk(self._file)
+
+    monkeypatch.setattr(TimeseriesWriter, "__init__", full_disk_init)
+    out = tmp_path / "out"
+    code = main(["run", str(OPEN_LOOP), "--out", str(out), "--no-camera", "--duration", "2"])
+    err = capsys.readouterr().err
+    assert code == 1, err
+    line = _one_error_line(err)
+    assert str(out / "timeseries.csv.partial") in line and "No space left on device" in line
+    assert {p.name for p in out.iterdir()} == {"timeseries.csv.partial", "recording.rrd.partial"}
+
+
+@pytest.mark.parametrize("limit", [100_000, 150_000], ids=["csv_first", "rrd_end"])
+def test_a_file_size_limit_is_a_one_line_error_and_no_final_name(tmp_path, limit):
+    """A real failing write (RLIMIT_FSIZE: EFBIG, as a full disk gives ENOSPC), whichever file
+    meets it; with 150 kB the recording's end (Rerun's footer, written in its own thread) fails."""
+
+    def limited() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    out = tmp_path / "out"
+    proc = subprocess.run(
+        [sys.executable, "-m", "cdpr_twin", "run", str(OPEN_LOOP), "--out", str(out),
+         "--no-camera", "--duration", "3"],
+        capture_output=True, text=True, cwd=tmp_path, timeout=300, preexec_fn=limited,
+        env={**os.environ, "MUJOCO_GL": "egl"},
+    )  # fmt: skip
+    assert proc.returncode == 1, proc.stderr
+    assert ".partial" in _one_error_line(proc.stderr)
+    left = {p.name for p in out.iterdir()}
+    assert left == {"timeseries.csv.partial", "recording.rrd.partial"}, left
+
+
+def test_huge_duration_is_a_one_line_error(tmp_path):
+    out = tmp_path / "out"
+    args = ("--out", str(out), "--no-camera", "--duration", "1e308")
+    proc = _cli(str(OPEN_LOOP), *args, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    assert "--duration" in _one_error_line(proc.stderr)
+    assert len(proc.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_out_that_is_a_file_is_a_one_line_error(tmp_path):
+    out = tmp_path / "out"
+    out.write_text("keep me")
+    proc = _cli(str(OPEN_LOOP), "--out", str(out), "--no-camera", "--duration", "1", cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    assert str(out) in _one_error_line(proc.stderr)
+    assert len(proc.stderr.strip().splitlines()) == 1
+    assert out.read_text() == "keep me"
+
+
+@pytest.mark.parametrize("cause", [errno.EACCES, errno.EROFS], ids=["not_permitted", "read_only"])
+def test_out_not_writable_is_a_one_line_error(tmp_path, monkeypatch, capsys, cause):
+    # as root chmod cannot forbid anything: the OS's refusal comes through os.open (the lock)
+    real_open = os.open
+
+    def refusing_open(path, flags, *args, **kwargs):
+        if Path(path).name == LOCK_NAME:
+            raise OSError(cause, os.strerror(cause), str(path))
+        return real_open(path, flags, *args, **kwargs)
+
+    monkeypatch.setattr(os, "open", refusing_open)
+    out = tmp_path / "out"
+    out.mkdir()
+    code = main(["run", str(OPEN_LOOP), "--out", str(out), "--no-camera", "--duration", "1"])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    line = _one_error_line(err)
+    assert str(out) in line and os.strerror(cause) in line
+    assert list(out.iterdir()) == []
+
+
+def test_unreadable_scenario_is_a_one_line_error(tmp_path, monkeypatch, capsys):
+    scenario = tmp_path / "secret.toml"
+    scenario.write_text(OPEN_LOOP.read_text())
+    real_read = Path.read_text
+
+    def refusing_read(self, *args, **kwargs):
+        if self == scenario:
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(self))
+        return real_read(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "read_text", refusing_read)
+    code = main(["run", str(scenario), "--out", str(tmp_path / "out"), "--no-camera"])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    line = _one_error_line(err)
+    assert str(scenario) in line and "Permission denied" in line
+    assert not (tmp_path / "out").exists()
+
+
+def test_lock_of_a_live_owner_is_kept_and_a_dead_owners_is_taken(tmp_path):
+    (tmp_path / LOCK_NAME).write_text(f"{os.getppid()} {socket.gethostname()}\n")
+    with pytest.raises(OutputDirError, match="in use by another run"):
+        OutputDir(tmp_path).claim()
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    (tmp_path / LOCK_NAME).write_text(f"{dead.pid} {socket.gethostname()}\n")
+    owner = OutputDir(tmp_path)
+    owner.claim()
+    assert (tmp_path / LOCK_NAME).read_text().split()[0] == str(os.getpid())
+    owner.release()
+    assert not (tmp_path / LOCK_NAME).exists()
