@@ -35,6 +35,11 @@ MAX_TICKS = 10**9
 """The most control periods a run may last (10⁹: 116 days at 100 Hz); more is a typo."""
 
 
+MIN_TIMESTEP, MAX_TIMESTEP = 1e-5, 0.002
+"""Physics step bounds [s]: below, a run takes hours per simulated second; above, the stiff
+cables (k ≈ 3e5 N/m) are unstable."""
+
+
 @dataclass(frozen=True)
 class ModelConfig:
     """Which model, and how to step it.
@@ -160,10 +165,11 @@ class Scenario:
                 raise ScenarioError(f"--duration must be > 0 s, got {duration}")
             s = replace(s, duration=float(duration))
             done["duration"] = float(duration)
-        if not s.duration / s.model.control_period <= MAX_TICKS:
+        ticks = s.duration / s.model.control_period
+        if not 0.5 <= ticks <= MAX_TICKS:  # round(ticks) ≥ 1: a run makes at least one tick
             where = "--duration" if duration is not None else f"{s.source}: duration"
             raise ScenarioError(
-                f"{where}: {s.duration:g} s is more than {MAX_TICKS:.0e} control periods "
+                f"{where}: {s.duration:g} s must span 1 to {MAX_TICKS:.0e} control periods "
                 f"({s.model.control_period:g} s each)"
             )
         if camera is not None:
@@ -283,7 +289,9 @@ def _model(top: OptionReader, source: Path) -> ModelConfig:
     m = top.table_of("model", required=False)
     file = Path(m.string("file", "../models/acrobot/scene.xml"))
     file = file if file.is_absolute() else (source.parent / file).resolve()
-    timestep = m.number("timestep", 0.0005, minimum=0, exclusive=True, unit="s")
+    timestep = m.number("timestep", 0.0005, minimum=MIN_TIMESTEP, unit="s")
+    if timestep > MAX_TIMESTEP:
+        raise m.fail("timestep", f"must be ≤ {MAX_TIMESTEP} s for stiff cables, got {timestep}")
     control_rate = m.number("control_rate", 25.0, minimum=0, exclusive=True, unit="Hz")
     align_every = m.integer("align_every", 10, minimum=1)
     m.done()

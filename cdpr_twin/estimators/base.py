@@ -89,6 +89,12 @@ class Estimator(ABC):
         if not self._ready:
             raise RuntimeError(f"{self.name}: call reset(T_base_platform0) before update()")
 
+    def _bad_time(self, m: Measurement) -> PoseEstimate | None:
+        """The held, flagged estimate when the measurement's time is NaN or infinite."""
+        if np.isfinite(m.time):
+            return None
+        return PoseEstimate(self._time, self._T, valid=False, flags=frozenset({NON_FINITE_INPUT}))
+
     def _held(self, m: Measurement, *flags: str, **extra) -> PoseEstimate:
         self._time = m.time
         return PoseEstimate(m.time, self._T, valid=False, flags=frozenset(flags), **extra)

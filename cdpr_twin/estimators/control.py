@@ -27,6 +27,8 @@ class ControlEstimator(Estimator):
         """Compose the estimate with the exponential of the last commanded twist."""
         self._check_reset()
         m = measurement
+        if (held := self._bad_time(m)) is not None:
+            return held
         dt = m.time - self._time
         if not np.isfinite(dt) or dt < 0:
             raise ValueError(

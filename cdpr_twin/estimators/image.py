@@ -81,6 +81,8 @@ class ImageEstimator(Estimator):
         """Compose the estimate from the reference detection and this one."""
         self._check_reset()
         m = measurement
+        if (held := self._bad_time(m)) is not None:
+            return held
         if m.tag is None:
             self._had_tag = False
             return self._held(m, TAG_LOST if m.camera_on else NO_CAMERA)

@@ -317,6 +317,8 @@ class ModelEstimator(Estimator):
         """One pass of Algorithm 1's loop (lines 7-12)."""
         self._check_reset()
         m = measurement
+        if (held := self._bad_time(m)) is not None:
+            return held
         lengths, tensions = m.cable_lengths, m.tensions
         if not math.isfinite(float(lengths.sum() + tensions.sum())):  # NaN/inf propagate
             return self._held(m, NON_FINITE_INPUT)

@@ -22,7 +22,14 @@ from cdpr_twin.deviations import DeviationSpec, TruthDeviations
 from cdpr_twin.realism import WinchRealism
 from cdpr_twin.se3 import matrix_from_quat_wxyz, transform
 from cdpr_twin.sim import camera as cam_mod
-from cdpr_twin.sim.model import TAG_BODY, build_model, cable_count, numeric, read_geometry
+from cdpr_twin.sim.model import (
+    TAG_BODY,
+    SimulationError,
+    build_model,
+    cable_count,
+    numeric,
+    read_geometry,
+)
 from cdpr_twin.sim.physics import Physics
 from cdpr_twin.sim.sensors import NominalRobot, Sensors
 from cdpr_twin.types import Command, Measurement
@@ -81,8 +88,11 @@ def build_robot(
     deviations = deviations if deviations is not None else TruthDeviations.zero(n)
     model = build_model(path, deviations)
     if timestep is not None:
-        if not (np.isfinite(timestep) and 0 < timestep <= 0.002):
-            raise ValueError(f"timestep must be in (0, 0.002] s for stiff cables, got {timestep}")
+        if not (np.isfinite(timestep) and 1e-5 <= timestep <= 0.002):
+            raise ValueError(
+                f"timestep must be in [1e-5, 0.002] s (stiff cables; a smaller one takes hours "
+                f"per simulated second), got {timestep}"
+            )
         model.opt.timestep = float(timestep)
     robot_seed = spec_seed if (spec_seed := getattr(deviations_in, "seed", None)) else 0
     physics = Physics(model, align_every, str(path), winch=winch, robot_seed=robot_seed)
@@ -143,8 +153,15 @@ class Twin:
     settle_error = _truth("settle_error", "Pose error after the last reset's settle [m, rad].")
 
     def close(self) -> None:
-        """Free the renderer's GL context."""
+        """Free the renderer's GL context; the twin can no longer step or sense."""
         self.sensors.close()
+        self._closed = True
+
+    def _check_open(self) -> None:
+        if getattr(self, "_closed", False):
+            raise SimulationError(
+                "this Twin is closed; build a new one (or use it in a with block)"
+            )
 
     def __enter__(self) -> Twin:
         return self
@@ -164,15 +181,18 @@ class Twin:
 
     def reset(self, T_base_platform: np.ndarray, settle_time: float = 0.3) -> None:
         """Settle the robot at a pose with all cables taut and home the encoders there."""
+        self._check_open()
         self.physics.reset(T_base_platform, settle_time, self.tau_min, self.tau_max)
         self.sensors.home(T_base_platform)
 
     def advance(self, duration: float, cable_rates: np.ndarray) -> None:
         """Run the winches at constant rates while physics steps (see :meth:`Physics.advance`)."""
+        self._check_open()
         self.physics.advance(duration, cable_rates)
 
     def sense(self, command: Command | None = None, render: bool | None = None) -> Measurement:
         """Read every sensor (see :meth:`Sensors.read`)."""
+        self._check_open()
         return self.sensors.read(command, render)
 
     def place(self, T_base_platform: np.ndarray) -> None:
