@@ -27,11 +27,10 @@ class Encoders:
     """The winch encoders of one robot.
 
     Args:
-        physics: the simulated robot (its true drum radii).
+        physics: the simulated robot (its true drum radii, drawn once per robot by
+            :func:`cdpr_twin.sim.winch.draw_drum_radii`).
         nominal: the nominal geometry (homing reads its rest lengths at the home pose).
         realism: winch and encoder imperfections.
-        robot_rng: the per-robot winch generator; unused: the drum radii are drawn once, by
-            the physics (:func:`cdpr_twin.sim.winch.draw_drum_radii`), so both see the same.
         home: home at :meth:`home` (else read the true rest lengths).
     """
 
@@ -40,7 +39,6 @@ class Encoders:
         physics: Physics,
         nominal: CdprGeometry,
         realism: WinchRealism,
-        robot_rng: np.random.Generator,
         home: bool = True,
     ) -> None:
         self.physics, self.nominal, self.realism, self.home_enabled = (

@@ -332,11 +332,9 @@ class Physics:
                 "call reset(T_base_platform) before advance(): the winches have paid out no "
                 "cable yet"
             )
-        rates = np.array(cable_rates, dtype=float)
-        if rates.shape == (self.n_cables,) and not math.isfinite(rates.sum()):
-            self.set_winch_rates(rates, 0)  # the clearest error first
+        checked_rates(cable_rates, self.n_cables, self._ctrl_lo, self._ctrl_hi)  # rates first
         n = self.steps_in(duration)
-        self.set_winch_rates(rates, n)
+        self.set_winch_rates(cable_rates, n)
         self.step(n)
 
     # ------------------------------------------------------------------ placing

@@ -81,9 +81,7 @@ class Sensors:
             np.random.default_rng(noise_seed),  # the run seed's own stream, as before realism
             robot_rng(robot_seed, "tension"),
         )
-        self.encoders = Encoders(
-            physics, nominal.geometry, realism.winch, robot_rng(robot_seed, "winch"), home_encoders
-        )
+        self.encoders = Encoders(physics, nominal.geometry, realism.winch, home_encoders)
         self.camera: OnboardCamera | None = None
         if camera:
             if nominal.intrinsics is None:

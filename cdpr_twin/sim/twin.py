@@ -79,7 +79,8 @@ def build_robot(
         ModelError: when the model file is missing, malformed or not a cable robot.
         ValueError: for a bad timestep or refresh interval.
     """
-    path, deviations_in = Path(model_path), deviations
+    path = Path(model_path)
+    robot_seed = deviations.seed if isinstance(deviations, DeviationSpec) else 0
     nominal_model = build_model(path)
     nominal = _nominal_robot(nominal_model)
     n = cable_count(nominal_model)
@@ -94,7 +95,6 @@ def build_robot(
                 f"per simulated second), got {timestep}"
             )
         model.opt.timestep = float(timestep)
-    robot_seed = spec_seed if (spec_seed := getattr(deviations_in, "seed", None)) else 0
     physics = Physics(model, align_every, str(path), winch=winch, robot_seed=robot_seed)
     return physics, nominal, deviations
 
@@ -138,6 +138,7 @@ class Twin:
             model_path, deviations, timestep, align_every
         )
         self.tau_min, self.tau_max = float(tau_min), float(tau_max)
+        self._closed = False
         self.sensors = Sensors(
             self.physics, self.nominal, tension_noise_std, noise_seed, camera, home_encoders
         )
@@ -158,7 +159,7 @@ class Twin:
         self._closed = True
 
     def _check_open(self) -> None:
-        if getattr(self, "_closed", False):
+        if self._closed:
             raise SimulationError(
                 "this Twin is closed; build a new one (or use it in a with block)"
             )
