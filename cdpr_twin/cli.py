@@ -182,7 +182,9 @@ def _run(args: argparse.Namespace) -> int:
     print(_table(s))
     _print_ends(s)
     print(f"outputs: {out}/recording.rrd, timeseries.csv, summary.json")
-    return 0
+    for fault in s.get("faults", ()):
+        print(f"fault at t = {fault['time_s']:.3f} s: {fault['kind']} ({fault['detail']})")
+    return 3 if str(s["status"]).startswith("fault:") else 0
 
 
 def _reproduce(args: argparse.Namespace) -> int:

@@ -247,6 +247,18 @@ class RerunRecorder:
         if len(b["time"]) >= self.flush_every:
             self._flush()
 
+    def mark(self, time: float, marks: tuple[str, ...]) -> None:
+        """Log what happened at ``time`` [s] (events, faults) to ``events``, a text log.
+
+        Faults are logged at level ``ERROR``, scenario events at ``WARN``, so the viewer's
+        text-log view shows them in colour on the run's timeline.
+        """
+        rr, rec = self.rr, self.rec
+        rec.set_time("sim_time", duration=time)
+        for text in marks:
+            level = rr.TextLogLevel.ERROR if text.startswith("fault") else rr.TextLogLevel.WARN
+            rec.log("events", rr.TextLog(text, level=level))
+
     def _new_buffer(self) -> dict[str, list]:
         keys = [
             "time",

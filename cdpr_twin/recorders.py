@@ -65,12 +65,15 @@ class Recorders:
         deviations: dict[str, tuple[float, float]],
         command: Command | None,
         plan: np.ndarray | None,
+        marks: tuple[str, ...] = (),
     ) -> None:
-        """Record one control tick."""
+        """Record one control tick (``marks``: what happened in it, events and faults)."""
         if self.csv is not None:
-            self.csv.tick(m.time, T_true, estimates, m, command, plan)
+            self.csv.tick(m.time, T_true, estimates, m, command, plan, marks)
         if self.rrd is not None:
             self.rrd.tick(m, T_true, estimates, deviations, plan)
+            if marks:
+                self.rrd.mark(m.time, marks)
 
     def close(self, summary: dict, commit: bool = True) -> None:
         """Complete every file, then give them final names, ``summary.json`` last.

@@ -29,7 +29,14 @@ from cdpr_twin.options import (
     parse_options,
 )
 from cdpr_twin.realism import Realism, profile, without_source
-from cdpr_twin.scenario_tables import read_events, read_plugins, read_realism, read_truth
+from cdpr_twin.scenario_tables import (
+    MonitorConfig,
+    read_events,
+    read_monitor,
+    read_plugins,
+    read_realism,
+    read_truth,
+)
 
 MAX_TICKS = 10**9
 """The most control periods a run may last (10⁹: 116 days at 100 Hz); more is a typo."""
@@ -125,6 +132,7 @@ class Scenario:
         controller: controller configuration.
         estimators: estimator configuration.
         events: timed events (faults), in file order.
+        monitor: what a fault of the robot does to the run (``[monitor]``).
         realism: the robot's and sensors' imperfections (``[realism]``; default: ideal).
         plugins: modules imported before the file's names were checked.
         overrides: the command-line overrides applied.
@@ -142,6 +150,7 @@ class Scenario:
     controller: ControllerConfig
     estimators: EstimatorConfig
     events: tuple[Event, ...] = ()
+    monitor: MonitorConfig = field(default_factory=MonitorConfig)
     plugins: tuple[str, ...] = ()
     realism: Realism = field(default_factory=Realism)
     overrides: Mapping[str, Any] = field(default_factory=dict)
@@ -347,11 +356,11 @@ def load_scenario(path: str | Path) -> Scenario:
     st.done()
     controller = _controller(top.table_of("controller"))
     estimators = _estimators(top.table_of("estimators"))
-    events = read_events(top)
+    events, monitor = read_events(top), read_monitor(top)
     realism = read_realism(top)
     top.done()
     scenario = Scenario(
         name, source, description, duration, seed, start, model, truth, sensors,
-        controller, estimators, events, loaded, realism,
+        controller, estimators, events, monitor, loaded, realism,
     )  # fmt: skip
     return scenario.with_overrides()

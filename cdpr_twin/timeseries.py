@@ -13,6 +13,7 @@ One row per control tick, columns in this order (:func:`header`):
 | ``plan_{x,…,qz}`` | the open-loop plan's pose (empty cells when there is none) |
 | ``tag_{x,…,qz}`` | the detected tag pose T_cam_tag (empty cells when not detected) |
 | ``status`` | the controller's :class:`~cdpr_twin.types.Status` (``start`` on the first row) |
+| ``event`` | the tick's scenario events and robot faults, ``; ``-separated (mostly empty) |
 
 Floats are written with ``%.17g``, so every value reads back exactly. The file is written as
 ``timeseries.csv.partial`` and renamed when complete: a file under its final name is whole.
@@ -40,7 +41,9 @@ VALID_SUFFIX = "_valid"
 CABLE_PREFIXES = ("tension", "length", "rate")
 """Per-cable column groups, in file order: ``<prefix>_1 … <prefix>_m``."""
 STATUS_COLUMN = "status"
-"""The last column: the controller's status (text)."""
+"""The controller's status (text)."""
+EVENT_COLUMN = "event"
+"""The last column: events and faults of the tick (text, usually empty)."""
 
 
 def pose_columns(prefix: str) -> list[str]:
@@ -60,7 +63,7 @@ def header(estimators: Sequence[str], n_cables: int) -> list[str]:
         names += [*pose_columns(name), f"{name}{VALID_SUFFIX}"]
     for prefix in CABLE_PREFIXES:
         names += cable_columns(prefix, n_cables)
-    return [*names, *pose_columns("plan"), *pose_columns("tag"), STATUS_COLUMN]
+    return [*names, *pose_columns("plan"), *pose_columns("tag"), STATUS_COLUMN, EVENT_COLUMN]
 
 
 class TimeseriesWriter:
@@ -102,6 +105,7 @@ class TimeseriesWriter:
         measurement: Measurement,
         command: Command | None,
         plan: np.ndarray | None,
+        marks: Sequence[str] = (),
     ) -> None:
         """Buffer one row.
 
@@ -112,6 +116,7 @@ class TimeseriesWriter:
             measurement: the sensors' reading (tensions, lengths, rates, tag).
             command: the command that led here, or ``None`` on the start row.
             plan: (4, 4) planned pose, or ``None``.
+            marks: what happened during the tick (events, faults), in words.
         """
         m = measurement
         poses = [
@@ -123,7 +128,8 @@ class TimeseriesWriter:
         valid = [int(estimates[n].valid) for n in self.estimators]
         sensors = [*m.tensions.tolist(), *m.cable_lengths.tolist(), *m.cable_rates.tolist()]
         status = command.status if command is not None else Status.START
-        self._rows.append((time, poses, valid, sensors, status))
+        event = "; ".join(marks).replace(",", ";").replace("\n", " ")
+        self._rows.append((time, poses, valid, sensors, status, event))
         if len(self._rows) >= self.flush_every:
             self.flush()
 
@@ -138,7 +144,7 @@ class TimeseriesWriter:
             cells += ["%.17g"] * (len(CABLE_PREFIXES) * self.n_cables)
             cells += f7 if has_plan else empty7
             cells += f7 if has_tag else empty7
-            cells.append("%s")
+            cells += ["%s", "%s"]
             self._formats[key] = ",".join(cells)
         return self._formats[key]
 
@@ -163,7 +169,7 @@ class TimeseriesWriter:
         pose7, present = self._pose7()
         k = len(self.estimators)
         lines = []
-        for i, (t, _, valid, sensors, status) in enumerate(self._rows):
+        for i, (t, _, valid, sensors, status, event) in enumerate(self._rows):
             has_plan, has_tag = bool(present[i, k + 1]), bool(present[i, k + 2])
             values = [t, *pose7[i, 0].tolist()]
             for j in range(k):
@@ -173,7 +179,7 @@ class TimeseriesWriter:
                 values += pose7[i, k + 1].tolist()
             if has_tag:
                 values += pose7[i, k + 2].tolist()
-            values.append(status)
+            values += [status, event]
             lines.append(self._row_format(has_plan, has_tag) % tuple(values))
         with writing(self._partial):
             self._file.write("\n".join(lines) + "\n")
@@ -214,10 +220,12 @@ class Timeseries:
     Attributes:
         columns: float columns by name, in file order (NaN where the file is empty), each (n,).
         status: (n,) controller status per row (text).
+        event: (n,) events and faults per row (text, mostly empty).
     """
 
     columns: dict[str, np.ndarray]
     status: np.ndarray
+    event: np.ndarray
 
     @classmethod
     def load(cls, path: str | Path) -> Timeseries:
@@ -239,12 +247,12 @@ class Timeseries:
                 f"{path}: not a timeseries.csv header (estimators {list(estimators)}, "
                 f"{_count_cables(names)} cables): got {names}"
             )
-        status = np.array([r[-1] for r in body])
+        status, event = np.array([r[-2] for r in body]), np.array([r[-1] for r in body])
         columns = {
             name: np.array([float(r[j]) if r[j] else np.nan for r in body])
-            for j, name in enumerate(names[:-1])
+            for j, name in enumerate(names[:-2])
         }
-        return cls(columns, status)
+        return cls(columns, status, event)
 
     @property
     def t(self) -> np.ndarray:

@@ -109,3 +109,39 @@ class Estimator(ABC):
             measurement: the sensors' reading.
             inputs: this tick's estimates of the estimators named by :attr:`inputs`.
         """
+
+
+def update_order(
+    estimators: Mapping[str, Estimator], dropped: frozenset[str] = frozenset()
+) -> tuple[str, ...]:
+    """Names ordered so that each estimator's inputs update before it (Kahn's algorithm).
+
+    Args:
+        estimators: the estimators by name.
+        dropped: names left out of the run because the camera is off (for the message).
+
+    Raises:
+        ValueError: an input that does not run, or inputs that read each other in a cycle.
+    """
+    order: list[str] = []
+    pending = dict(estimators)
+    while pending:
+        ready = [n for n, e in pending.items() if all(i in order for i in e.inputs)]
+        if not ready:
+            for name, e in pending.items():
+                missing = [i for i in e.inputs if i not in estimators]
+                if missing and dropped & set(missing):
+                    raise ValueError(
+                        f"{name!r} reads {missing}, dropped because the camera is off; keep "
+                        "the camera on or read other estimators"
+                    )
+                if missing:
+                    raise ValueError(
+                        f"{name!r} reads {missing}, which do not run; add them to "
+                        "estimators.passive"
+                    )
+            raise ValueError(f"{sorted(pending)} read each other in a cycle")
+        order += ready
+        for name in ready:
+            del pending[name]
+    return tuple(order)

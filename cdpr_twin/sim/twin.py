@@ -63,6 +63,7 @@ def build_robot(
     timestep: float | None = None,
     align_every: int = 10,
     winch: WinchRealism | None = None,
+    occluder: bool = False,
 ) -> tuple[Physics, NominalRobot, TruthDeviations]:
     """The simulated robot (with its calibration errors) and what its software believes.
 
@@ -74,6 +75,7 @@ def build_robot(
         align_every: physics steps between swivel/stiffness refreshes.
         winch: the winches' servo imperfections (default: none); per-robot draws use the
             deviations' seed.
+        occluder: give the true scene the sheet of ``tag_occlusion`` events.
 
     Raises:
         ModelError: when the model file is missing, malformed or not a cable robot.
@@ -87,7 +89,7 @@ def build_robot(
     if isinstance(deviations, DeviationSpec):
         deviations = deviations.draw(n)
     deviations = deviations if deviations is not None else TruthDeviations.zero(n)
-    model = build_model(path, deviations)
+    model = build_model(path, deviations, occluder)
     if timestep is not None:
         if not (np.isfinite(timestep) and 1e-5 <= timestep <= 0.002):
             raise ValueError(
