@@ -237,7 +237,7 @@ class Monitor:
             return
         if math.isnan(self._slack_since):
             self._slack_since = t
-        if t - self._slack_since > lim.slack_time:
+        if t - self._slack_since > lim.slack_time + 1e-9:  # (not a float's last bit)
             seen[FaultKind.SLACK] = (
                 f"{taut} taut for {t - self._slack_since:.3f} s > {lim.slack_time:g} s",
                 0,
