@@ -11,6 +11,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from conftest import paper_pose
 
 from cdpr_twin import runner
 from cdpr_twin.cli import main
@@ -271,3 +272,66 @@ def test_a_cable_break_in_motion_can_leave_too_few_taut_cables(tmp_path):
     summary = run(load_scenario(path).with_overrides(camera=False), None).summary
     assert summary["status"] == "fault: fewer than six taut cables"
     assert 5.0 < summary["faults"][0]["time_s"] <= summary["simulated_time_s"] <= 5.0 + 0.2
+
+
+def _camera_robot(occluder: bool):
+    from cdpr_twin.sim import Sensors, build_robot
+
+    physics, nominal, _ = build_robot(occluder=occluder)
+    physics.reset(paper_pose("p1"))  # the tag in the middle of the view
+    return physics, Sensors(physics, nominal, tension_noise_std=0.0)
+
+
+def test_the_occluding_sheet_hides_the_tag_in_the_rendered_image_and_only_then():
+    plain, plain_sensors = _camera_robot(False)
+    physics, sensors = _camera_robot(True)
+    try:
+        parked = sensors.render()
+        # parked under the floor, the sheet is nowhere in the frame: pixel for pixel the same
+        np.testing.assert_array_equal(parked, plain_sensors.render())
+        assert sensors.read().tag is not None
+        physics.occlude_tag(1.0)
+        covered = sensors.render()
+        changed = np.any(covered != parked, axis=2)
+        # it covers the tag's corners as the camera sees them, and little else of the frame
+        corners = np.round(plain_sensors.read().tag.corners).astype(int)
+        assert changed[corners[:, 1].clip(0, 479), corners[:, 0].clip(0, 639)].all()
+        assert 0.01 < changed.mean() < 0.6
+        assert sensors.read().tag is None  # the detector finds nothing: nothing was skipped
+        physics.occlude_tag(0.0)
+        np.testing.assert_array_equal(sensors.render(), parked)
+    finally:
+        sensors.close()
+        plain_sensors.close()
+
+
+@pytest.mark.slow
+def test_pbvs_holds_still_while_the_tag_is_hidden_and_resumes_after(tmp_path):
+    out = tmp_path / "occlusion"
+    s = load_scenario(ROOT / "scenarios" / "fault_tag_occlusion.toml")  # as shipped: acrobot
+    summary = run(s, out).summary
+    assert summary["status"] == "converged" and "faults" not in summary
+    ts = Timeseries.load(out / "timeseries.csv")
+    t, lost = ts.t, ts.columns["image_valid"] == 0
+    hidden = (t > 3.0 + 0.2) & (t < 5.0 - 1e-9)  # (+ the camera's latency, a few frames)
+    assert lost[hidden].all()  # the image estimator flags the loss …
+    assert set(ts.status[hidden]) == {"tag_lost"}
+    assert np.all(ts.matrix("rate")[hidden] == 0.0)  # … and PBVS commands nothing
+    moved = np.linalg.norm(np.diff(ts.poses("true")[hidden][:, :3, 3], axis=0), axis=1).sum()
+    assert moved < 1e-3  # the platform holds still (it swings out the stop: < 1 mm)
+    back = t > 5.0 + 0.2
+    assert not lost[back][:10].any() and np.any(ts.matrix("rate")[back][:10] != 0.0)
+    marks = [(round(float(x), 2), e) for x, e in zip(t, ts.event, strict=True) if e]
+    assert marks == [
+        (3.0, "tag_occlusion until 5 coverage 1"),
+        (5.0, "tag_occlusion ends until 5 coverage 1"),
+    ]
+    env = {**__import__("os").environ, "RERUN_ANALYTICS": "0"}
+    import shutil
+    import subprocess
+    import sys
+
+    rerun = shutil.which("rerun", path=str(Path(sys.executable).parent)) or "rerun"
+    stats = subprocess.run([rerun, "rrd", "stats", str(out / "recording.rrd")],
+                           capture_output=True, text=True, env=env).stdout  # fmt: skip
+    assert "/events:" in stats  # the events text log, on the run's timeline

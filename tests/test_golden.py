@@ -3,10 +3,10 @@
 The fixtures (``tests/fixtures/golden``) were written by the version before the issue-8 redesign
 (commit 7645b83); see their README. What must hold:
 
-- every cell of ``timeseries.csv`` but the quaternions is byte-identical (the ``event``
-  column added later by the fault monitor must be empty: these runs have no event or fault) (time, positions,
+- every cell of ``timeseries.csv`` but the quaternions is byte-identical (time, positions,
   tensions, encoder lengths, rates, status): the physics, sensors, estimators and controllers
-  compute exactly what they did;
+  compute exactly what they did; the ``event`` column added later (issue 13) is empty, as
+  these runs have no event and the fault monitor, checking them, raises nothing;
 - quaternion cells are the same rotations to 2e-16: the one SE(3) implementation for one or a
   stack of rotations (Shepperd's method, w ≥ 0) now writes them, where a second vectorised copy
   without sign convention did; so they differ in the last bit, and the tag's quaternions carry
