@@ -283,7 +283,7 @@ def _camera_robot(occluder: bool):
 
 
 def test_the_occluding_sheet_hides_the_tag_in_the_rendered_image_and_only_then():
-    plain, plain_sensors = _camera_robot(False)
+    _, plain_sensors = _camera_robot(False)
     physics, sensors = _camera_robot(True)
     try:
         parked = sensors.render()
