@@ -131,6 +131,8 @@ def test_the_acrobot_open_loop_scenario_raises_no_fault():
     s = load_scenario(OPEN_LOOP).with_overrides(camera=False)  # as shipped: acrobot profile
     summary = run(s, None).summary
     assert summary["status"] == "done" and "faults" not in summary
+    for name, e in summary["estimators"].items():  # and no sensor watch false alarm
+        assert not {"encoder_mismatch", "tension_stuck"} & set(e["flags"]), (name, e["flags"])
 
 
 def _events_run(tmp_path, events: str, name: str, duration: float = 3.0) -> Timeseries:
@@ -177,6 +179,20 @@ def test_winch_stall_encoder_glitch_and_sensor_failure_act_as_their_hardware_wou
         ("winch_stall", "start"),
         ("winch_stall", "end"),
     ]
+    # what the estimators can detect, they flag: encoders that disagree with the commanded
+    # winch motion (stall, glitch), a tension sensor reading a constant; never without a fault
+    flags = {run: _flags(tmp_path / run) for run in ("base", "stall", "g", "fail")}
+    model = ("model_simple", "model_elastic", "model_pulley", "model_elastic_pulley")
+    assert all(not f for f in flags["base"].values())
+    for run in ("stall", "g"):
+        assert all(flags[run][n].get("encoder_mismatch", 0) > 0 for n in ("control", *model))
+    assert all(flags["fail"][n].get("tension_stuck", 0) > 0 for n in model)
+    assert all("encoder_mismatch" not in flags["fail"][n] for n in model)
+
+
+def _flags(out: Path) -> dict[str, dict]:
+    summary = json.loads((out / "summary.json").read_text())
+    return {n: e["flags"] for n, e in summary["estimators"].items() if n != "image"}
 
 
 @pytest.mark.parametrize(
@@ -311,6 +327,8 @@ def test_pbvs_holds_still_while_the_tag_is_hidden_and_resumes_after(tmp_path):
     s = load_scenario(ROOT / "scenarios" / "fault_tag_occlusion.toml")  # as shipped: acrobot
     summary = run(s, out).summary
     assert summary["status"] == "converged" and "faults" not in summary
+    for name, e in summary["estimators"].items():
+        assert not {"encoder_mismatch", "tension_stuck"} & set(e["flags"]), (name, e["flags"])
     ts = Timeseries.load(out / "timeseries.csv")
     t, lost = ts.t, ts.columns["image_valid"] == 0
     hidden = (t > 3.0 + 0.2) & (t < 5.0 - 1e-9)  # (+ the camera's latency, a few frames)
