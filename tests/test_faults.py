@@ -184,8 +184,8 @@ def test_winch_stall_encoder_glitch_and_sensor_failure_act_as_their_hardware_wou
     flags = {run: _flags(tmp_path / run) for run in ("base", "stall", "g", "fail")}
     model = ("model_simple", "model_elastic", "model_pulley", "model_elastic_pulley")
     assert all(not f for f in flags["base"].values())
-    for run in ("stall", "g"):
-        assert all(flags[run][n].get("encoder_mismatch", 0) > 0 for n in ("control", *model))
+    for case in ("stall", "g"):
+        assert all(flags[case][n].get("encoder_mismatch", 0) > 0 for n in ("control", *model))
     assert all(flags["fail"][n].get("tension_stuck", 0) > 0 for n in model)
     assert all("encoder_mismatch" not in flags["fail"][n] for n in model)
 
