@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_twin import DEFAULT_SCENE, se3
+from cdpr_twin import DEFAULT_SCENE, model_cli, se3
 
 P0 = (0.112, -0.032, 0.301, -12.0, -10.0, 0.0)
 """The paper's start pose ᵇp_p0 [m, deg]."""
@@ -270,6 +270,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     runp.set_defaults(func=_run)
     _reproduce_parser(sub)
+    model_cli.add_parser(sub)  # cdpr-twin model build|workspace
     return parser
 
 

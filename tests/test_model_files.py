@@ -27,7 +27,7 @@ def test_model_numbers_match_their_sources():
 
 def test_viewer_keyframe_hangs_still_in_plain_mujoco():
     """MuJoCo's viewer runs no cdpr_twin code: the p0 key and the file's winch gains must be a
-    static equilibrium by themselves (regenerate with models/acrobot/make_keyframe.py)."""
+    static equilibrium by themselves (`cdpr-twin model build` settles and writes them)."""
     model = mujoco.MjModel.from_xml_path(str(DEFAULT_SCENE))
     data = mujoco.MjData(model)
     mujoco.mj_resetDataKeyframe(model, data, model.key("p0").id)

@@ -1,0 +1,369 @@
+"""Robot description files (``models/<robot>/robot.toml``) → a frozen :class:`Robot` value.
+
+A description holds every number of one cable robot in SI units, each key naming its unit
+(``_m``, ``_kg``, ``_n``, ``_s``, ``_deg``…): the frame, per-cable exit points and swivel
+pulleys, platform anchor points, the platform's mass, inertia and box, the cable material, the
+winches, the camera, the tag, the monitor's limits and the viewer's scene. The schema is strict:
+an unknown, missing or badly typed key is a one-line :class:`RobotError` naming the file and the
+field. :mod:`cdpr_twin.sim.generate` turns a :class:`Robot` into MJCF through ``mujoco.MjSpec``;
+this module is numpy + tomllib only.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+SECTIONS = ("frame", "cables", "pulleys", "platform", "winches", "camera", "tag", "monitor")
+OPTIONAL_SECTIONS = ("camera", "tag", "monitor", "scene")
+
+
+class RobotError(ValueError):
+    """A robot description file is missing, malformed, or has a bad field."""
+
+
+def _frozen(a: Any) -> np.ndarray:
+    out = np.array(a, dtype=float)
+    out.flags.writeable = False
+    return out
+
+
+class _Table:
+    """Typed access to one TOML table; errors name the file and ``table.key``."""
+
+    def __init__(self, source: Path, table: dict, where: str) -> None:
+        self.source, self.table, self.where, self.used = source, table, where, set()
+
+    def fail(self, key: str, problem: str) -> RobotError:
+        return RobotError(f"{self.source}: {self.where}.{key}: {problem}")
+
+    def get(self, key: str, default: Any = ...) -> Any:
+        self.used.add(key)
+        if key in self.table:
+            return self.table[key]
+        if default is ...:
+            raise self.fail(key, "missing (see models/acrobot/robot.toml for the schema)")
+        return default
+
+    def number(self, key: str, default: Any = ..., positive: bool = False) -> float:
+        v = self.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise self.fail(key, f"must be a finite number, got {v!r}")
+        if positive and not v > 0:
+            raise self.fail(key, f"must be > 0, got {v!r}")
+        return float(v)
+
+    def array(self, key: str, shape: tuple[int, ...], default: Any = ...) -> np.ndarray:
+        """A numeric array of ``shape`` (``-1``: any length ≥ 1 on that axis)."""
+        v = self.get(key, default)
+        try:
+            a = np.array(v, dtype=float)
+        except (TypeError, ValueError):
+            raise self.fail(key, f"must be an array of numbers of shape {shape}") from None
+        if a.ndim != len(shape) or any(
+            s not in (-1, n) for s, n in zip(shape, a.shape, strict=True)
+        ):
+            want = "×".join("m" if s == -1 else str(s) for s in shape)
+            raise self.fail(key, f"must have shape {want}, got {'×'.join(map(str, a.shape))}")
+        if not np.all(np.isfinite(a)) or any(isinstance(x, bool) for x in np.ravel(v)):
+            raise self.fail(key, "must hold finite numbers only")
+        return _frozen(a)
+
+    def per_cable(self, key: str, m: int, default: Any = ...) -> np.ndarray:
+        """One number for all cables, or a list of m numbers."""
+        v = self.get(key, default)
+        a = self.array(key, (m,)) if isinstance(v, list) else np.full(m, self.number(key))
+        if np.any(a <= 0):
+            raise self.fail(key, "must be > 0 for every cable")
+        return _frozen(a)
+
+    def string(self, key: str, default: Any = ...) -> str:
+        v = self.get(key, default)
+        if not isinstance(v, str) or not v:
+            raise self.fail(key, f"must be a non-empty string, got {v!r}")
+        return v
+
+    def integer(self, key: str, default: Any = ...) -> int:
+        v = self.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+            raise self.fail(key, f"must be a whole number ≥ 0, got {v!r}")
+        return v
+
+    def done(self) -> None:
+        extra = sorted(set(self.table) - self.used)
+        if extra:
+            raise self.fail(extra[0], "unknown key (a typo? see models/acrobot/robot.toml)")
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """The onboard camera: pose in F_p (MuJoCo camera frame: looks along −z, y up)."""
+
+    position: np.ndarray  # (3,) [m]
+    quat_wxyz: np.ndarray  # (4,)
+    resolution: tuple[int, int]  # (width, height) [px]
+    fovy_deg: float  # vertical field of view [deg]
+
+
+@dataclass(frozen=True, eq=False)
+class Tag:
+    """The AprilTag on a static plate; its body frame is the pupil-apriltags tag frame."""
+
+    family: str
+    id: int
+    size: float  # edge of the black square [m]
+    plate_half_size: float  # [m]
+    plate_thickness: float  # [m]
+    position: np.ndarray  # (3,) [m] in F_b
+    quat_wxyz: np.ndarray  # (4,)
+    texture: str  # PNG file relative to the model's texture directory
+
+
+@dataclass(frozen=True, eq=False)
+class Robot:
+    """One cable robot, every number in SI units (see ``models/acrobot/robot.toml``).
+
+    Attributes:
+        name: model name; files are ``models/<name>/<name>.xml`` and ``scene.xml``.
+        source: the description file.
+        timestep: physics step [s].
+        gravity: (3,) [m/s²].
+        frame_min, frame_max: (3,) inner box of the frame, the workspace bound [m].
+        frame_outer_min, frame_outer_max: (3,) outer box of the visual frame [m].
+        frame_member_half_width: half-width of the visual posts and beams [m].
+        floor_height: height of the floor plane [m].
+        exit_points: (m, 3) A_i in F_b [m] (sheave point on each swivel axis).
+        anchor_points: (m, 3) B_i in F_p [m].
+        sheave_radius: (m,) r_p [m]; sheave_half_width: (m,) [m] (visual).
+        entry_height: cable entry segment down the swivel axis [m].
+        es: (m,) axial stiffness E·S [N]; damping_time: η [s] (c = η E·S / l0).
+        cable_diameter [m], linear_density [kg/m], breaking_load [N].
+        mass [kg], box_half_size (3,) [m], inertia: (3,) principal inertia [kg m²] or None
+            (uniform box); home_pose: (6,) [x, y, z m, rx, ry, rz deg], the pose of the viewer's
+            keyframe named home_key.
+        rate_limit [m/s], force_limit [N], length_range (2,) [m], tension_range (2,) [N].
+        camera, tag: or None.
+        max_speed [m/s], max_angular_speed [rad/s]: the monitor's limits (inf: unchecked).
+        view_center (3,) [m], view_extent [m], floor_half_size [m]: the viewer's scene.
+    """
+
+    name: str
+    source: Path
+    timestep: float
+    gravity: np.ndarray
+    frame_min: np.ndarray
+    frame_max: np.ndarray
+    frame_outer_min: np.ndarray
+    frame_outer_max: np.ndarray
+    frame_member_half_width: float
+    floor_height: float
+    exit_points: np.ndarray
+    anchor_points: np.ndarray
+    sheave_radius: np.ndarray
+    sheave_half_width: np.ndarray
+    entry_height: float
+    es: np.ndarray
+    damping_time: float
+    cable_diameter: float
+    linear_density: float
+    breaking_load: float
+    mass: float
+    box_half_size: np.ndarray
+    inertia: np.ndarray | None
+    home_pose: np.ndarray
+    home_key: str
+    rate_limit: float
+    force_limit: float
+    length_range: np.ndarray
+    tension_range: np.ndarray
+    camera: Camera | None
+    tag: Tag | None
+    max_speed: float
+    max_angular_speed: float
+    view_center: np.ndarray
+    view_extent: float
+    floor_half_size: float
+
+    @property
+    def n_cables(self) -> int:
+        """Number of cables m."""
+        return self.exit_points.shape[0]
+
+
+def _frame(t: _Table) -> dict:
+    out = {
+        "frame_min": t.array("inner_min_m", (3,)),
+        "frame_max": t.array("inner_max_m", (3,)),
+        "frame_outer_min": t.array("outer_min_m", (3,)),
+        "frame_outer_max": t.array("outer_max_m", (3,)),
+        "frame_member_half_width": t.number("member_half_width_m", positive=True),
+        "floor_height": t.number("floor_height_m"),
+    }
+    if np.any(out["frame_min"] >= out["frame_max"]):
+        raise t.fail("inner_min_m", "must be below inner_max_m on every axis")
+    return out
+
+
+def _cables(t: _Table, p: _Table) -> dict:
+    a = t.array("exit_points_m", (-1, 3))
+    m = a.shape[0]
+    if m < 6:
+        raise t.fail("exit_points_m", f"a 6-DoF cable robot needs m ≥ 6 cables, got {m}")
+    b = t.array("anchor_points_m", (m, 3))
+    es = t.per_cable("axial_stiffness_n", m)
+    d = t.number("diameter_m", positive=True)
+    if t.get("youngs_modulus_pa", None) is not None:  # optional: then E·S must agree with it
+        es_e = t.number("youngs_modulus_pa", positive=True) * math.pi * d * d / 4
+        if not np.allclose(es, es_e, rtol=1e-6):
+            raise t.fail(
+                "axial_stiffness_n", f"differs from youngs_modulus_pa·πd²/4 = {es_e:.7g} N"
+            )
+    axis = p.array("swivel_axis", (3,), [0.0, 0.0, 1.0])
+    if not np.allclose(axis, [0.0, 0.0, 1.0]):
+        raise p.fail("swivel_axis", "only vertical swivel axes [0, 0, 1] are supported")
+    return {
+        "exit_points": a,
+        "anchor_points": b,
+        "es": es,
+        "damping_time": t.number("damping_time_s", positive=True),
+        "cable_diameter": d,
+        "linear_density": t.number("linear_density_kg_m", positive=True),
+        "breaking_load": t.number("breaking_load_n", positive=True),
+        "sheave_radius": p.per_cable("sheave_radius_m", m),
+        "sheave_half_width": p.per_cable("sheave_half_width_m", m),
+        "entry_height": p.number("entry_height_m", positive=True),
+    }
+
+
+def _platform(t: _Table) -> dict:
+    box = t.array("box_half_size_m", (3,))
+    inertia = t.get("inertia_kg_m2", None)
+    if np.any(box <= 0):
+        raise t.fail("box_half_size_m", "must be > 0 on every axis")
+    if inertia is not None:
+        inertia = t.array("inertia_kg_m2", (3,))
+        if np.any(inertia <= 0):
+            raise t.fail("inertia_kg_m2", "principal moments must be > 0")
+    return {
+        "mass": t.number("mass_kg", positive=True),
+        "box_half_size": box,
+        "inertia": inertia,
+        "home_pose": t.array("home_pose", (6,)),
+        "home_key": t.string("home_key", "home"),
+    }
+
+
+def _winches(t: _Table) -> dict:
+    lengths, tensions = t.array("length_range_m", (2,)), t.array("tension_range_n", (2,))
+    if not 0 < lengths[0] < lengths[1]:
+        raise t.fail("length_range_m", f"must be [min, max] with 0 < min < max, got {lengths}")
+    if not 0 <= tensions[0] < tensions[1]:
+        raise t.fail("tension_range_n", f"must be [min, max] with 0 ≤ min < max, got {tensions}")
+    return {
+        "rate_limit": t.number("rate_limit_m_s", positive=True),
+        "force_limit": t.number("force_limit_n", positive=True),
+        "length_range": lengths,
+        "tension_range": tensions,
+    }
+
+
+def _camera(t: _Table) -> Camera:
+    res = t.array("resolution_px", (2,))
+    if np.any(res < 1) or np.any(res != np.round(res)):
+        raise t.fail("resolution_px", "must be two whole numbers ≥ 1 [width, height]")
+    fovy = t.number("fovy_deg", positive=True)
+    if fovy >= 180:
+        raise t.fail("fovy_deg", f"must be < 180, got {fovy}")
+    return Camera(
+        t.array("position_m", (3,)), t.array("quat_wxyz", (4,)), (int(res[0]), int(res[1])), fovy
+    )
+
+
+def _tag(t: _Table) -> Tag:
+    return Tag(
+        family=t.string("family"),
+        id=t.integer("id"),
+        size=t.number("size_m", positive=True),
+        plate_half_size=t.number("plate_half_size_m", positive=True),
+        plate_thickness=t.number("plate_thickness_m", positive=True),
+        position=t.array("position_m", (3,)),
+        quat_wxyz=t.array("quat_wxyz", (4,)),
+        texture=t.string("texture"),
+    )
+
+
+def _read(path: Path) -> dict:
+    if not path.is_file():
+        raise RobotError(f"{path}: robot description not found")
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise RobotError(f"{path}: not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise RobotError(f"{path}: cannot read the robot description: {exc.strerror}") from None
+
+
+def load_robot(path: str | Path) -> Robot:
+    """Read and validate a robot description file.
+
+    Args:
+        path: a ``robot.toml``.
+
+    Returns:
+        The robot, in SI units.
+
+    Raises:
+        RobotError: one line naming the file, the field and the problem.
+    """
+    path = Path(path)
+    data = _read(path)
+    top = _Table(path, data, "")
+    top.where = "robot"
+
+    def table(name: str, required: bool = True) -> _Table | None:
+        v = top.get(name, ... if required else None)
+        if v is None:
+            return None
+        if not isinstance(v, dict):
+            raise RobotError(f"{path}: [{name}] must be a table")
+        return _Table(path, v, name)
+
+    name = top.string("name")
+    top.string("description", "-")
+    sim = table("simulation")
+    fields: dict[str, Any] = {"name": name, "source": path}
+    fields["timestep"] = sim.number("timestep_s", positive=True)
+    fields["gravity"] = sim.array("gravity_m_s2", (3,))
+    tables = [sim]
+    for key, reader in (("frame", _frame), ("platform", _platform), ("winches", _winches)):
+        tables.append(table(key))
+        fields.update(reader(tables[-1]))
+    tables += [table("cables"), table("pulleys")]
+    fields.update(_cables(tables[-2], tables[-1]))
+    for key, reader in (("camera", _camera), ("tag", _tag)):
+        t = table(key, required=False)
+        fields[key] = None if t is None else reader(t)
+        tables += [t] if t is not None else []
+    mon = table("monitor", required=False) or _Table(path, {}, "monitor")
+    fields["max_speed"] = mon.number("platform_max_speed_m_s", math.inf, positive=True)
+    fields["max_angular_speed"] = mon.number(
+        "platform_max_angular_speed_rad_s", math.inf, positive=True
+    )
+    scene = table("scene", required=False) or _Table(path, {}, "scene")
+    centre = 0.5 * (fields["frame_outer_min"] + fields["frame_outer_max"])
+    fields["view_center"] = scene.array("view_center_m", (3,), centre.tolist())
+    size = fields["frame_outer_max"] - fields["frame_outer_min"]
+    fields["view_extent"] = scene.number(
+        "view_extent_m", float(np.linalg.norm(size)), positive=True
+    )
+    fields["floor_half_size"] = scene.number(
+        "floor_half_size_m", float(size[:2].max()), positive=True
+    )
+    for t in [*tables, mon, scene, top]:
+        t.done()
+    return Robot(**fields)

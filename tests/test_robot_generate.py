@@ -1,0 +1,171 @@
+"""Robot descriptions and MJCF generated from them through MjSpec (issue 10, items 1-2).
+
+The truth for ACROBOT is the hand-written model the generated one replaced, kept verbatim (but
+for its texture path) in tests/fixtures/acrobot_handwritten/.
+"""
+
+import shutil
+from operator import attrgetter
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+from conftest import A_BASE, B_PLATFORM, random_workspace_poses
+
+from cdpr_twin import MODELS_DIR
+from cdpr_twin.cli import main
+from cdpr_twin.robot import RobotError, load_robot
+from cdpr_twin.sim import Physics
+from cdpr_twin.sim.generate import model_texts
+
+FIXTURES = Path(__file__).parent / "fixtures"
+HANDWRITTEN = FIXTURES / "acrobot_handwritten" / "scene.xml"
+ACROBOT = MODELS_DIR / "acrobot" / "robot.toml"
+
+
+@pytest.fixture(scope="module")
+def generated(tmp_path_factory):
+    """The generator's ACROBOT files, written to a fresh directory with the tag texture."""
+    out = tmp_path_factory.mktemp("gen")
+    robot_xml, scene_xml = model_texts(load_robot(ACROBOT))
+    (out / "acrobot.xml").write_text(robot_xml)
+    (out / "scene.xml").write_text(scene_xml)
+    shutil.copytree(MODELS_DIR / "acrobot" / "assets", out / "assets")
+    return out, robot_xml, scene_xml
+
+
+def _state(physics: Physics) -> dict[str, np.ndarray]:
+    """Everything the twin reads from MuJoCo at the current (placed) pose."""
+    m, d = physics.model, physics.data
+    n = physics.n_cables
+    jac = []
+    for i in range(n):
+        site = m.site(f"cable{i + 1}_anchor").id
+        jp, jr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+        mujoco.mj_jacSite(m, d, jp, jr, site)
+        jac.append(np.vstack([jp, jr]))
+    M = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, M)
+    cam = m.camera("platform_cam").id
+    return {
+        "ten_length": d.ten_length.copy(),
+        "ten_J": np.array(d.ten_J).reshape(m.ntendon, m.nv),
+        "jac_sites": np.array(jac),
+        "site_xpos": d.site_xpos.copy(),
+        "cam": np.concatenate([d.cam_xpos[cam], d.cam_xmat[cam]]),
+        "mass_matrix": M,
+        "cable_lengths": physics.cable_lengths,
+    }
+
+
+def test_generated_acrobot_equals_the_handwritten_model_at_100_poses(generated):
+    out, _, _ = generated
+    ref = mujoco.MjModel.from_xml_path(str(HANDWRITTEN))
+    gen = mujoco.MjModel.from_xml_path(str(out / "scene.xml"))
+    # the constants: masses, inertia, camera, sites, tendons, actuators, keyframe
+    for field in (
+        "body_mass", "body_inertia", "body_ipos", "body_iquat", "body_pos", "body_quat",
+        "site_pos", "site_quat", "site_bodyid", "geom_size", "geom_pos", "geom_quat",
+        "cam_fovy", "cam_resolution", "cam_pos", "cam_quat", "tendon_num", "wrap_objid",
+        "wrap_prm", "actuator_gainprm", "actuator_biasprm", "actuator_ctrlrange",
+        "actuator_forcerange", "actuator_actrange", "actuator_dyntype", "key_qpos", "key_act",
+        "key_mpos", "key_mquat", "opt.timestep", "opt.gravity", "tex_data",
+    ):  # fmt: skip
+        a, b = (np.asarray(attrgetter(field)(model)) for model in (ref, gen))
+        assert a.shape == b.shape and np.array_equal(a, b), field
+    for name in ("cable_es", "cable_damping_time", "cable_entry_height", "frame_min",
+                 "frame_max", "cable_breaking_load", "platform_max_speed",
+                 "platform_max_angular_speed", "tag_size", "floor_height"):  # fmt: skip
+        np.testing.assert_array_equal(gen.numeric(name).data, ref.numeric(name).data)
+    # the kinematics at 100 poses, each model driven by the twin's own physics core
+    p_ref, p_gen = Physics(ref), Physics(gen)
+    worst = {}
+    for T in random_workspace_poses(100, seed=10):
+        p_ref.place(T)
+        p_gen.place(T)
+        for key, a in _state(p_ref).items():
+            b = _state(p_gen)[key]
+            worst[key] = max(worst.get(key, 0.0), float(np.max(np.abs(a - b))))
+    assert max(worst.values()) <= 1e-12, worst  # measured: 0 (bit for bit)
+
+
+def test_the_committed_files_are_what_the_generator_writes(generated):
+    _, robot_xml, scene_xml = generated
+    assert (MODELS_DIR / "acrobot" / "acrobot.xml").read_text() == robot_xml
+    assert (MODELS_DIR / "acrobot" / "scene.xml").read_text() == scene_xml
+
+
+def test_the_description_carries_acrobots_numbers():
+    r = load_robot(ACROBOT)
+    np.testing.assert_array_equal(r.exit_points, A_BASE)
+    np.testing.assert_array_equal(r.anchor_points, B_PLATFORM)
+    np.testing.assert_allclose(r.es, 111e9 * np.pi * 0.001**2, rtol=1e-6)
+    assert r.mass == 3.5 and r.camera.resolution == (640, 480) and r.tag.size == 0.04
+    np.testing.assert_array_equal(2 * r.box_half_size, [0.18, 0.17, 0.07])
+
+
+def test_model_build_command_writes_both_files(tmp_path, capsys):
+    assert main(["model", "build", str(ACROBOT), "--out", str(tmp_path)]) == 0
+    assert "acrobot.xml" in capsys.readouterr().out
+    assert (tmp_path / "acrobot.xml").read_text() == (
+        MODELS_DIR / "acrobot" / "acrobot.xml"
+    ).read_text()
+    # the robot file compiles alone (no tag, no texture) and hangs still from its key
+    model = mujoco.MjModel.from_xml_path(str(tmp_path / "acrobot.xml"))
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, model.key("p0").id)
+    q0 = data.qpos.copy()
+    mujoco.mj_step(model, data, nstep=1000)
+    assert np.max(np.abs(data.qpos[:3] - q0[:3])) < 1e-4
+
+
+def _edited(tmp_path: Path, old: str, new: str) -> Path:
+    text = ACROBOT.read_text()
+    assert old in text
+    path = tmp_path / "robot.toml"
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "field"),
+    [
+        ("mass_kg = 3.5", "mass_kg = -3.5", "platform.mass_kg"),
+        ("mass_kg = 3.5", "mass_g = 3500", "platform.mass_g"),  # unknown key (and mass missing)
+        ("fovy_deg = 60.0", 'fovy_deg = "60"', "camera.fovy_deg"),
+        ("    [0.4675, -0.5225, 1.165],\n]", "]", "cables.anchor_points_m"),  # 7 exits, 8 anchors
+        ("axial_stiffness_n = 348716.8", "axial_stiffness_n = 3.5e5", "cables.axial_stiffness_n"),
+        ("swivel_axis = [0.0, 0.0, 1.0]", "swivel_axis = [1.0, 0.0, 0.0]", "pulleys.swivel_axis"),
+        (
+            "tension_range_n = [2.0, 75.0]",
+            "tension_range_n = [75.0, 2.0]",
+            "winches.tension_range_n",
+        ),
+        ("[simulation]", "[simulation]\nsubsteps = 2", "simulation.substeps"),
+    ],
+)
+def test_a_bad_description_is_a_one_line_error_naming_file_and_field(
+    tmp_path, capsys, old, new, field
+):
+    path = _edited(tmp_path, old, new)
+    with pytest.raises(RobotError) as err:
+        load_robot(path)
+    message = str(err.value)
+    assert message.startswith(f"{path}: ") and "\n" not in message
+    assert field.split(".")[0] in message and (field.split(".")[1] in message or "mass" in message)
+    assert main(["model", "build", str(path)]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    assert not (tmp_path / "acrobot.xml").exists()
+
+
+def test_fewer_than_six_cables_is_refused(tmp_path):
+    text = ACROBOT.read_text()
+    start = text.index("exit_points_m = [") + len("exit_points_m = [")
+    end = text.index("]\n", text.index("[0.4675, -0.5225, 1.165]")) + 1
+    path = tmp_path / "robot.toml"
+    path.write_text(
+        text[:start] + "[0, 0, 1], [1, 0, 1], [0, 1, 1], [1, 1, 1], [0, 2, 1]]" + text[end:]
+    )
+    with pytest.raises(RobotError, match=r"cables\.exit_points_m: .*m ≥ 6 cables, got 5"):
+        load_robot(path)
