@@ -19,7 +19,7 @@ def _build(args: argparse.Namespace) -> int:
 
     try:
         paths = build_files(args.description, args.out)
-    except RobotError as exc:
+    except (RobotError, ValueError) as exc:  # a bad description, an infeasible home pose
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
         return 2
     for p in paths:

@@ -121,7 +121,7 @@ class Tag:
     plate_thickness: float  # [m]
     position: np.ndarray  # (3,) [m] in F_b
     quat_wxyz: np.ndarray  # (4,)
-    texture: str  # PNG file relative to the model's texture directory
+    texture: str  # PNG file, relative to the description file
 
 
 @dataclass(frozen=True, eq=False)

@@ -260,16 +260,16 @@ class PbvsController(Controller):
         return cmd
 
     def _command(self, estimate: PoseEstimate, measurement: Measurement) -> Command:
-        zero8, zero6 = np.zeros(self.geometry.n_cables), np.zeros(6)
+        zero_m, zero6 = np.zeros(self.geometry.n_cables), np.zeros(6)
         if measurement.tag is None:
-            return Command(zero8, zero6, status=Status.TAG_LOST)
+            return Command(zero_m, zero6, status=Status.TAG_LOST)
         T_co = measurement.tag.T_cam_tag
         e = self.error(T_co)
         if (
             np.linalg.norm(e[:3]) < self.converged_translation
             and np.linalg.norm(e[3:]) < self.converged_rotation
         ):
-            return Command(zero8, zero6, done=True, status=Status.CONVERGED, error=e)
+            return Command(zero_m, zero6, done=True, status=Status.CONVERGED, error=e)
         v_cam = -self.gain * np.linalg.pinv(interaction_matrix(T_co[:3, 3], e[3:])) @ e
         scale = max(
             1.0,

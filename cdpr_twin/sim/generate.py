@@ -12,6 +12,7 @@ compiles to the spec's model bit for bit.
 from __future__ import annotations
 
 import math
+import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -188,8 +189,14 @@ def robot_spec(r: Robot) -> mujoco.MjSpec:
     return spec
 
 
-def scene_spec(r: Robot) -> mujoco.MjSpec:
-    """The robot in its cell: floor, light, viewer settings and (if described) the tag."""
+def scene_spec(r: Robot, out_dir: str | Path | None = None) -> mujoco.MjSpec:
+    """The robot in its cell: floor, light, viewer settings and (if described) the tag.
+
+    Args:
+        r: the robot.
+        out_dir: where the file will be written (the tag texture's path is relative to it);
+            default: beside the description.
+    """
     spec = robot_spec(r)
     spec.modelname = f"{r.name} scene"
     spec.stat.center, spec.stat.extent = r.view_center, r.view_extent
@@ -233,15 +240,17 @@ def scene_spec(r: Robot) -> mujoco.MjSpec:
         material="floor_grid",
     )
     if r.tag is not None:
-        _tag(spec, r)
+        _tag(spec, r, Path(r.source).parent if out_dir is None else Path(out_dir))
     return spec
 
 
-def _tag(spec: mujoco.MjSpec, r: Robot) -> None:
+def _tag(spec: mujoco.MjSpec, r: Robot, out_dir: Path) -> None:
     t = r.tag
-    name = Path(t.texture).stem
-    spec.compiler.texturedir = "assets"
-    spec.add_texture(name=name, type=mujoco.mjtTexture.mjTEXTURE_2D, file=t.texture)
+    texture = (Path(r.source).parent / t.texture).resolve()
+    name = texture.stem
+    spec.compiler.texturedir = os.path.relpath(texture.parent, out_dir.resolve())
+    spec.modelfiledir = str(out_dir.resolve())  # where the compiler looks for the texture
+    spec.add_texture(name=name, type=mujoco.mjtTexture.mjTEXTURE_2D, file=texture.name)
     spec.add_material(name=name, specular=0, shininess=0).textures[1] = name
     body = spec.worldbody.add_body(name=TAG_BODY, pos=t.position, quat=t.quat_wxyz)
     h = 0.5 * t.plate_thickness
@@ -330,7 +339,8 @@ def add_home_key(spec: mujoco.MjSpec, r: Robot, key_name: str) -> None:
     from cdpr_twin.sim.physics import Physics  # (physics imports this package's model module)
 
     physics = Physics(spec.compile())
-    physics.reset(pose_from_vector(r.home_pose), settle_time=0.5)
+    tau_min, tau_max = r.tension_range
+    physics.reset(pose_from_vector(r.home_pose), 0.5, float(tau_min), float(tau_max))
     m, d = physics.model, physics.data
 
     def rounded(a: np.ndarray) -> list[float]:
@@ -364,22 +374,26 @@ def build_files(description: str | Path, out_dir: str | Path | None = None) -> t
     """
     r = load_robot(description)
     out = Path(description).parent if out_dir is None else Path(out_dir)
-    texts = model_texts(r)
+    texts = model_texts(r, out)
+    out.mkdir(parents=True, exist_ok=True)
     paths = (out / f"{r.name}.xml", out / "scene.xml")
     for path, text in zip(paths, texts, strict=True):
         path.write_text(text, encoding="utf-8")
     return paths
 
 
-def model_texts(r: Robot) -> tuple[str, str]:
-    """The texts of ``<name>.xml`` and ``scene.xml`` (what :func:`build_files` writes)."""
-    robot, scene = robot_spec(r), scene_spec(r)
+def model_texts(r: Robot, out_dir: str | Path | None = None) -> tuple[str, str]:
+    """The texts of ``<name>.xml`` and ``scene.xml`` (what :func:`build_files` writes).
+
+    Args:
+        r: the robot.
+        out_dir: where they will be written (default: beside the description).
+    """
+    robot, scene = robot_spec(r), scene_spec(r, out_dir)
     add_home_key(robot, r, r.home_key)
     for i in range(r.n_cables):
         src, dst = robot.actuator(actuator_name(i)), scene.actuator(actuator_name(i))
         dst.gainprm, dst.biasprm = src.gainprm, src.biasprm
     key = robot.key(r.home_key)
     scene.add_key(name=key.name, qpos=key.qpos, act=key.act, mpos=key.mpos, mquat=key.mquat)
-    if r.tag is not None:
-        scene.modelfiledir = str(Path(r.source).parent.resolve())
     return to_xml(robot), to_xml(scene)
