@@ -42,6 +42,8 @@ class CdprGeometry:
         T_platform_cam: (4, 4) camera mounting, OpenCV camera frame (x right, y down, z forward).
         frame_min: (3,) lower corner of the frame's inner box in F_b [m] (workspace bound).
         frame_max: (3,) upper corner of the frame's inner box in F_b [m].
+        tension_min: lowest admissible cable tension [N] (wrench-feasible workspace).
+        tension_max: highest admissible cable tension [N] (``inf``: unbounded).
     """
 
     a_base: np.ndarray
@@ -54,6 +56,8 @@ class CdprGeometry:
     T_platform_cam: np.ndarray = field(default_factory=lambda: np.eye(4))
     frame_min: np.ndarray = field(default_factory=lambda: np.full(3, -np.inf))
     frame_max: np.ndarray = field(default_factory=lambda: np.full(3, np.inf))
+    tension_min: float = 0.5
+    tension_max: float = 75.0
 
     def __post_init__(self) -> None:
         a = np.asarray(self.a_base)
@@ -78,6 +82,11 @@ class CdprGeometry:
         object.__setattr__(self, "frame_max", hi)
         if np.any(self.pulley_radius < 0) or np.any(self.es <= 0) or not self.mass > 0:
             raise ValueError("CdprGeometry needs pulley_radius ≥ 0, es > 0 and mass > 0")
+        if not 0 <= self.tension_min < self.tension_max:
+            raise ValueError(
+                f"CdprGeometry needs 0 ≤ tension_min < tension_max, got {self.tension_min}, "
+                f"{self.tension_max}"
+            )
 
     @property
     def n_cables(self) -> int:

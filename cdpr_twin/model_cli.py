@@ -29,14 +29,14 @@ def _build(args: argparse.Namespace) -> int:
 
 def _workspace(args: argparse.Namespace) -> int:
     from cdpr_twin.robot import RobotError, load_robot
-    from cdpr_twin.workspace import draw_workspace, sample_workspace
+    from cdpr_twin.workspace import draw_workspace, geometry_of, sample_workspace
 
     try:
         robot = load_robot(args.description)
     except RobotError as exc:
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
         return 2
-    ws = sample_workspace(robot, spacing=args.spacing)
+    ws = sample_workspace(geometry_of(robot), spacing=args.spacing)
     out = args.out or Path(args.description).parent / "workspace.png"
     draw_workspace(ws, out, title=robot.name)
     print(

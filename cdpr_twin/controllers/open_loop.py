@@ -12,8 +12,8 @@ from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import jacobian
 from cdpr_twin.plugins import OptionError, option, register
 from cdpr_twin.se3 import so3_exp, so3_log, transform, vector_from_pose
-from cdpr_twin.statics import InfeasibleTensionError, tension_distribution
 from cdpr_twin.types import Command, Measurement, PoseEstimate, Status
+from cdpr_twin.workspace import infeasible_reason, is_feasible
 
 
 def quintic(tau: float) -> tuple[float, float]:
@@ -122,20 +122,24 @@ class OpenLoopController(Controller):
         self._starts = np.zeros(0)
 
     def check(self) -> None:
-        """Every waypoint inside the frame and holdable with all cables taut (≥ 0.5 N).
+        """Every waypoint inside the frame and wrench-feasible (:mod:`cdpr_twin.workspace`).
+
+        Wrench-feasible: holdable with tensions within the robot's limits
+        (``cable_tension_range`` in the model; 0.5…75 N without it).
 
         Raises:
             OptionError: naming the waypoint (``waypoints[i]``, from 0).
         """
         for i, w in enumerate(self.waypoints):
+            where = f"{vector_from_pose(w).round(4).tolist()}"
             try:
                 self.geometry.check_pose_inside(w, "waypoint")
-                tension_distribution(self.geometry, w, tau_min=0.5)
-            except (ValueError, InfeasibleTensionError) as exc:
+            except ValueError as exc:
                 raise OptionError(
-                    f"waypoints[{i}]",
-                    f"{vector_from_pose(w).round(4).tolist()} is outside the workspace: {exc}",
+                    f"waypoints[{i}]", f"{where} is outside the frame: {exc}"
                 ) from None
+            if not is_feasible(self.geometry, w):
+                raise OptionError(f"waypoints[{i}]", f"{where} {infeasible_reason(self.geometry)}")
 
     @property
     def total_duration(self) -> float:

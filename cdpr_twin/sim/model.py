@@ -236,7 +236,8 @@ def read_geometry(model: mujoco.MjModel) -> CdprGeometry:
         anchor sites, radii from the sheaves, E·S from ``<numeric name="cable_es">``, mass and
         centre of mass from the platform body, the OpenCV camera mounting from
         ``platform_cam`` (identity when the model has no camera), the workspace from
-        ``frame_min``/``frame_max``.
+        ``frame_min``/``frame_max``, the tension limits from ``cable_tension_range`` (when the
+        model has it; else the geometry's defaults).
     """
     n = cable_count(model)
 
@@ -250,6 +251,10 @@ def read_geometry(model: mujoco.MjModel) -> CdprGeometry:
     if platform < 0 or np.any(model.site_bodyid[sites] != platform):
         raise ModelError("the model's anchor sites must sit on a body named 'platform'")
     es = numeric(model, "cable_es")
+    limits = {}
+    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "cable_tension_range") >= 0:
+        lo, hi = numeric(model, "cable_tension_range")
+        limits = {"tension_min": float(lo), "tension_max": float(hi)}
     return CdprGeometry(
         a_base=model.body_pos[bodies],
         b_platform=model.site_pos[sites],
@@ -261,4 +266,5 @@ def read_geometry(model: mujoco.MjModel) -> CdprGeometry:
         T_platform_cam=camera.T_body_cam(model) if camera.has_camera(model) else np.eye(4),
         frame_min=numeric(model, "frame_min"),
         frame_max=numeric(model, "frame_max"),
+        **limits,
     )
