@@ -56,7 +56,7 @@ class CdprGeometry:
     T_platform_cam: np.ndarray = field(default_factory=lambda: np.eye(4))
     frame_min: np.ndarray = field(default_factory=lambda: np.full(3, -np.inf))
     frame_max: np.ndarray = field(default_factory=lambda: np.full(3, np.inf))
-    tension_min: float = 0.5
+    tension_min: float = 2.0
     tension_max: float = 75.0
 
     def __post_init__(self) -> None:
@@ -92,6 +92,13 @@ class CdprGeometry:
     def n_cables(self) -> int:
         """Number of cables m."""
         return self.a_base.shape[0]
+
+    def tension_bounds(
+        self, tension_min: float | None = None, tension_max: float | None = None
+    ) -> tuple[float, float]:
+        """Tension bounds [N]: the ones given, the geometry's where ``None``."""
+        lo = self.tension_min if tension_min is None else float(tension_min)
+        return lo, self.tension_max if tension_max is None else float(tension_max)
 
     def check_pose_inside(self, T_base_platform: np.ndarray, what: str = "pose") -> np.ndarray:
         """Check a platform pose: rigid, and every anchor point inside the frame's inner box.

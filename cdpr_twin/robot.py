@@ -143,9 +143,10 @@ class Robot:
         entry_height: cable entry segment down the swivel axis [m].
         es: (m,) axial stiffness E·S [N]; damping_time: η [s] (c = η E·S / l0).
         cable_diameter [m], linear_density [kg/m], breaking_load [N].
-        mass [kg], box_half_size (3,) [m], inertia: (3,) principal inertia [kg m²] or None
-            (uniform box); home_pose: (6,) [x, y, z m, rx, ry, rz deg], the pose of the viewer's
-            keyframe named home_key.
+        mass [kg], box_half_size (3,) [m], box_center (3,) [m] in F_p; inertia: (3,) principal
+            or (6,) Ixx Iyy Izz Ixy Ixz Iyz [kg m²] at the centre of mass com (3,) [m] in F_p,
+            or both None (a uniform box); home_pose: (6,) [x, y, z m, rx, ry, rz deg], the
+            pose of the viewer's keyframe named home_key.
         rate_limit [m/s], force_limit [N], length_range (2,) [m], tension_range (2,) [N].
         camera, tag: or None.
         max_speed [m/s], max_angular_speed [rad/s]: the monitor's limits (inf: unchecked).
@@ -174,7 +175,9 @@ class Robot:
     breaking_load: float
     mass: float
     box_half_size: np.ndarray
+    box_center: np.ndarray
     inertia: np.ndarray | None
+    com: np.ndarray | None
     home_pose: np.ndarray
     home_key: str
     rate_limit: float
@@ -242,17 +245,23 @@ def _cables(t: _Table, p: _Table) -> dict:
 
 def _platform(t: _Table) -> dict:
     box = t.array("box_half_size_m", (3,))
-    inertia = t.get("inertia_kg_m2", None)
     if np.any(box <= 0):
         raise t.fail("box_half_size_m", "must be > 0 on every axis")
-    if inertia is not None:
-        inertia = t.array("inertia_kg_m2", (3,))
-        if np.any(inertia <= 0):
-            raise t.fail("inertia_kg_m2", "principal moments must be > 0")
+    inertia = t.get("inertia_kg_m2", None)
+    if inertia is not None:  # 3 principal moments, or Ixx Iyy Izz Ixy Ixz Iyz (at the CoM)
+        n = len(inertia) if isinstance(inertia, list) else 0
+        inertia = t.array("inertia_kg_m2", (6 if n == 6 else 3,))
+        if np.any(inertia[:3] <= 0):
+            raise t.fail("inertia_kg_m2", "the moments Ixx, Iyy, Izz must be > 0")
+    com = t.get("com_m", None)
+    if com is not None and inertia is None:
+        raise t.fail("com_m", "needs inertia_kg_m2 (without it the platform is a uniform box)")
     return {
         "mass": t.number("mass_kg", positive=True),
         "box_half_size": box,
+        "box_center": t.array("box_center_m", (3,), [0.0, 0.0, 0.0]),
         "inertia": inertia,
+        "com": None if com is None else t.array("com_m", (3,)),
         "home_pose": t.array("home_pose", (6,)),
         "home_key": t.string("home_key", "home"),
     }

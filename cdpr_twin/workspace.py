@@ -23,7 +23,7 @@ from cdpr_twin.se3 import transform, vector_from_pose
 def geometry_of(robot) -> CdprGeometry:
     """The nominal :class:`CdprGeometry` of a :class:`cdpr_twin.robot.Robot` (no MuJoCo).
 
-    The centre of mass is the box centre (uniform box, or an explicit inertia about it).
+    The centre of mass is the description's, else the box centre (a uniform box).
     """
     return CdprGeometry(
         a_base=robot.exit_points,
@@ -31,7 +31,7 @@ def geometry_of(robot) -> CdprGeometry:
         pulley_radius=robot.sheave_radius,
         es=robot.es,
         mass=robot.mass,
-        com_platform=np.zeros(3),
+        com_platform=robot.box_center if robot.com is None else robot.com,
         gravity=robot.gravity,
         frame_min=robot.frame_min,
         frame_max=robot.frame_max,

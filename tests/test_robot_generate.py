@@ -169,3 +169,22 @@ def test_fewer_than_six_cables_is_refused(tmp_path):
     )
     with pytest.raises(RobotError, match=r"cables\.exit_points_m: .*m ≥ 6 cables, got 5"):
         load_robot(path)
+
+
+def test_cogiro_files_are_generated_and_carry_casprs_platform():
+    cogiro = MODELS_DIR / "cogiro" / "robot.toml"
+    r = load_robot(cogiro)
+    robot_xml, scene_xml = model_texts(r)
+    assert (MODELS_DIR / "cogiro" / "cogiro.xml").read_text() == robot_xml
+    assert (MODELS_DIR / "cogiro" / "scene.xml").read_text() == scene_xml
+    model = mujoco.MjModel.from_xml_string(scene_xml)
+    body = model.body("platform").id
+    assert model.body_mass[body] == 91.058
+    np.testing.assert_allclose(model.body_ipos[body], [-0.034, -0.013, 0.264], atol=1e-15)
+    # MuJoCo's principal inertia = the eigenvalues of CASPR's full tensor (Ixy… products)
+    ixx, iyy, izz, ixy, ixz, iyz = r.inertia
+    tensor = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+    np.testing.assert_allclose(
+        np.sort(model.body_inertia[body]), np.linalg.eigvalsh(tensor), rtol=1e-12
+    )
+    np.testing.assert_allclose(r.es, 68.5e9 * np.pi * 0.002**2, rtol=1e-8)

@@ -125,7 +125,7 @@ class OpenLoopController(Controller):
         """Every waypoint inside the frame and wrench-feasible (:mod:`cdpr_twin.workspace`).
 
         Wrench-feasible: holdable with tensions within the robot's limits
-        (``cable_tension_range`` in the model; 0.5…75 N without it).
+        (``cable_tension_range`` in the model; 2…75 N without it).
 
         Raises:
             OptionError: naming the waypoint (``waypoints[i]``, from 0).

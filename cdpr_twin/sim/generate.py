@@ -4,16 +4,14 @@
 sensors, camera, ``<numeric>`` constants) and :func:`scene_spec` the robot in its cell (floor,
 light, tag). :func:`build_files` writes ``<name>.xml`` and ``scene.xml`` beside the description,
 with a viewer keyframe settled at the description's home pose (MuJoCo's own viewer runs no
-cdpr_twin code). MuJoCo's XML writer prints numbers with 6 significant digits; :func:`to_xml`
-rewrites every number of a named element at full precision from the spec itself, so the file
-compiles to the spec's model bit for bit.
+cdpr_twin code). The text is MuJoCo's own XML writer's, its numbers restored to full precision
+(:mod:`cdpr_twin.sim.mjcf_writer`), so a file compiles to its spec's model bit for bit.
 """
 
 from __future__ import annotations
 
 import math
 import os
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import mujoco
@@ -22,6 +20,7 @@ import numpy as np
 from cdpr_twin.robot import Robot, load_robot
 from cdpr_twin.se3 import pose_from_vector
 from cdpr_twin.sim import camera as cam_mod
+from cdpr_twin.sim.mjcf_writer import to_xml
 from cdpr_twin.sim.model import (
     PLATFORM_BODY,
     TAG_BODY,
@@ -116,10 +115,17 @@ def _platform(world: mujoco.MjsBody, r: Robot) -> None:
     body = world.add_body(name=PLATFORM_BODY, pos=r.home_pose[:3])
     body.add_freejoint(name="platform_joint")
     box = {"type": _GEOM.mjGEOM_BOX, "size": r.box_half_size, "rgba": _COLOURS["platform"]}
+    if r.box_center.any():
+        box["pos"] = r.box_center
     if r.inertia is None:
         body.add_geom(name="platform_box", mass=r.mass, **box)
     else:
-        body.mass, body.inertia, body.explicitinertial = r.mass, r.inertia, True
+        body.mass, body.explicitinertial = r.mass, True
+        body.ipos = r.box_center if r.com is None else r.com
+        if r.inertia.size == 6:
+            body.fullinertia = r.inertia
+        else:
+            body.inertia = r.inertia
         body.add_geom(name="platform_box", density=0, **box)
     for i in range(r.n_cables):
         body.add_site(
@@ -266,69 +272,6 @@ def _tag(spec: mujoco.MjSpec, r: Robot, out_dir: Path) -> None:
     body.add_site(name="tag_center", size=[0.002, 0.005, 0.005], group=4)
 
 
-_GETTERS = {
-    "body": "body",
-    "geom": "geom",
-    "site": "site",
-    "camera": "camera",
-    "numeric": "numeric",
-    "general": "actuator",
-    "key": "key",
-    "spatial": "tendon",
-    "light": "light",
-    "texture": "texture",
-    "material": "material",
-    "actuatorfrc": "sensor",
-}
-
-
-def _number(v: float) -> str:
-    s = repr(float(v))
-    return s[:-2] if s.endswith(".0") else s
-
-
-def _exact(elem: ET.Element, obj: object) -> None:
-    """Rewrite ``elem``'s numeric attributes from the spec object ``obj`` at full precision."""
-    for attr, text in elem.attrib.items():
-        value = getattr(obj, attr, None)
-        if value is None or isinstance(value, str):
-            continue
-        try:
-            n = len([float(x) for x in text.split()])
-            arr = np.asarray(value)
-            flat = np.ravel(arr.astype(float))
-        except (TypeError, ValueError):
-            continue
-        if arr.dtype == np.float32:  # colours: six digits round-trip a float32
-            continue
-        if n and flat.size >= n:
-            elem.set(attr, " ".join(_number(v) for v in flat[:n]))
-
-
-def to_xml(spec: mujoco.MjSpec) -> str:
-    """The spec as MJCF text, every number of a named element at full precision.
-
-    Args:
-        spec: a spec (compiled by MuJoCo's writer on the way).
-
-    Returns:
-        The XML text; it compiles to the same model as ``spec`` bit for bit.
-    """
-    text = spec.to_xml()
-    root = ET.fromstring(text, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True)))
-    for elem in root.iter():
-        if elem.tag == "option":
-            _exact(elem, spec.option)
-        name = elem.get("name")
-        getter = _GETTERS.get(elem.tag)
-        if getter and name:
-            obj = getattr(spec, getter)(name)
-            if obj is not None:
-                _exact(elem, obj)
-    ET.indent(root, "  ")
-    return ET.tostring(root, encoding="unicode") + "\n"
-
-
 def add_home_key(spec: mujoco.MjSpec, r: Robot, key_name: str) -> None:
     """Settle the robot at its home pose and store the state as a viewer keyframe.
 
@@ -339,8 +282,7 @@ def add_home_key(spec: mujoco.MjSpec, r: Robot, key_name: str) -> None:
     from cdpr_twin.sim.physics import Physics  # (physics imports this package's model module)
 
     physics = Physics(spec.compile())
-    tau_min, tau_max = r.tension_range
-    physics.reset(pose_from_vector(r.home_pose), 0.5, float(tau_min), float(tau_max))
+    physics.reset(pose_from_vector(r.home_pose), settle_time=0.5)  # tensions within the range
     m, d = physics.model, physics.data
 
     def rounded(a: np.ndarray) -> list[float]:

@@ -361,8 +361,8 @@ class Physics:
         self,
         T_base_platform: np.ndarray,
         settle_time: float = 0.3,
-        tau_min: float = 2.0,
-        tau_max: float = 75.0,
+        tau_min: float | None = None,
+        tau_max: float | None = None,
     ) -> None:
         """Place the platform at a pose, all cables taut, and let it settle.
 
@@ -373,8 +373,8 @@ class Physics:
         Args:
             T_base_platform: (4, 4) requested platform pose.
             settle_time: how long to settle [s].
-            tau_min: lowest tension of the distribution [N].
-            tau_max: highest tension of the distribution [N].
+            tau_min: lowest tension [N] (default: the model's ``cable_tension_range``).
+            tau_max: highest tension [N] (default: the model's ``cable_tension_range``).
 
         Raises:
             ValueError: if the pose leaves the frame.
@@ -382,7 +382,7 @@ class Physics:
         """
         geom = self.geometry
         T = geom.check_pose_inside(T_base_platform, "reset pose")
-        tau = tension_distribution(geom, T, tau_min, tau_max, model="pulley")
+        tau = tension_distribution(geom, T, *geom.tension_bounds(tau_min, tau_max))  # pulley
         l0 = rest_lengths(cable_lengths(geom, T, "pulley"), tau, self._es)
         mujoco.mj_resetData(self.model, self.data)
         self._servos.reset()  # winches at rest

@@ -111,8 +111,9 @@ class Twin:
         noise_seed: seed of this run's sensor noise.
         camera: render the onboard camera and detect the tag in :meth:`sense`.
         align_every: physics steps between refreshes of the swivel yaws and cable stiffnesses.
-        tau_min: lowest tension of the distribution used by :meth:`reset` [N].
-        tau_max: highest tension of that distribution [N].
+        tau_min: lowest tension of the distribution used by :meth:`reset` [N] (default: the
+            model's ``cable_tension_range``, else 2 N).
+        tau_max: highest tension of that distribution [N] (default: likewise, else 75 N).
         timestep: physics step [s]; ``None`` keeps the model file's.
         home_encoders: home the encoders at :meth:`reset` (see :class:`Sensors`).
 
@@ -128,8 +129,8 @@ class Twin:
         noise_seed: int = 0,
         camera: bool = True,
         align_every: int = 10,
-        tau_min: float = 2.0,
-        tau_max: float = 75.0,
+        tau_min: float | None = None,
+        tau_max: float | None = None,
         timestep: float | None = None,
         home_encoders: bool = True,
     ) -> None:
@@ -139,7 +140,9 @@ class Twin:
         self.physics, self.nominal, self.deviations = build_robot(
             model_path, deviations, timestep, align_every
         )
-        self.tau_min, self.tau_max = float(tau_min), float(tau_max)
+        g = self.physics.geometry  # None: the model's tension range (cable_tension_range)
+        self.tau_min = g.tension_min if tau_min is None else float(tau_min)
+        self.tau_max = g.tension_max if tau_max is None else float(tau_max)
         self._closed = False
         self.sensors = Sensors(
             self.physics, self.nominal, tension_noise_std, noise_seed, camera, home_encoders
