@@ -15,6 +15,7 @@ paper's pose p1 before every repeat so that cable lengths never run away):
     of a 1 cm/s vertical platform twist (A · [0, 0, 0.01, 0, 0, 0], A the nominal base-frame
     pulley Jacobian at p1), the largest difference of the tendon lengths (``twin.cable_lengths``),
     platform pose and tensions from the ``align_every=1`` run.
+(f) µs per physics step of ``Twin.advance`` (align_every = 40) for ACROBOT and CoGiRo.
 
 Run from the repository root (about 6 s on a 2-core machine; well under 2 min):
 
@@ -36,6 +37,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import mujoco
 import numpy as np
 
+from cdpr_twin import MODELS_DIR
 from cdpr_twin.kinematics import jacobian
 from cdpr_twin.se3 import pose_distance, pose_from_vector
 from cdpr_twin.sim.twin import Twin
@@ -96,6 +98,26 @@ def bench_advance(twin: Twin, n: int, repeats: int) -> float:
         / n
         * 1e6
     )
+
+
+ROBOTS = {  # robot: (scene, a pose inside its workspace)
+    "acrobot": (MODELS_DIR / "acrobot" / "scene.xml", P1),
+    "cogiro": (MODELS_DIR / "cogiro" / "scene.xml", pose_from_vector([2.0, -1.5, 1.0, 0, 0, 0])),
+}
+
+
+def bench_robots(n: int, repeats: int) -> None:
+    """(f): µs per physics step of Twin.advance (align_every = 40) for each described robot.
+
+    Cables are massless (sagging cables, issue 10 item 5, are not in the physics yet).
+    """
+    print(f"{'(f) robot':<12}{'cables':>8}{'µs/step, massless cables':>28}")
+    for name, (scene, pose) in ROBOTS.items():
+        with Twin(scene, camera=False, tension_noise_std=0.0, align_every=40) as twin:
+            rates = np.full(twin.physics.n_cables, SMALL_RATE)
+            run = lambda t=twin, r=rates: t.advance(n * t.timestep, r)  # noqa: E731
+            us = median_time(run, lambda t=twin, p=pose: t.reset(p), repeats) / n * 1e6
+            print(f"{name:<12}{twin.physics.n_cables:>8}{us:>28.2f}")
 
 
 def bench_sense(repeats: int) -> dict[str, float | bool]:
@@ -186,6 +208,8 @@ def main() -> None:
         )
     z_moved = (runs[1][2][2, 3] - P1[2, 3]) * 1e3
     print(f"(platform rose {z_moved:.2f} mm in the align_every=1 run)")
+    print()
+    bench_robots(args.steps, args.repeats)
     print()
     print(f"total benchmark time {time.perf_counter() - t_start:.1f} s")
 
