@@ -15,7 +15,7 @@ paper's pose p1 before every repeat so that cable lengths never run away):
     of a 1 cm/s vertical platform twist (A · [0, 0, 0.01, 0, 0, 0], A the nominal base-frame
     pulley Jacobian at p1), the largest difference of the tendon lengths (``twin.cable_lengths``),
     platform pose and tensions from the ``align_every=1`` run.
-(f) µs per physics step of ``Twin.advance`` (align_every = 40) for ACROBOT and CoGiRo.
+(f) µs per physics step (align_every = 40) for ACROBOT and CoGiRo, massless and sagging cables.
 
 Run from the repository root (about 6 s on a 2-core machine; well under 2 min):
 
@@ -40,6 +40,8 @@ import numpy as np
 from cdpr_twin import MODELS_DIR
 from cdpr_twin.kinematics import jacobian
 from cdpr_twin.se3 import pose_distance, pose_from_vector
+from cdpr_twin.sim import Physics, build_model
+from cdpr_twin.sim.sag import SaggingPhysics
 from cdpr_twin.sim.twin import Twin
 
 P1 = pose_from_vector([0.284, -0.197, 0.08, 0.0, 0.0, 0.0])
@@ -100,24 +102,30 @@ def bench_advance(twin: Twin, n: int, repeats: int) -> float:
     )
 
 
-ROBOTS = {  # robot: (scene, a pose inside its workspace)
-    "acrobot": (MODELS_DIR / "acrobot" / "scene.xml", P1),
-    "cogiro": (MODELS_DIR / "cogiro" / "scene.xml", pose_from_vector([2.0, -1.5, 1.0, 0, 0, 0])),
+ROBOTS = {  # robot: (scene, a pose inside its workspace, cable mass per metre [kg/m])
+    "acrobot": (MODELS_DIR / "acrobot" / "scene.xml", P1, 0.0024),
+    "cogiro": (
+        MODELS_DIR / "cogiro" / "scene.xml",
+        pose_from_vector([2.0, -1.5, 1.0, 0, 0, 0]),
+        0.064,
+    ),
 }
 
 
 def bench_robots(n: int, repeats: int) -> None:
-    """(f): µs per physics step of Twin.advance (align_every = 40) for each described robot.
-
-    Cables are massless (sagging cables, issue 10 item 5, are not in the physics yet).
-    """
-    print(f"{'(f) robot':<12}{'cables':>8}{'µs/step, massless cables':>28}")
-    for name, (scene, pose) in ROBOTS.items():
-        with Twin(scene, camera=False, tension_noise_std=0.0, align_every=40) as twin:
-            rates = np.full(twin.physics.n_cables, SMALL_RATE)
-            run = lambda t=twin, r=rates: t.advance(n * t.timestep, r)  # noqa: E731
-            us = median_time(run, lambda t=twin, p=pose: t.reset(p), repeats) / n * 1e6
-            print(f"{name:<12}{twin.physics.n_cables:>8}{us:>28.2f}")
+    """(f): µs per physics step (align_every = 40) for each robot, massless and sagging cables."""
+    print(f"{'(f) robot':<12}{'cables':>8}{'µs/step massless':>20}{'µs/step sagging':>20}")
+    for name, (scene, pose, rho) in ROBOTS.items():
+        cost = []
+        for physics in (
+            Physics(build_model(scene), 40),
+            SaggingPhysics(build_model(scene), 40, linear_density=rho),
+        ):
+            rates = np.full(physics.n_cables, SMALL_RATE)
+            run = lambda p=physics, r=rates: p.advance(n * p.timestep, r)  # noqa: E731
+            reset = lambda p=physics, T=pose: p.reset(T)  # noqa: E731
+            cost.append(median_time(run, reset, repeats) / n * 1e6)
+        print(f"{name:<12}{physics.n_cables:>8}{cost[0]:>20.2f}{cost[1]:>20.2f}")
 
 
 def bench_sense(repeats: int) -> dict[str, float | bool]:

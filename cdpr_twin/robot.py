@@ -142,7 +142,8 @@ class Robot:
         sheave_radius: (m,) r_p [m]; sheave_half_width: (m,) [m] (visual).
         entry_height: cable entry segment down the swivel axis [m].
         es: (m,) axial stiffness E·S [N]; damping_time: η [s] (c = η E·S / l0).
-        cable_diameter [m], linear_density [kg/m], breaking_load [N].
+        cable_diameter [m], linear_density [kg/m], breaking_load [N]; sag: the cables' weight
+            acts in the physics (Irvine's catenary, :mod:`cdpr_twin.sim.sag`).
         mass [kg], box_half_size (3,) [m], box_center (3,) [m] in F_p; inertia: (3,) principal
             or (6,) Ixx Iyy Izz Ixy Ixz Iyz [kg m²] at the centre of mass com (3,) [m] in F_p,
             or both None (a uniform box); home_pose: (6,) [x, y, z m, rx, ry, rz deg], the
@@ -172,6 +173,7 @@ class Robot:
     damping_time: float
     cable_diameter: float
     linear_density: float
+    sag: bool
     breaking_load: float
     mass: float
     box_half_size: np.ndarray
@@ -196,6 +198,13 @@ class Robot:
     def n_cables(self) -> int:
         """Number of cables m."""
         return self.exit_points.shape[0]
+
+
+def _boolean(t: _Table, key: str, default: bool) -> bool:
+    v = t.get(key, default)
+    if not isinstance(v, bool):
+        raise t.fail(key, f"must be true or false, got {v!r}")
+    return v
 
 
 def _frame(t: _Table) -> dict:
@@ -236,6 +245,7 @@ def _cables(t: _Table, p: _Table) -> dict:
         "damping_time": t.number("damping_time_s", positive=True),
         "cable_diameter": d,
         "linear_density": t.number("linear_density_kg_m", positive=True),
+        "sag": _boolean(t, "sag", False),
         "breaking_load": t.number("breaking_load_n", positive=True),
         "sheave_radius": p.per_cable("sheave_radius_m", m),
         "sheave_half_width": p.per_cable("sheave_half_width_m", m),

@@ -97,7 +97,14 @@ def build_robot(
                 f"per simulated second), got {timestep}"
             )
         model.opt.timestep = float(timestep)
-    physics = Physics(model, align_every, str(path), winch=winch, robot_seed=robot_seed)
+    args = (model, align_every, str(path))
+    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "cable_linear_density") >= 0:
+        from cdpr_twin.sim.sag import SaggingPhysics  # heavy cables (robot.toml: sag = true)
+
+        rho = float(numeric(model, "cable_linear_density")[0])
+        physics = SaggingPhysics(*args, winch=winch, robot_seed=robot_seed, linear_density=rho)
+    else:
+        physics = Physics(*args, winch=winch, robot_seed=robot_seed)
     return physics, nominal, deviations
 
 

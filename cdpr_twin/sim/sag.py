@@ -1,0 +1,80 @@
+"""Cables with mass: each free span's force on the platform follows Irvine's elastic catenary.
+
+MuJoCo's tendons are massless and straight. :class:`SaggingPhysics` keeps them (they carry the
+elastic law, its damping and the implicit integration) and adds, at every refresh of the swivels
+and stiffnesses (every ``align_every`` steps), the difference between the sagging and the
+straight cable's force on the platform as an applied force at each anchor point B_i. The span
+is MuJoCo's last tendon segment, from the sheave's tangent point to B_i, and its unstretched
+length the cable's l0 in proportion of that segment in the tendon path (stretch uniform along
+the cable). The catenary (:mod:`cdpr_twin.catenary`) is solved for that unstretched length and
+span; the platform then also carries its share of the cable's weight.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from cdpr_twin.catenary import CatenaryError, end_forces, solve_catenary
+from cdpr_twin.sim.physics import Physics
+
+G = 9.81
+
+
+class SaggingPhysics(Physics):
+    """:class:`Physics` with heavy cables (Irvine's elastic catenary on every free span).
+
+    Args:
+        model: as :class:`Physics`.
+        linear_density: the cables' mass per unstretched metre [kg/m].
+        **kwargs: as :class:`Physics`.
+    """
+
+    def __init__(self, model: mujoco.MjModel, *args, linear_density: float, **kwargs) -> None:
+        super().__init__(model, *args, **kwargs)
+        if not linear_density > 0:
+            raise ValueError(f"linear_density must be > 0 kg/m, got {linear_density}")
+        self.linear_density = float(linear_density)
+        self.sag_force = np.zeros((self.n_cables, 3))  # the catenary − straight force on B_i [N]
+
+    def refresh(self) -> None:
+        """Swivels and stiffnesses (:meth:`Physics.refresh`), then the sagging spans' forces."""
+        super().refresh()
+        d, m = self.data, self.model
+        if not self.was_reset and not np.any(d.act):
+            return  # no cable paid out yet
+        mujoco.mj_tendon(m, d)  # the paths at the last step's positions (place(): the new ones)
+        b = d.site_xpos[self._anchors]
+        total = np.zeros(3)
+        torque = np.zeros(3)
+        com = d.xipos[self._platform]
+        l0 = d.act[self._actuators]
+        for i in range(self.n_cables):
+            force = self._span_force(i, b[i], l0[i]) if self.cable_enabled[i] else np.zeros(3)
+            self.sag_force[i] = force
+            total += force
+            torque += np.cross(b[i] - com, force)
+        d.xfrc_applied[self._platform] = np.concatenate([total, torque])
+
+    def _span_force(self, i: int, b: np.ndarray, l0: float) -> np.ndarray:
+        """Catenary − straight elastic force of cable i's free span on B_i [N] (3,)."""
+        d = self.data
+        tendon = self._tendons[i]
+        points = d.wrap_xpos.reshape(-1, 3)  # the tendon paths' points, B_i last
+        start = points[d.ten_wrapadr[tendon] + d.ten_wrapnum[tendon] - 2]  # tangent point
+        span = start - b
+        chord = float(np.linalg.norm(span))
+        total = float(d.ten_length[tendon]) - self._entry
+        if total <= 0 or l0 <= 0:
+            return np.zeros(3)
+        ls = l0 * chord / total  # unstretched length of the free span
+        es = self._es[i]
+        if chord <= ls:  # slack: MuJoCo's cable pulls nothing, a hanging one little; leave it
+            return np.zeros(3)
+        straight = es * (chord - ls) / ls * span / chord
+        try:
+            cat = solve_catenary(ls, es, self.linear_density * G, np.hypot(*span[:2]), span[2])
+        except CatenaryError:
+            return np.zeros(3)
+        on_b, _ = end_forces(cat, start, b)
+        return on_b - straight
