@@ -212,6 +212,7 @@ def _reproduce(args: argparse.Namespace) -> int:
             progress,
             decompose=RUN_SOURCES if args.decompose else (),
             other_goal=args.other_goal,
+            scenarios=model_cli.robot_scenarios(args.robot),
         )
     except ValueError as exc:
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
@@ -304,6 +305,7 @@ def _reproduce_parser(sub) -> None:
         default=None,
         help="also run PBVS (control in the loop) with this goal",
     )
+    rep.add_argument("--robot", choices=model_cli.STUDY_ROBOTS, default="acrobot", help="robot")
     rep.set_defaults(func=_reproduce)
 
 

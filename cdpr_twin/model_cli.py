@@ -12,6 +12,18 @@ import argparse
 import sys
 from pathlib import Path
 
+STUDY_ROBOTS = ("acrobot", "cogiro")
+"""Robots ``cdpr-twin reproduce --robot`` knows: their (open-loop, PBVS) scenario files."""
+
+
+def robot_scenarios(robot: str) -> tuple[Path, Path]:
+    """The (open-loop, PBVS) scenarios of a robot's study (``reproduce --robot``)."""
+    from cdpr_twin import MODELS_DIR
+
+    prefix = "paper" if robot == "acrobot" else robot
+    d = MODELS_DIR.parent / "scenarios"
+    return d / f"{prefix}_open_loop.toml", d / f"{prefix}_pbvs.toml"
+
 
 def _build(args: argparse.Namespace) -> int:
     from cdpr_twin.robot import RobotError

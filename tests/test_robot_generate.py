@@ -177,7 +177,7 @@ def test_cogiro_files_are_generated_and_carry_casprs_platform():
     robot_xml, scene_xml = model_texts(r)
     assert (MODELS_DIR / "cogiro" / "cogiro.xml").read_text() == robot_xml
     assert (MODELS_DIR / "cogiro" / "scene.xml").read_text() == scene_xml
-    model = mujoco.MjModel.from_xml_string(scene_xml)
+    model = mujoco.MjModel.from_xml_path(str(MODELS_DIR / "cogiro" / "scene.xml"))
     body = model.body("platform").id
     assert model.body_mass[body] == 91.058
     np.testing.assert_allclose(model.body_ipos[body], [-0.034, -0.013, 0.264], atol=1e-15)

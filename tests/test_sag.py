@@ -45,9 +45,9 @@ def test_a_description_with_sag_builds_sagging_physics(tmp_path):
     text = (MODELS_DIR / "cogiro" / "robot.toml").read_text()
     assert "linear_density_kg_m = 0.064" in text
     path = tmp_path / "robot.toml"
-    path.write_text(
-        text.replace("linear_density_kg_m = 0.064", "linear_density_kg_m = 0.064\nsag = true")
-    )
+    text = text.replace("linear_density_kg_m = 0.064", "linear_density_kg_m = 0.064\nsag = true")
+    texture = MODELS_DIR / "acrobot" / "assets" / "tag36h11_00000.png"  # from anywhere
+    path.write_text(text.replace('"../acrobot/assets/tag36h11_00000.png"', f'"{texture}"'))
     _, scene = build_files(path, tmp_path)
     physics, _, _ = build_robot(scene)
     assert isinstance(physics, SaggingPhysics) and physics.linear_density == 0.064

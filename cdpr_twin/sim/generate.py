@@ -57,9 +57,10 @@ def _numerics(spec: mujoco.MjSpec, r: Robot) -> None:
         "platform_max_speed": [r.max_speed],
         "platform_max_angular_speed": [r.max_angular_speed],
         "cable_tension_range": r.tension_range,
+        "cable_linear_density": [r.linear_density],
     }
     if r.sag:  # heavy cables: the twin builds SaggingPhysics (cdpr_twin/sim/sag.py)
-        values["cable_linear_density"] = [r.linear_density]
+        values["cable_sag"] = [1.0]
     for name, data in values.items():
         if np.all(np.isfinite(data)):
             spec.add_numeric(name=name, data=list(map(float, data)), size=len(data))

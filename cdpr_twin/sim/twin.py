@@ -98,7 +98,7 @@ def build_robot(
             )
         model.opt.timestep = float(timestep)
     args = (model, align_every, str(path))
-    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "cable_linear_density") >= 0:
+    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "cable_sag") >= 0:
         from cdpr_twin.sim.sag import SaggingPhysics  # heavy cables (robot.toml: sag = true)
 
         rho = float(numeric(model, "cable_linear_density")[0])

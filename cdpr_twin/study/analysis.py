@@ -110,8 +110,14 @@ def _model_physics(ts: Timeseries, scenario_file: Path) -> dict:
     from cdpr_twin import kinematics as kin
     from cdpr_twin.scenario import load_scenario
     from cdpr_twin.sim import build_model, read_geometry
+    from cdpr_twin.sim.model import numeric
 
-    geom = read_geometry(build_model(load_scenario(scenario_file).model.file))
+    model = build_model(load_scenario(scenario_file).model.file)
+    geom = read_geometry(model)
+    try:
+        rho = float(numeric(model, "cable_linear_density")[0])
+    except ValueError:  # a model without it: massless cables, no sag to estimate
+        rho = float("nan")
     tau, l0 = ts.matrix("tension"), ts.matrix("length")
     stretch = np.abs(tau) * l0 / geom.es  # eq. 14 with τ(0) = 0
     T = ts.poses("true")
@@ -126,7 +132,33 @@ def _model_physics(ts: Timeseries, scenario_file: Path) -> dict:
         "wrap_min_m": float(wrap.min()),
         "wrap_max_m": float(wrap.max()),
         "wrap_change_max_m": float((wrap.max(axis=0) - wrap.min(axis=0)).max()),
+        "max_sag_m": _max_sag(geom, rho, T[:: max(1, len(T) // 50)], tau[:: max(1, len(T) // 50)]),
     }
+
+
+def _max_sag(geom, rho: float, poses: np.ndarray, tau: np.ndarray) -> float:
+    """Largest mid-span sag of the cables along the run if they had their mass [m].
+
+    Irvine's catenary (:mod:`cdpr_twin.catenary`) for each span A_i → B_i, its unstretched
+    length the straight one at the measured tension; NaN without a density (rho [kg/m]).
+    """
+    from cdpr_twin.catenary import CatenaryError, solve_catenary
+
+    if not rho > 0:
+        return float("nan")
+    worst = 0.0
+    for T, t in zip(poses, tau, strict=True):
+        span = geom.a_base - (geom.b_platform @ T[:3, :3].T + T[:3, 3])
+        for i, (d, ti) in enumerate(zip(span, t, strict=True)):
+            h = float(np.hypot(d[0], d[1]))
+            if not (ti > 1.0 and h > 0):
+                continue
+            l0 = float(np.linalg.norm(d)) / (1.0 + ti / geom.es[i])
+            try:
+                worst = max(worst, solve_catenary(l0, geom.es[i], rho * 9.81, h, d[2]).sag)
+            except CatenaryError:
+                continue
+    return worst
 
 
 def _camera_tag_errors(scenario_file: str | Path) -> dict:

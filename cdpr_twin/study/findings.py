@@ -165,8 +165,8 @@ def model_variants_agree(rep: dict) -> Finding | None:
     if not mv:
         return None
     return Finding(
-        finding="the four model-based variants are nearly identical on ACROBOT",
-        paper="almost the same output",
+        finding="the four model-based variants are nearly identical",
+        paper="almost the same output (on ACROBOT)",
         twin="max difference between variants "
         f"{mv['max_pairwise_difference_m'] * 1e3:.2f} mm vs their deviation from truth "
         f"up to {mv['max_deviation_m'] * 1e3:.1f} mm",
@@ -175,9 +175,15 @@ def model_variants_agree(rep: dict) -> Finding | None:
         why=f"stretch τ·l/(E·S) is at most {mv['max_stretch_m'] * 1e6:.0f} µm and "
         f"the pulley wrap (l_pulley − l_straight, "
         f"{mv['wrap_min_m'] * 1e3:.2f}–{mv['wrap_max_m'] * 1e3:.2f} mm) changes "
-        f"by at most {mv['wrap_change_max_m'] * 1e3:.2f} mm along the run, "
-        "against centimetre geometry errors.",
+        f"by at most {mv['wrap_change_max_m'] * 1e3:.2f} mm along the run"
+        + _sag_words(mv)
+        + ", against centimetre geometry errors.",
     )
+
+
+def _sag_words(mv: dict) -> str:
+    sag = mv.get("max_sag_m", float("nan"))
+    return "" if sag != sag else f"; the cables, massless here, would sag ≤ {sag * 1e3:.1f} mm"
 
 
 def control_best_with_pbvs(rep: dict) -> Finding | None:
