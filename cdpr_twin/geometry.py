@@ -44,6 +44,7 @@ class CdprGeometry:
         frame_max: (3,) upper corner of the frame's inner box in F_b [m].
         tension_min: lowest admissible cable tension [N] (wrench-feasible workspace).
         tension_max: highest admissible cable tension [N] (``inf``: unbounded).
+        linear_density: the cables' mass per unstretched metre [kg/m] (0: massless).
     """
 
     a_base: np.ndarray
@@ -58,6 +59,7 @@ class CdprGeometry:
     frame_max: np.ndarray = field(default_factory=lambda: np.full(3, np.inf))
     tension_min: float = 2.0
     tension_max: float = 75.0
+    linear_density: float = 0.0
 
     def __post_init__(self) -> None:
         a = np.asarray(self.a_base)

@@ -37,6 +37,7 @@ def geometry_of(robot) -> CdprGeometry:
         frame_max=robot.frame_max,
         tension_min=float(robot.tension_range[0]),
         tension_max=float(robot.tension_range[1]),
+        linear_density=robot.linear_density,
     )
 
 

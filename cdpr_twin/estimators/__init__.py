@@ -39,6 +39,9 @@ PAPER_ESTIMATORS = tuple(
 )
 """The paper's six estimators, in its order (Est. 1 … Est. 6)."""
 
+# Est. 7 (issue 10), registered after the paper's six so that their order stays the paper's
+from cdpr_twin.estimators import catenary as _catenary  # noqa: E402, F401
+
 
 def make_estimator(name: str, geometry: CdprGeometry, **options: Any) -> Estimator:
     """Build a registered estimator by name (DESIGN §7).

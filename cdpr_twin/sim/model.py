@@ -255,6 +255,8 @@ def read_geometry(model: mujoco.MjModel) -> CdprGeometry:
     if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "cable_tension_range") >= 0:
         lo, hi = numeric(model, "cable_tension_range")
         limits = {"tension_min": float(lo), "tension_max": float(hi)}
+    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "cable_linear_density") >= 0:
+        limits["linear_density"] = float(numeric(model, "cable_linear_density")[0])
     return CdprGeometry(
         a_base=model.body_pos[bodies],
         b_platform=model.site_pos[sites],

@@ -7,7 +7,8 @@ straight cable's force on the platform as an applied force at each anchor point 
 is MuJoCo's last tendon segment, from the sheave's tangent point to B_i, and its unstretched
 length the cable's l0 in proportion of that segment in the tendon path (stretch uniform along
 the cable). The catenary (:mod:`cdpr_twin.catenary`) is solved for that unstretched length and
-span; the platform then also carries its share of the cable's weight.
+span; the platform then also carries its share of the cable's weight, and the tension sensors
+at B_i read the catenary's tension there.
 """
 
 from __future__ import annotations
@@ -36,6 +37,18 @@ class SaggingPhysics(Physics):
             raise ValueError(f"linear_density must be > 0 kg/m, got {linear_density}")
         self.linear_density = float(linear_density)
         self.sag_force = np.zeros((self.n_cables, 3))  # the catenary − straight force on B_i [N]
+        self._unit = np.zeros((self.n_cables, 3))  # B_i → tangent point, at the last refresh
+
+    @property
+    def tensions(self) -> np.ndarray:
+        """True tensions at B_i (m,) [N]: the sagging span's, |τ_straight û + Δ|.
+
+        MuJoCo's tendon carries the straight elastic tension τ_straight (current); the span's
+        catenary differs by the force Δ of the last refresh. A tension sensor at B_i reads this.
+        """
+        straight = super().tensions
+        pulled = straight[:, None] * self._unit + self.sag_force
+        return np.where(straight > 0, np.linalg.norm(pulled, axis=1), straight)
 
     def refresh(self) -> None:
         """Swivels and stiffnesses (:meth:`Physics.refresh`), then the sagging spans' forces."""
@@ -69,6 +82,7 @@ class SaggingPhysics(Physics):
             return np.zeros(3)
         ls = l0 * chord / total  # unstretched length of the free span
         es = self._es[i]
+        self._unit[i] = span / chord
         if chord <= ls:  # slack: MuJoCo's cable pulls nothing, a hanging one little; leave it
             return np.zeros(3)
         straight = es * (chord - ls) / ls * span / chord
