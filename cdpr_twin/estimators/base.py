@@ -31,6 +31,9 @@ NO_TWIST = "no_twist"
 """Time advanced but no commanded twist was recorded: the control-based estimate is held."""
 NOT_CONVERGED = "not_converged"
 """The least-squares solve did not converge: the estimate is held."""
+ILL_CONDITIONED = "ill_conditioned"
+"""The cables available form a nearly singular set (Jacobian condition number above the
+estimator's ``max_condition``): the estimate is held rather than jump."""
 REANCHORED = "reanchored"
 """Image-based: no successive detection pair; the reference restarts at the held estimate."""
 
