@@ -1,4 +1,4 @@
-"""The six moving-platform pose estimators of the paper (§III), chosen by name.
+"""The six moving-platform pose estimators of the paper (§III) and ``fused`` (Est. 7), by name.
 
 >>> est = make_estimator("model_elastic_pulley", geometry)
 >>> est.reset(T_base_platform0)
@@ -15,6 +15,7 @@ from typing import Any
 from cdpr_twin import plugins
 from cdpr_twin.estimators.base import Estimator
 from cdpr_twin.estimators.control import ControlEstimator
+from cdpr_twin.estimators.fused import FusedEstimator
 from cdpr_twin.estimators.image import ImageEstimator
 from cdpr_twin.estimators.model import (
     ElasticModelEstimator,
@@ -38,6 +39,8 @@ PAPER_ESTIMATORS = tuple(
     )
 )
 """The paper's six estimators, in its order (Est. 1 … Est. 6)."""
+EXTRA_ESTIMATORS = (FusedEstimator.name,)
+"""Estimators beyond the paper: Est. 7, the fused filter (issue 11)."""
 
 
 def make_estimator(name: str, geometry: CdprGeometry, **options: Any) -> Estimator:
@@ -56,6 +59,7 @@ def make_estimator(name: str, geometry: CdprGeometry, **options: Any) -> Estimat
 
 
 __all__ = [
+    "EXTRA_ESTIMATORS",
     "PAPER_ESTIMATORS",
     "Estimator",
     "ModelEstimator",

@@ -1,0 +1,203 @@
+"""The measurement models of the fused filter (numpy only): cable lengths and tag poses.
+
+The filter's error state (:mod:`cdpr_twin.estimators.fused`) is, in this order,
+
+| slice | symbol | meaning |
+|---|---|---|
+| ``POSE`` (6) | δ | the platform pose error, ``T_true = T · exp(δ)``, δ = [v, ω] in F_p |
+| ``START`` (6) | δ₀ | the error of the pose at the reference reading (homing repeatability) |
+| ``DRUM`` (m) | ρ | each drum's true/nominal radius ratio − 1 (the encoders' scale error) |
+| ``TAG`` (6) | δ_o | the error of the tag pose in F_b, ``T_base_tag_true = T_base_tag · exp(δ_o)`` |
+
+Cable model. The encoders are homed at the start pose: each reading counts the paid-out length
+since then through the nominal drum radius. With c_i = l_i + l_i τ_i / E·S_i − η l̇_i the
+stretch-corrected reading (eq. 13-14, η the cables' damping time: a tension sensor reads the
+damping force η E·S/l₀ · l̇ too), the reading since the reference is
+
+    y_i = c_i(t) − c_i(t₀) = L_i(T) − L_i(T₀) − ρ_i Δl_i + n_i,
+
+with L_i the pulley length (eq. 15-24), Δl_i the encoder's count since t₀ and n_i the encoder
+quantisation (a floor: mean −q/2, std q/√12) and the tension noise mapped through the
+elasticity (δl = l δτ / E·S, at both readings).
+
+Tag model. The detection ᶜT_o (pupil frame) is the tag pose seen from the camera at
+``T_lag = T · exp(−ξ d)`` (the latency d of the frame: one tick plus half the exposure):
+``z = T_pc⁻¹ T_lag⁻¹ T_base_tag · exp(n)``, n the detection noise in the tag frame, whose
+covariance follows from the corners' pixel noise through the projection's Jacobian (it grows
+with the distance to the tag).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cdpr_twin.se3 import adjoint, inverse, se3_log, skew
+
+POSE, START = slice(0, 6), slice(6, 12)
+
+
+def drum_slice(m: int) -> slice:
+    """The drums' slice of the error state, for m cables."""
+    return slice(12, 12 + m)
+
+
+def tag_slice(m: int) -> slice:
+    """The tag's slice of the error state, for m cables."""
+    return slice(12 + m, 18 + m)
+
+
+def corrected_readings(
+    lengths: np.ndarray,
+    tensions: np.ndarray,
+    rates: np.ndarray,
+    es: np.ndarray,
+    damping_time: float,
+) -> np.ndarray:
+    """c_i = l_i + l_i τ_i / E·S_i − η l̇_i: the readings corrected for stretch and damping.
+
+    Args:
+        lengths: (m,) encoder lengths [m].
+        tensions: (m,) measured tensions [N].
+        rates: (m,) commanded winch rates over the last period [m/s] (≈ l̇_i).
+        es: (m,) nominal E·S [N].
+        damping_time: η, the cables' damping time [s].
+
+    Returns:
+        (m,) corrected lengths [m].
+    """
+    return lengths + lengths * tensions / es - damping_time * rates
+
+
+def cable_noise_var(
+    lengths: np.ndarray,
+    tensions: np.ndarray,
+    es: np.ndarray,
+    quantum: float,
+    floor_std: float,
+    tension_std: float,
+    threshold: float,
+) -> np.ndarray:
+    """Variance of each cable reading's error n_i [m²], tension-aware.
+
+    Quantisation (q²/12), a floor, the tension noise at both readings mapped through the
+    elasticity, and a cable close to slack (below 3× the taut threshold) trusted less: its
+    variance grows ×(3·threshold/τ)⁴, for a reading that may come from a sagging cable.
+
+    Args:
+        lengths: (k,) encoder lengths [m].
+        tensions: (k,) measured tensions [N] (each above ``threshold``).
+        es: (k,) nominal E·S [N].
+        quantum: encoder count length q [m].
+        floor_std: a floor under the noise std [m].
+        tension_std: std of a tension reading's random error [N].
+        threshold: the taut threshold [N].
+
+    Returns:
+        (k,) variances [m²].
+    """
+    var = quantum**2 / 12.0 + floor_std**2 + 2.0 * (lengths * tension_std / es) ** 2
+    near_slack = np.maximum(3.0 * threshold / np.maximum(tensions, 1e-9), 1.0)
+    return var * near_slack**4
+
+
+def tag_covariance(
+    T_cam_tag: np.ndarray, tag_size: float, focal_px: float, pixel_std: float
+) -> np.ndarray:
+    """Covariance of the detection noise n (tag frame, [v, ω]) from the corners' pixel noise.
+
+    R = σ² (JᵀJ)⁻¹ with J the (8, 6) Jacobian of the four corners' pixel coordinates with
+    respect to n: it grows with the tag's distance (roughly as its square for depth).
+
+    Args:
+        T_cam_tag: (4, 4) detected tag pose in the camera frame.
+        tag_size: edge of the tag's black square [m].
+        focal_px: focal length [px] (square pixels).
+        pixel_std: std of a corner's pixel coordinates [px].
+
+    Returns:
+        (6, 6) covariance [m², m·rad, rad²].
+    """
+    h = 0.5 * tag_size
+    corners = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+    R, t = T_cam_tag[:3, :3], T_cam_tag[:3, 3]
+    rows = []
+    for p in corners:
+        X = R @ p + t
+        d_pix = focal_px / X[2] * np.array([[1.0, 0.0, -X[0] / X[2]], [0.0, 1.0, -X[1] / X[2]]])
+        d_point = R @ np.hstack([np.eye(3), -skew(p)])  # d(R(p + ω×p + v) + t)/d[v, ω]
+        rows.append(d_pix @ d_point)
+    J = np.vstack(rows)
+    return pixel_std**2 * np.linalg.inv(J.T @ J)
+
+
+def tag_residual(
+    T_base_platform: np.ndarray,
+    T_base_tag: np.ndarray,
+    T_platform_cam: np.ndarray,
+    T_cam_tag: np.ndarray,
+    lag_twist: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Innovation of a tag detection and its Jacobian with respect to δ (the tag's is I).
+
+    Args:
+        T_base_platform: (4, 4) current pose estimate.
+        T_base_tag: (4, 4) the tag's estimated pose in F_b.
+        T_platform_cam: (4, 4) the camera mounting.
+        T_cam_tag: (4, 4) the detection.
+        lag_twist: (6,) ξ·d, the platform motion over the frame's latency (F_p) [m, rad].
+
+    Returns:
+        ``(r, H_pose)``: (6,) log(ẑ⁻¹ z) in the tag frame, and (6, 6) ∂r/∂δ.
+    """
+    from cdpr_twin.se3 import se3_exp
+
+    T_lag = T_base_platform @ se3_exp(-lag_twist)
+    M = inverse(T_lag) @ T_base_tag  # ᵖT_o at the frame's time
+    z_hat = inverse(T_platform_cam) @ M
+    r = se3_log(inverse(z_hat) @ T_cam_tag)
+    return r, -adjoint(inverse(M)) @ adjoint(se3_exp(lag_twist))
+
+
+def joseph_update(
+    P: np.ndarray,
+    H: np.ndarray,
+    R: np.ndarray,
+    innovation: np.ndarray,
+    consider: slice | None = None,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """One Kalman update in Joseph form, optionally with "consider" states (Schmidt).
+
+    The Joseph form P⁺ = (I − KH) P (I − KH)ᵀ + K R Kᵀ is the covariance of the update for any
+    gain K, so zeroing the gain of some states keeps P exact: those states are *considered*
+    (their uncertainty and correlations shape every update) but never corrected, and what the
+    data seem to say about them is not believed.
+
+    Args:
+        P: (n, n) prior covariance.
+        H: (k, n) measurement Jacobian.
+        R: (k, k) measurement noise covariance.
+        innovation: (k,) measured − predicted.
+        consider: the states to consider and not correct, or ``None``.
+
+    Returns:
+        ``(dx, P_post, nis)``: (n,) correction, (n, n) posterior covariance and the
+        normalised innovation squared.
+    """
+    PHt = P @ H.T
+    S = H @ PHt + R
+    S_inv = np.linalg.inv(S)
+    K = PHt @ S_inv
+    if consider is not None:
+        K[consider] = 0.0
+    IKH = np.eye(len(P)) - K @ H
+    P_post = IKH @ P @ IKH.T + K @ R @ K.T
+    return K @ innovation, 0.5 * (P_post + P_post.T), float(innovation @ S_inv @ innovation)
+
+
+def chi2_gate(dof: int, probability: float) -> float:
+    """The χ²(dof) quantile at ``probability``, used as a Mahalanobis gate."""
+    from scipy.stats import chi2
+
+    return float(chi2.ppf(probability, dof)) if dof > 0 else math.inf
