@@ -93,8 +93,9 @@ class FusedOptions:
     drum_consider: bool = option(True)
 
     def __post_init__(self) -> None:
+        flags = ("use_tag", "drum_consider")
         for name, value in vars(self).items():
-            if name not in ("use_tag", "drum_consider") and not (math.isfinite(value) and value >= 0):
+            if name not in flags and not (math.isfinite(value) and value >= 0):
                 raise OptionError(name, f"must be a finite number ≥ 0, got {value}")
         if not self.gate_probability < 1.0:
             raise OptionError("gate_probability", "must be below 1")

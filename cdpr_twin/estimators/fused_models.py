@@ -7,7 +7,7 @@ The filter's error state (:mod:`cdpr_twin.estimators.fused`) is, in this order,
 | ``POSE`` (6) | δ | the platform pose error, ``T_true = T · exp(δ)``, δ = [v, ω] in F_p |
 | ``START`` (6) | δ₀ | the error of the pose at the reference reading (homing repeatability) |
 | ``DRUM`` (m) | ρ | each drum's true/nominal radius ratio − 1 (the encoders' scale error) |
-| ``TAG`` (6) | δ_o | the error of the tag pose in F_b, ``T_base_tag_true = T_base_tag · exp(δ_o)`` |
+| ``TAG`` (6) | δ_o | the tag pose's error in F_b, ``T_base_tag_true = T_base_tag · exp(δ_o)`` |
 
 Cable model. The encoders are homed at the start pose: each reading counts the paid-out length
 since then through the nominal drum radius. With c_i = l_i + l_i τ_i / E·S_i − η l̇_i the

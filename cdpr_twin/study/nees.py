@@ -51,9 +51,11 @@ class NeesResult:
 
 
 def nominal_robot(scenario: Scenario, robot_seed: int) -> Scenario:
-    """The scenario on a robot built exactly to the nominal model (no geometric errors); the
-    realism profile's per-robot draws (drum radii, tension-sensor bias) still come from
-    ``robot_seed``."""
+    """The scenario on a robot built exactly to the nominal model (no geometric errors).
+
+    The realism profile's per-robot draws (drum radii, tension-sensor bias) still come from
+    ``robot_seed``.
+    """
     return replace(scenario, truth=DeviationSpec(seed=int(robot_seed)))
 
 
