@@ -20,6 +20,7 @@ Rerun entity paths (they follow the frame tree, DESIGN §9):
 | ``world/platform/cam/image`` | the rendered frame (JPEG) |
 | ``world/platform/cam/image/tag`` | detected tag outline (image pixels) |
 | ``world/estimates/<name>`` | each estimator's pose, as axes |
+| ``world/estimates/<name>/covariance`` | its 3σ position ellipsoid (F_p), when it has one |
 | ``world/plan`` | the open-loop plan's current pose, as axes |
 | ``deviation/translation_mm`` | ‖t_est − t_true‖ per estimator [mm] (one series each) |
 | ``deviation/rotation_deg`` | angle of R_estᵀ R_true per estimator [deg] |
@@ -90,9 +91,11 @@ class RerunRecorder:
         spawn: bool = False,
         jpeg_quality: int = 80,
         flush_every: int | None = None,
+        covariance: tuple[str, ...] = (),
     ) -> None:
         import rerun as rr
 
+        self.covariance = tuple(covariance)
         self.rr = rr
         self.path = path
         self._partial = partial_of(path)
@@ -228,6 +231,9 @@ class RerunRecorder:
         b["length"].append(m.cable_lengths)
         for name in self.estimators:
             b[f"est/{name}"].append(estimates[name].T_base_platform)
+        for name in self.covariance:
+            P = estimates[name].covariance
+            b[f"cov/{name}"].append(np.full((3, 3), np.nan) if P is None else P[:3, :3])
         b["deviation"].append([deviations[name] for name in self.estimators])
         if plan is not None:
             b["plan_time"].append(m.time)
@@ -257,6 +263,7 @@ class RerunRecorder:
             "plan_time",
             "plan",
             *(f"est/{n}" for n in self.estimators),
+            *(f"cov/{n}" for n in self.covariance),
         ]
         return {k: [] for k in keys}
 
@@ -282,6 +289,13 @@ class RerunRecorder:
         transforms("world/platform", b["platform"])
         for name in self.estimators:
             transforms(f"world/estimates/{name}", b[f"est/{name}"])
+        for name in self.covariance:
+            half, quat = ellipsoids(np.array(b[f"cov/{name}"]))
+            rec.send_columns(
+                f"world/estimates/{name}/covariance",
+                indexes=index,
+                columns=rr.Ellipsoids3D.columns(half_sizes=half, quaternions=quat),
+            )
         if b["plan"]:
             transforms(
                 "world/plan",
@@ -367,3 +381,11 @@ class RerunRecorder:
         """Finish and give the file its final name."""
         self.finish()
         self.commit()
+
+
+def ellipsoids(P: np.ndarray, sigmas: float = 3.0) -> tuple[np.ndarray, np.ndarray]:
+    """Half-axes [m] and orientations (quaternions x, y, z, w) of (n, 3, 3) covariances."""
+    values, vectors = np.linalg.eigh(np.nan_to_num(P))
+    vectors[np.linalg.det(vectors) < 0, :, 2] *= -1.0  # right-handed axes
+    half = sigmas * np.sqrt(np.maximum(values, 0.0))
+    return half, quat_xyzw_from_matrix(vectors)

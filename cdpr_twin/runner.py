@@ -270,8 +270,9 @@ def run(
     try:
         owner.claim()  # the lock, then an earlier run's files removed
         metrics = RunMetrics(s.estimators.names, setup.controller.checkpoints(s.duration), period)
+        covariance = tuple(n for n, e in setup.estimators.items() if e.reports_covariance)
         recorders = Recorders(out_dir, _scene(setup), s.estimators.names, physics.n_cables,
-                              f"{s.name}-{s.seed}", record_rrd, spawn)  # fmt: skip
+                              f"{s.name}-{s.seed}", record_rrd, spawn, covariance)  # fmt: skip
     except BaseException:
         setup.close()
         owner.release()

@@ -58,6 +58,8 @@ class Estimator(ABC):
     Options: ClassVar[type] = NoOptions
     needs_camera: ClassVar[bool] = False
     """Whether it reads tag detections (dropped from the passive set when the camera is off)."""
+    reports_covariance: ClassVar[bool] = False
+    """Whether its estimates carry a covariance (recorded in ``timeseries.csv`` and Rerun)."""
 
     def __init__(self, geometry: CdprGeometry, options: Any = None) -> None:
         self.geometry = geometry

@@ -70,6 +70,12 @@ class FusedOptions:
             for, never estimated. Estimating them from the redundant cables learns the
             encoders' quantisation (a floor: its error persists while a drum turns slowly)
             as drum errors, and the filter grows overconfident.
+        exit_point_std: per-axis std of the exit points' calibration error [m]; with this or
+            ``anchor_point_std`` above 0 the filter considers both (6m consider states).
+        anchor_point_std: per-axis std of the anchor points' calibration error [m].
+        camera_position_std: per-axis std of the camera mount's position error [m]; with this
+            or ``camera_rotation_std`` above 0 the mount is considered (6 states).
+        camera_rotation_std: per-axis std of the camera mount's rotation error [rad].
     """
 
     initial_position_std: float = option(0.001, minimum=0.0, unit="m")
@@ -84,13 +90,17 @@ class FusedOptions:
     tension_noise_std: float = option(0.01, minimum=0.0, unit="N")
     damping_time: float = option(0.0005, minimum=0.0, unit="s")
     taut_threshold: float = option(1.0, minimum=0.0, unit="N")
-    pixel_std: float = option(0.5, minimum=0.0, exclusive=True, unit="px")
+    pixel_std: float = option(1.0, minimum=0.0, exclusive=True, unit="px")
     focal_px: float = option(415.69219381653056, minimum=0.0, exclusive=True, unit="px")
     tag_size: float = option(0.04, minimum=0.0, exclusive=True, unit="m")
     tag_latency: float = option(0.044, minimum=0.0, unit="s")
     gate_probability: float = option(0.9999, minimum=0.0, exclusive=True)
     use_tag: bool = option(True)
     drum_consider: bool = option(True)
+    exit_point_std: float = option(0.0, minimum=0.0, unit="m")
+    anchor_point_std: float = option(0.0, minimum=0.0, unit="m")
+    camera_position_std: float = option(0.0, minimum=0.0, unit="m")
+    camera_rotation_std: float = option(0.0, minimum=0.0, unit="deg")
 
     def __post_init__(self) -> None:
         flags = ("use_tag", "drum_consider")
@@ -112,12 +122,17 @@ class FusedEstimator(Estimator):
 
     name = "fused"
     Options = FusedOptions
+    reports_covariance = True
 
     def __init__(self, geometry: CdprGeometry, options: FusedOptions | None = None) -> None:
         super().__init__(geometry, options)
         m = geometry.n_cables
-        self._m, self._n = m, 18 + m
-        self._drum, self._tag_slice = fm.drum_slice(m), fm.tag_slice(m)
+        o = self.options
+        geometry_errors = o.exit_point_std > 0 or o.anchor_point_std > 0
+        camera_errors = o.camera_position_std > 0 or o.camera_rotation_std > 0
+        self.layout = fm.Layout.build(m, geometry_errors, camera_errors, o.drum_consider)
+        self._m, self._n = m, self.layout.n
+        self._drum, self._tag_slice = self.layout.drum, self.layout.tag
         self._cables = _cable_tuples(geometry.a_base, geometry.b_platform, geometry.pulley_radius)
         self._gate1 = fm.chi2_gate(1, self.options.gate_probability)
         self._gate6 = fm.chi2_gate(6, self.options.gate_probability)
@@ -137,7 +152,13 @@ class FusedEstimator(Estimator):
         for a in (fm.POSE, fm.START):
             for b in (fm.POSE, fm.START):
                 self.P[a, b] = P0  # the start pose is the current one: fully correlated
-        self.P[self._drum, self._drum] = np.eye(self._m) * o.drum_scale_std**2
+        L, P = self.layout, self.P
+        P[L.drum, L.drum] = np.eye(self._m) * o.drum_scale_std**2
+        P[L.exit, L.exit] = np.eye(L.exit.stop - L.exit.start) * o.exit_point_std**2
+        P[L.anchor, L.anchor] = np.eye(L.anchor.stop - L.anchor.start) * o.anchor_point_std**2
+        if L.cam.stop > L.cam.start:
+            cam = [o.camera_position_std**2] * 3 + [o.camera_rotation_std**2] * 3
+            P[L.cam, L.cam] = np.diag(cam)
 
     @property
     def T_base_tag(self) -> np.ndarray | None:
@@ -163,12 +184,17 @@ class FusedEstimator(Estimator):
         self._T = self._T @ se3_exp(step)
         F = np.eye(self._n)
         F[fm.POSE, fm.POSE] = adjoint(se3_exp(-step))
-        if taut.sum() >= 6 and np.any(rates):
+        if taut.sum() >= 6 and np.any(step):
             _, rows = _kernel(self._cables, True, _pose(self._T))
-            A = np.asarray(rows)[taut]
-            F[fm.POSE, np.flatnonzero(taut) + self._drum.start] = np.linalg.pinv(A) * (
-                rates[taut] * dt
-            )
+            rows = np.asarray(rows)
+            A_pinv = np.linalg.pinv(rows[taut])
+            F[fm.POSE, np.flatnonzero(taut) + self._drum.start] = A_pinv * (rates[taut] * dt)
+            if self.layout.exit.stop > self.layout.exit.start:
+                T_prev = self._T @ se3_exp(-step)
+                _, rows_prev = _kernel(self._cables, True, _pose(T_prev))
+                G = fm.geometry_rows(self.layout, rows, self._T[:3, :3])
+                G -= fm.geometry_rows(self.layout, np.asarray(rows_prev), T_prev[:3, :3])
+                F[fm.POSE] -= A_pinv @ G[taut]
         self.P = F @ self.P @ F.T
         lag = (o.winch_time_constant * np.abs(twist - self._last_twist)) ** 2
         q = np.array([o.process_position_std**2] * 3 + [o.process_rotation_std**2] * 3) * dt
@@ -209,6 +235,8 @@ class FusedEstimator(Estimator):
         H[:, fm.POSE] = rows_now
         H[:, fm.START] = -np.asarray(rows_0)
         H[:, self._drum] = -np.diag(moved)
+        H += fm.geometry_rows(self.layout, np.asarray(rows_now), self._T[:3, :3])
+        H -= fm.geometry_rows(self.layout, np.asarray(rows_0), self._T0[:3, :3])
         var = fm.cable_noise_var(
             np.asarray(m.cable_lengths), np.maximum(m.tensions, 1e-9), g.es, o.encoder_quantum,
             o.length_noise_std, o.tension_noise_std, o.taut_threshold,
@@ -221,8 +249,8 @@ class FusedEstimator(Estimator):
         use = taut & ~gated
         if use.sum() == 0:
             return flags | {PREDICTED}
-        consider = self._drum if self.options.drum_consider else None
-        dx, self.P, _ = fm.joseph_update(self.P, H[use], np.diag(var[use]), r[use], consider)
+        c = self.layout.consider
+        dx, self.P, _ = fm.joseph_update(self.P, H[use], np.diag(var[use]), r[use], c)
         self._inject(dx)
         return flags
 
@@ -240,15 +268,16 @@ class FusedEstimator(Estimator):
         if self._T_tag is None:
             self._anchor_tag(z, R, lag)
             return set()
-        r, H_pose = fm.tag_residual(self._T, self._T_tag, g.T_platform_cam, z, lag)
+        r, H_pose, z_hat = fm.tag_residual(self._T, self._T_tag, g.T_platform_cam, z, lag)
         H = np.zeros((6, self._n))
         H[:, fm.POSE] = H_pose
         H[:, self._tag_slice] = np.eye(6)
+        if self.layout.cam.stop > self.layout.cam.start:
+            H[:, self.layout.cam] = -adjoint(np.linalg.inv(z_hat))
         S = H @ self.P @ H.T + R
         if r @ np.linalg.solve(S, r) > self._gate6:
             return {TAG_OUTLIER}
-        consider = self._drum if self.options.drum_consider else None
-        dx, self.P, _ = fm.joseph_update(self.P, H, R, r, consider)
+        dx, self.P, _ = fm.joseph_update(self.P, H, R, r, self.layout.consider)
         self._inject(dx)
         return set()
 
@@ -256,11 +285,14 @@ class FusedEstimator(Estimator):
         """Put the tag in F_b from this detection: ᵇT_o = T_lag ᵖT_c z, with its covariance."""
         M = self.geometry.T_platform_cam @ z
         self._T_tag = self._T @ se3_exp(-lag) @ M
-        A = adjoint(np.linalg.inv(M)) @ adjoint(se3_exp(lag))  # δ_o = A δ − n
+        J = np.zeros((6, self._n))  # δ_o = J x − n
+        J[:, fm.POSE] = adjoint(np.linalg.inv(M)) @ adjoint(se3_exp(lag))
+        if self.layout.cam.stop > self.layout.cam.start:
+            J[:, self.layout.cam] = adjoint(np.linalg.inv(z))
         t, P = self._tag_slice, self.P
-        P[t, :] = A @ P[fm.POSE, :]
+        P[t, :] = J @ P
         P[:, t] = P[t, :].T
-        P[t, t] = A @ P[fm.POSE, fm.POSE] @ A.T + R
+        P[t, t] = J @ P @ J.T + R
 
     def update(
         self, measurement: Measurement, inputs: Mapping[str, PoseEstimate] = NO_INPUTS

@@ -30,6 +30,7 @@ with the distance to the tag).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -38,14 +39,43 @@ from cdpr_twin.se3 import adjoint, inverse, se3_log, skew
 POSE, START = slice(0, 6), slice(6, 12)
 
 
-def drum_slice(m: int) -> slice:
-    """The drums' slice of the error state, for m cables."""
-    return slice(12, 12 + m)
+@dataclass(frozen=True)
+class Layout:
+    """Where each part of the error state sits.
 
+    Attributes:
+        n: the state's dimension.
+        drum: (m) drum scale errors ρ.
+        exit: (3m) exit-point errors δa_i in F_b, cable after cable (empty when not modelled).
+        anchor: (3m) anchor-point errors δb_i in F_p (empty when not modelled).
+        cam: (6) camera-mount error, ``T_pc_true = T_pc · exp(δc)`` (empty when not modelled).
+        tag: (6) the tag pose's error δ_o.
+        consider: the states the filter accounts for but never corrects (Schmidt), as a mask.
+    """
 
-def tag_slice(m: int) -> slice:
-    """The tag's slice of the error state, for m cables."""
-    return slice(12 + m, 18 + m)
+    n: int
+    drum: slice
+    exit: slice
+    anchor: slice
+    cam: slice
+    tag: slice
+    consider: np.ndarray
+
+    @classmethod
+    def build(cls, m: int, geometry: bool, camera: bool, consider_drums: bool) -> Layout:
+        """The layout for m cables, with or without the geometry and camera-mount states."""
+        sizes = {"drum": m, "exit": 3 * m * geometry, "anchor": 3 * m * geometry,
+                 "cam": 6 * camera, "tag": 6}  # fmt: skip
+        start, out = 12, {}
+        for name, size in sizes.items():
+            out[name] = slice(start, start + size)
+            start += size
+        consider = np.zeros(start, dtype=bool)
+        if consider_drums:
+            consider[out["drum"]] = True
+        for name in ("exit", "anchor", "cam"):
+            consider[out[name]] = True
+        return cls(n=start, consider=consider, **out)
 
 
 def corrected_readings(
@@ -149,7 +179,8 @@ def tag_residual(
         lag_twist: (6,) ξ·d, the platform motion over the frame's latency (F_p) [m, rad].
 
     Returns:
-        ``(r, H_pose)``: (6,) log(ẑ⁻¹ z) in the tag frame, and (6, 6) ∂r/∂δ.
+        ``(r, H_pose, z_hat)``: (6,) log(ẑ⁻¹ z) in the tag frame, (6, 6) ∂r/∂δ and the
+        (4, 4) predicted detection ẑ.
     """
     from cdpr_twin.se3 import se3_exp
 
@@ -157,7 +188,7 @@ def tag_residual(
     M = inverse(T_lag) @ T_base_tag  # ᵖT_o at the frame's time
     z_hat = inverse(T_platform_cam) @ M
     r = se3_log(inverse(z_hat) @ T_cam_tag)
-    return r, -adjoint(inverse(M)) @ adjoint(se3_exp(lag_twist))
+    return r, -adjoint(inverse(M)) @ adjoint(se3_exp(lag_twist)), z_hat
 
 
 def joseph_update(
@@ -165,7 +196,7 @@ def joseph_update(
     H: np.ndarray,
     R: np.ndarray,
     innovation: np.ndarray,
-    consider: slice | None = None,
+    consider: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """One Kalman update in Joseph form, optionally with "consider" states (Schmidt).
 
@@ -179,7 +210,7 @@ def joseph_update(
         H: (k, n) measurement Jacobian.
         R: (k, k) measurement noise covariance.
         innovation: (k,) measured − predicted.
-        consider: the states to consider and not correct, or ``None``.
+        consider: (n,) bool, the states to consider and not correct, or ``None``.
 
     Returns:
         ``(dx, P_post, nis)``: (n,) correction, (n, n) posterior covariance and the
@@ -201,3 +232,27 @@ def chi2_gate(dof: int, probability: float) -> float:
     from scipy.stats import chi2
 
     return float(chi2.ppf(probability, dof)) if dof > 0 else math.inf
+
+
+def geometry_rows(layout: Layout, rows: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """∂L/∂(exit points, anchor points) of every cable at one pose, as (m, n) state columns.
+
+    ∂L_i/∂a_i = −u_i (F_b) and ∂L_i/∂b_i = Rᵀu_i (F_p), u_i the free segment's direction (the
+    pulley's small change of wrap is left out).
+
+    Args:
+        layout: the state layout (zero columns when the geometry is not modelled).
+        rows: (m, 6) platform-frame Jacobian rows [u_p, b × u_p] at the pose.
+        R: (3, 3) the pose's rotation.
+    """
+    m = len(rows)
+    G = np.zeros((m, layout.n))
+    if layout.exit.stop == layout.exit.start:
+        return G
+    u_p = rows[:, :3]
+    u_b = u_p @ R.T
+    idx = np.arange(m)
+    for k in range(3):
+        G[idx, layout.exit.start + 3 * idx + k] = -u_b[:, k]
+        G[idx, layout.anchor.start + 3 * idx + k] = u_p[:, k]
+    return G
