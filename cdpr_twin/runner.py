@@ -87,6 +87,11 @@ class RunSetup:
             out[name] = est.update(m, inputs) if inputs else est.update(m)
         return {name: out[name] for name in self.estimators}
 
+    @property
+    def cov(self) -> tuple[str, ...]:
+        """The estimators whose estimates carry a covariance (recorded with them)."""
+        return tuple(n for n, e in self.estimators.items() if e.reports_covariance)
+
     def close(self) -> None:
         """Free the renderer."""
         self.sensors.close()
@@ -270,9 +275,8 @@ def run(
     try:
         owner.claim()  # the lock, then an earlier run's files removed
         metrics = RunMetrics(s.estimators.names, setup.controller.checkpoints(s.duration), period)
-        covariance = tuple(n for n, e in setup.estimators.items() if e.reports_covariance)
         recorders = Recorders(out_dir, _scene(setup), s.estimators.names, physics.n_cables,
-                              f"{s.name}-{s.seed}", record_rrd, spawn, covariance)  # fmt: skip
+                              f"{s.name}-{s.seed}", record_rrd, spawn, setup.cov)  # fmt: skip
     except BaseException:
         setup.close()
         owner.release()

@@ -182,20 +182,24 @@ class FusedEstimator(Estimator):
         twist = np.asarray(twist, dtype=float)
         step = twist * dt
         self._T = self._T @ se3_exp(step)
-        F = np.eye(self._n)
-        F[fm.POSE, fm.POSE] = adjoint(se3_exp(-step))
+        F = np.zeros((6, self._n))  # the pose rows of the transition; the others are I's
+        F[:, fm.POSE] = adjoint(se3_exp(-step))
         if taut.sum() >= 6 and np.any(step):
             _, rows = _kernel(self._cables, True, _pose(self._T))
             rows = np.asarray(rows)
-            A_pinv = np.linalg.pinv(rows[taut])
-            F[fm.POSE, np.flatnonzero(taut) + self._drum.start] = A_pinv * (rates[taut] * dt)
+            A = rows[taut]
+            A_pinv = np.linalg.solve(A.T @ A, A.T)
+            F[:, np.flatnonzero(taut) + self._drum.start] = A_pinv * (rates[taut] * dt)
             if self.layout.exit.stop > self.layout.exit.start:
                 T_prev = self._T @ se3_exp(-step)
                 _, rows_prev = _kernel(self._cables, True, _pose(T_prev))
                 G = fm.geometry_rows(self.layout, rows, self._T[:3, :3])
                 G -= fm.geometry_rows(self.layout, np.asarray(rows_prev), T_prev[:3, :3])
-                F[fm.POSE] -= A_pinv @ G[taut]
-        self.P = F @ self.P @ F.T
+                F -= A_pinv @ G[taut]
+        X = F @ self.P  # F P Fᵀ, touching only the pose rows and columns
+        self.P[fm.POSE, :] = X
+        self.P[:, fm.POSE] = X.T
+        self.P[fm.POSE, fm.POSE] = X @ F.T
         lag = (o.winch_time_constant * np.abs(twist - self._last_twist)) ** 2
         q = np.array([o.process_position_std**2] * 3 + [o.process_rotation_std**2] * 3) * dt
         self.P[fm.POSE, fm.POSE] += np.diag(q + lag)

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cdpr_twin.se3 import adjoint, inverse, se3_log, skew
+from cdpr_twin.se3 import adjoint, inverse, se3_log
 
 POSE, START = slice(0, 6), slice(6, 12)
 
@@ -150,15 +150,23 @@ def tag_covariance(
         (6, 6) covariance [m², m·rad, rad²].
     """
     h = 0.5 * tag_size
-    corners = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+    p = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
     R, t = T_cam_tag[:3, :3], T_cam_tag[:3, 3]
-    rows = []
-    for p in corners:
-        X = R @ p + t
-        d_pix = focal_px / X[2] * np.array([[1.0, 0.0, -X[0] / X[2]], [0.0, 1.0, -X[1] / X[2]]])
-        d_point = R @ np.hstack([np.eye(3), -skew(p)])  # d(R(p + ω×p + v) + t)/d[v, ω]
-        rows.append(d_pix @ d_point)
-    J = np.vstack(rows)
+    X = p @ R.T + t  # (4, 3) corners in the camera frame
+    inv_z = focal_px / X[:, 2]
+    # d(pixel)/dX per corner: f/Z [[1, 0, −X/Z], [0, 1, −Y/Z]], (4, 2, 3)
+    d_pix = np.zeros((4, 2, 3))
+    d_pix[:, 0, 0] = d_pix[:, 1, 1] = inv_z
+    d_pix[:, 0, 2] = -inv_z * X[:, 0] / X[:, 2]
+    d_pix[:, 1, 2] = -inv_z * X[:, 1] / X[:, 2]
+    # dX/d[v, ω] = R [I, −[p]×] (a tag-frame twist moves the corner by v + ω × p)
+    d_point = np.zeros((4, 3, 6))
+    d_point[:, :, :3] = R
+    cross = np.zeros((4, 3, 3))  # −[p]×
+    cross[:, 0, 1], cross[:, 0, 2], cross[:, 1, 2] = p[:, 2], -p[:, 1], p[:, 0]
+    cross[:, 1, 0], cross[:, 2, 0], cross[:, 2, 1] = -p[:, 2], p[:, 1], -p[:, 0]
+    d_point[:, :, 3:] = R @ cross
+    J = (d_pix @ d_point).reshape(8, 6)
     return pixel_std**2 * np.linalg.inv(J.T @ J)
 
 
