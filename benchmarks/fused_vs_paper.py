@@ -39,7 +39,8 @@ def rms_deviations(out: Path) -> dict[str, tuple[float, float]]:
 def compare(file: str, duration: float | None, seed: int | None, out: Path) -> dict:
     """Run one paper scenario with ``fused`` added and return the RMS deviations."""
     s = load_scenario(ROOT / "scenarios" / file)
-    s = replace(s, estimators=replace(s.estimators, passive=(*s.estimators.passive, "fused")))
+    if "fused" not in s.estimators.names:
+        s = replace(s, estimators=replace(s.estimators, passive=(*s.estimators.passive, "fused")))
     s = s.with_overrides(duration=duration, seed=seed)
     run(s, out, record_rrd=False)
     return rms_deviations(out)
