@@ -337,7 +337,24 @@ def load_scenario(path: str | Path) -> Scenario:
         ScenarioError: naming the file, the field and the fix.
     """
     source = Path(path)
-    top = _read(source)
+    return _scenario(_read(source), source)
+
+
+def scenario_from_data(data: Mapping[str, Any], source: str | Path) -> Scenario:
+    """Validate a scenario given as the parsed content of a file (a campaign's variation).
+
+    Args:
+        data: what ``tomllib`` would read from a scenario file.
+        source: the file it stands for: relative paths (``model.file``) resolve beside it,
+            and errors name it.
+
+    Raises:
+        ScenarioError: naming the source, the field and the fix.
+    """
+    return _scenario(OptionReader(Path(source), dict(data), ""), Path(source))
+
+
+def _scenario(top: OptionReader, source: Path) -> Scenario:
     loaded = read_plugins(top)  # first: the file may name what they register
     name = top.string("name", source.stem)
     if not name or any(c in name for c in "/\\") or name in (".", ".."):

@@ -55,10 +55,15 @@ def _same_rotation(got: list[str], want: list[str]) -> bool:
     return min(np.abs(a - b).max(), np.abs(a + b).max()) <= 2e-16
 
 
+ADDED_LATER = {"rms_translation_m", "rms_rotation_deg", "true_pose"}
+"""Summary keys added after the fixtures were recorded (issue 12: campaign tables need the
+RMS deviations and the true pose at each checkpoint); every key of the fixtures is compared."""
+
+
 def _assert_json_close(got, want, where=""):
     assert type(got) is type(want) or {type(got), type(want)} <= {int, float}, where
     if isinstance(want, dict):
-        assert list(got) == list(want), where
+        assert [k for k in got if k not in ADDED_LATER] == list(want), where
         for k in want:
             _assert_json_close(got[k], want[k], f"{where}.{k}")
     elif isinstance(want, list):
