@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from cdpr_twin import DEFAULT_SCENE, se3
+from cdpr_twin.cli_campaign import add_campaign_parser
 
 P0 = (0.112, -0.032, 0.301, -12.0, -10.0, 0.0)
 """The paper's start pose ᵇp_p0 [m, deg]."""
@@ -270,6 +271,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     runp.set_defaults(func=_run)
     _reproduce_parser(sub)
+    add_campaign_parser(sub)
     return parser
 
 

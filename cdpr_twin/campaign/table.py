@@ -23,6 +23,7 @@ import contextlib
 import json
 import math
 import os
+import time
 from pathlib import Path
 from typing import Any
 
@@ -87,10 +88,12 @@ class ResultTable:
     Args:
         out: the campaign's output directory.
         every: rows buffered before a part is written.
+        interval: seconds after which buffered rows are written anyway.
     """
 
-    def __init__(self, out: Path, every: int = 20) -> None:
-        self.out, self.every = Path(out), every
+    def __init__(self, out: Path, every: int = 20, interval: float = 10.0) -> None:
+        self.out, self.every, self.interval = Path(out), every, interval
+        self._flushed = time.monotonic()
         self.parts = self.out / PARTS
         self._rows: list[dict] = []
         with writing(self.parts):
@@ -110,9 +113,9 @@ class ResultTable:
         return ids
 
     def add(self, row: dict) -> None:
-        """Buffer a row; write a part when ``every`` are buffered."""
+        """Buffer a row; write a part when ``every`` are buffered or ``interval`` has passed."""
         self._rows.append(row)
-        if len(self._rows) >= self.every:
+        if len(self._rows) >= self.every or time.monotonic() - self._flushed >= self.interval:
             self.flush()
 
     def flush(self) -> None:
@@ -125,6 +128,7 @@ class ResultTable:
         _write(pa.Table.from_pylist(self._rows), path)
         self._next += 1
         self._rows = []
+        self._flushed = time.monotonic()
 
     def gather(self) -> Path:
         """Write every part into ``results.parquet`` (whole, then renamed); returns its path."""
