@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from cdpr_twin import plugins
+from cdpr_twin import plugins, resources
 from cdpr_twin.deviations import DeviationSpec
 from cdpr_twin.events import Event
 from cdpr_twin.options import (
@@ -287,8 +287,7 @@ def _estimators(r: OptionReader) -> EstimatorConfig:
 
 def _model(top: OptionReader, source: Path) -> ModelConfig:
     m = top.table_of("model", required=False)
-    file = Path(m.string("file", "../models/acrobot/scene.xml"))
-    file = file if file.is_absolute() else (source.parent / file).resolve()
+    file = _model_file(m, source)
     timestep = m.number("timestep", 0.0005, minimum=MIN_TIMESTEP, unit="s")
     if timestep > MAX_TIMESTEP:
         raise m.fail("timestep", f"must be ≤ {MAX_TIMESTEP} s for stiff cables, got {timestep}")
@@ -304,6 +303,20 @@ def _model(top: OptionReader, source: Path) -> ModelConfig:
             " choose a rate or timestep that divide evenly",
         )
     return ModelConfig(file, timestep, control_rate, align_every)
+
+
+def _model_file(m: OptionReader, source: Path) -> Path:
+    """``robot = "<name>"`` (a shipped robot, the default ``acrobot``) or ``file = "<path>"``."""
+    if m.has("robot") and m.has("file"):
+        raise m.fail("robot", "give either robot (a shipped robot's name) or file, not both")
+    if m.has("file"):
+        file = Path(m.string("file"))
+        return file if file.is_absolute() else (source.parent / file).resolve()
+    name = m.string("robot", "acrobot")
+    try:
+        return resources.robot_scene(name)
+    except resources.ResourceError as exc:
+        raise m.fail("robot", str(exc)) from None
 
 
 def _read(source: Path) -> OptionReader:
@@ -322,12 +335,15 @@ def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario file.
 
     Args:
-        path: a TOML scenario file.
+        path: a TOML scenario file, or a shipped scenario's name (``paper_open_loop``).
 
     Raises:
         ScenarioError: naming the file, the field and the fix.
     """
-    source = Path(path)
+    try:
+        source = resources.scenario_file(path)
+    except resources.ResourceError as exc:
+        raise ScenarioError(str(exc)) from None
     top = _read(source)
     loaded = read_plugins(top)  # first: the file may name what they register
     name = top.string("name", source.stem)
