@@ -176,11 +176,10 @@ class Scenario:
             s = replace(s, sensors=replace(s.sensors, camera=bool(camera)))
             done["camera"] = bool(camera)
         if in_loop is not None:
-            known = plugins.names("estimator")
-            if in_loop not in known:
-                raise ScenarioError(
-                    f"--in-loop {in_loop!r}: unknown estimator; choose one of {', '.join(known)}"
-                )
+            try:
+                plugins.lookup("estimator", in_loop)
+            except ValueError as exc:
+                raise ScenarioError(f"--in-loop: {exc}") from None
             passive = tuple(n for n in s.estimators.names if n != in_loop)
             s = replace(s, estimators=replace(s.estimators, in_loop=in_loop, passive=passive))
             done["in_loop"] = in_loop
@@ -260,25 +259,31 @@ def _without_camera(s: Scenario, done: dict) -> Scenario:
     return s
 
 
+def _plugin(r: OptionReader, key: str, kind: str, name: str) -> type:
+    """The registered class of a name the file gives; unknown: the installed ones listed."""
+    try:
+        return plugins.lookup(kind, name)
+    except ValueError as exc:
+        raise r.fail(key, str(exc)) from None
+
+
 def _controller(r: OptionReader) -> ControllerConfig:
-    kind = r.string("type", choices=plugins.names("controller"))
-    cls = plugins.lookup("controller", kind)
+    kind = r.string("type")
+    cls = _plugin(r, "type", "controller", kind)
     return ControllerConfig(kind, parse_options(r, cls.Options, skip=("type",)))
 
 
 def _estimators(r: OptionReader) -> EstimatorConfig:
-    known = plugins.names("estimator")
-    in_loop = r.string("in_loop", choices=known)
+    in_loop = r.string("in_loop")
+    _plugin(r, "in_loop", "estimator", in_loop)
     passive = r.raw("passive", [], "list of estimator names")
-    if not isinstance(passive, list) or any(p not in known for p in passive):
-        raise r.fail(
-            "passive", f"must list estimator names among {', '.join(known)}, got {passive!r}"
-        )
+    if not isinstance(passive, list) or not all(isinstance(p, str) for p in passive):
+        raise r.fail("passive", f"must be a list of estimator names, got {passive!r}")
+    for name in passive:
+        _plugin(r, "passive", "estimator", name)
     options: dict[str, Any] = {}
     for name in [k for k in r.table if k not in ("in_loop", "passive")]:
-        if name not in known:
-            raise r.fail(name, f"unknown estimator; choose one of {', '.join(known)}")
-        cls = plugins.lookup("estimator", name)
+        cls = _plugin(r, name, "estimator", name)
         options[name] = parse_options(r.table_of(name), cls.Options)
     r.done()
     passive_t = tuple(p for p in dict.fromkeys(passive) if p != in_loop)
