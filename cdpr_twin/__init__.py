@@ -15,5 +15,5 @@ MODELS_DIR = resources.models_dir()
 SCENARIOS_DIR = resources.scenarios_dir()
 """The shipped scenario files (``scenarios/paper_open_loop.toml``…)."""
 
-DEFAULT_SCENE = resources.robot_scene("acrobot")
+DEFAULT_SCENE = MODELS_DIR / "acrobot" / resources.SCENE_FILE
 """The ACROBOT scene: robot, floor, lights and the AprilTag."""
