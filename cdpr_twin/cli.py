@@ -154,6 +154,8 @@ def _run(args: argparse.Namespace) -> int:
     from cdpr_twin.sim import SimulationError
 
     try:
+        if args.spawn and args.connect is not None:
+            raise ValueError("give --spawn (a new viewer) or --connect ADDR, not both")
         connect = None if args.connect is None else live_url(args.connect)
         scenario = load_scenario(args.scenario).with_overrides(
             seed=args.seed,

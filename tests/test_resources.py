@@ -135,3 +135,12 @@ def test_a_bad_connect_address_is_a_one_line_error(tmp_path):
         "rerun+http://host:port/proxy"
     )
     assert not (tmp_path / "runs").exists()
+
+
+def test_spawn_and_connect_together_is_a_one_line_error(tmp_path):
+    proc = _cli("run", "paper_open_loop", "--spawn", "--connect", "9876", cwd=tmp_path)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == (
+        "cdpr-twin: error: give --spawn (a new viewer) or --connect ADDR, not both"
+    )
+    assert not (tmp_path / "runs").exists()
