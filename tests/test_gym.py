@@ -117,3 +117,24 @@ def test_a_proportional_pose_controller_reaches_the_goal_within_5_mm():
         assert reward == pytest.approx(-(error_t + task.rotation_weight * error_r))
     finally:
         env.close()
+
+
+def test_the_servo_task_is_achieved_at_p1_on_the_nominal_robot():
+    # the scene places the tag so that the nominal camera sees the paper's goal view ᶜp_o1 at p1
+    from cdpr_twin.gym import ServoToTag, Truth
+    from cdpr_twin.gym.tasks import P1
+    from cdpr_twin.se3 import pose_from_vector
+    from cdpr_twin.sim import Twin
+
+    with Twin(robot="acrobot", camera=False, tension_noise_std=0.0) as twin:
+        twin.reset(pose_from_vector(P1))
+        at_p1 = Truth(twin.T_base_platform.copy(), twin.T_cam_tag.copy())
+        twin.reset(pose_from_vector([0.27, -0.18, 0.09, 0, 0, 0]))
+        nearby = Truth(twin.T_base_platform.copy(), twin.T_cam_tag.copy())
+    servo, reach = ServoToTag(), ReachPose()
+    score = servo.score(at_p1)
+    assert score.success and score.translation_error < 1e-4 and score.rotation_error < 1e-4
+    assert reach.score(at_p1).success
+    moved = servo.score(nearby)  # 2.1 cm off p1: the view is off by about as much
+    assert not moved.success and 0.015 < moved.translation_error < 0.03
+    assert moved.reward == pytest.approx(-(moved.translation_error + 0.1 * moved.rotation_error))
