@@ -49,6 +49,7 @@ def test_seeds_draw_the_robot_and_the_noise():
     try:
         a, info_a = env.reset(seed=5)
         geometry_a = env._setup.physics.geometry.a_base.copy()
+        nominal_a = env.nominal_geometry.a_base.copy()
         b, info_b = env.reset(seed=5)
         assert info_a["robot_seed"] == info_b["robot_seed"]
         for key in OBSERVATION_KEYS:
@@ -56,6 +57,7 @@ def test_seeds_draw_the_robot_and_the_noise():
         c, info_c = env.reset(seed=6)
         assert info_c["robot_seed"] != info_a["robot_seed"]
         assert np.abs(env._setup.physics.geometry.a_base - geometry_a).max() > 1e-3  # exit points
+        np.testing.assert_array_equal(env.nominal_geometry.a_base, nominal_a)  # what it believes
         assert not np.array_equal(a["tensions"], c["tensions"])
     finally:
         env.close()

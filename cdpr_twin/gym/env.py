@@ -137,6 +137,11 @@ class CdprEnv(gym.Env):
         self._estimate: PoseEstimate | None = None
         self._steps, self._seeds = 0, (self.scenario.truth.seed, self.scenario.seed)
 
+    @property
+    def nominal_geometry(self):
+        """The nominal geometry (what a policy may believe: exit/anchor points, camera mount)."""
+        return self._setup.nominal.geometry
+
     def _observation_space(self, n: int) -> spaces.Dict:
         pose_high = np.array([_POSITION] * 3 + [np.pi] * 3)
         space = {
