@@ -35,6 +35,18 @@ def _wait_listening(port: int, server: subprocess.Popen, timeout: float = 30.0) 
     raise AssertionError(f"the Rerun server did not listen on {port} within {timeout} s")
 
 
+def _wait_stable(path: Path, timeout: float = 15.0) -> None:
+    """Until the server's file has stopped growing for half a second (it saved what it got)."""
+    deadline, last, since = time.monotonic() + timeout, -1, time.monotonic()
+    while time.monotonic() < deadline:
+        size = path.stat().st_size if path.exists() else -1
+        if size != last:
+            last, since = size, time.monotonic()
+        elif size > 0 and time.monotonic() - since > 0.5:
+            return
+        time.sleep(0.1)
+
+
 def _entities(rrd: Path, env: dict) -> set[str]:
     """The scenario's entity paths in a recording (blueprint entities left out)."""
     stats = subprocess.run(
@@ -59,11 +71,12 @@ def test_a_run_streams_its_entities_to_a_rerun_grpc_server(tmp_path):
     try:
         _wait_listening(port, server)
         proc = subprocess.run(
-            [sys.executable, "-m", "cdpr_twin", "run", "paper_open_loop", "--duration", "0.4",
+            [sys.executable, "-m", "cdpr_twin", "run", "paper_open_loop", "--duration", "1",
              "--no-camera", "--out", str(tmp_path / "out"), "--connect", str(port)],
             capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300,
         )  # fmt: skip
         assert proc.returncode == 0, proc.stderr
+        _wait_stable(received)
     finally:
         server.send_signal(signal.SIGINT)  # the server finishes its file on Ctrl-C
         server.wait(timeout=30)
