@@ -67,6 +67,7 @@ def test_a_run_streams_its_entities_to_a_rerun_grpc_server(tmp_path):
         stderr=subprocess.PIPE,
         text=True,
         env=env,
+        start_new_session=True,  # its own process group: the wrapper script and the binary
     )
     try:
         _wait_listening(port, server)
@@ -78,8 +79,12 @@ def test_a_run_streams_its_entities_to_a_rerun_grpc_server(tmp_path):
         assert proc.returncode == 0, proc.stderr
         _wait_stable(received)
     finally:
-        server.send_signal(signal.SIGINT)  # the server finishes its file on Ctrl-C
-        server.wait(timeout=30)
+        os.killpg(server.pid, signal.SIGINT)  # Ctrl-C: the server finishes its file and exits
+        try:
+            server.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(server.pid, signal.SIGKILL)
+            server.wait()
     assert received.is_file() and received.stat().st_size > 0
     on_server = _entities(received, env)
     expected = {
