@@ -60,9 +60,7 @@ def main() -> None:
             print("ray: not installed (pip install -e '.[ray]'): skipped")
             return
         rate = runs_per_minute(campaign, Path(tmp) / "ray", cores, True)
-        print(
-            f"ray, {cores} CPUs: {rate:.1f} runs/min, {rate / base:.2f}× one local worker"
-        )
+        print(f"ray, {cores} CPUs: {rate:.1f} runs/min, {rate / base:.2f}× one local worker")
 
 
 if __name__ == "__main__":

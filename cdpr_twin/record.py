@@ -78,7 +78,12 @@ class SceneInfo:
 
 
 class RerunRecorder:
-    """Logs the run to a ``.rrd`` file (and optionally a live viewer)."""
+    """Logs the run to a ``.rrd`` file (and optionally live: a spawned viewer or a server).
+
+    ``spawn`` starts a Rerun viewer and streams to it; ``connect`` streams to a Rerun gRPC server
+    already listening at that URL (``rerun+http://host:port/proxy``). A live stream that cannot
+    be delivered (viewer closed, server gone) does not fail the run: the file is still written.
+    """
 
     def __init__(
         self,
@@ -90,6 +95,7 @@ class RerunRecorder:
         spawn: bool = False,
         jpeg_quality: int = 80,
         flush_every: int | None = None,
+        connect: str | None = None,
     ) -> None:
         import rerun as rr
 
@@ -99,18 +105,22 @@ class RerunRecorder:
         self.scene, self.estimators, self.jpeg_quality = scene, estimators, jpeg_quality
         # column-wise sending costs ~0.5 ms per entity and call: batch 4 s of a file run, but
         # only 0.4 s when a live viewer watches
-        self.flush_every = flush_every or (10 if spawn else 100)
+        live = spawn or connect is not None
+        self.flush_every = flush_every or (10 if live else 100)
         self._buf = self._new_buffer()
         self.rec = rr.RecordingStream(
             application_id, recording_id=recording_id, send_properties=False
         )
         blueprint = self.blueprint()
-        self.spawned = False
-        if spawn:
+        self.spawned = False  # streaming live (a spawned viewer or a server at ``connect``)
+        if live:
             try:
-                self.rec.spawn(connect=False)
+                if spawn:
+                    self.rec.spawn(connect=False)
                 self.rec.set_sinks(
-                    rr.FileSink(str(self._partial)), rr.GrpcSink(), default_blueprint=blueprint
+                    rr.FileSink(str(self._partial)),
+                    rr.GrpcSink(connect),  # None: the spawned viewer's default address
+                    default_blueprint=blueprint,
                 )
                 self.spawned = True
             except Exception:  # no viewer binary or no display: keep the file only

@@ -28,6 +28,7 @@ class Recorders:
         recording_id: the Rerun recording id.
         rrd: write ``recording.rrd``.
         spawn: also stream to a live Rerun viewer.
+        connect: also stream to the Rerun gRPC server at this URL.
     """
 
     def __init__(
@@ -39,6 +40,7 @@ class Recorders:
         recording_id: str,
         rrd: bool = True,
         spawn: bool = False,
+        connect: str | None = None,
     ) -> None:
         self.out_dir = out_dir
         self.csv: TimeseriesWriter | None = None
@@ -51,8 +53,9 @@ class Recorders:
         if rrd:
             try:
                 self.rrd = RerunRecorder(
-                    out_dir / "recording.rrd", scene, names, "cdpr-twin", recording_id, spawn
-                )
+                    out_dir / "recording.rrd", scene, names, "cdpr-twin", recording_id, spawn,
+                    connect=connect,
+                )  # fmt: skip
             except BaseException:
                 self.csv.abort()
                 raise

@@ -15,10 +15,8 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import NamedTuple
 
-from cdpr_twin import MODELS_DIR
+from cdpr_twin import SCENARIOS_DIR
 
-SCENARIOS_DIR = MODELS_DIR.parent / "scenarios"
-"""The scenario files shipped with the checkout."""
 OPEN_LOOP_SCENARIO = SCENARIOS_DIR / "paper_open_loop.toml"
 """The paper's open-loop experiment (Fig. 5)."""
 PBVS_SCENARIO = SCENARIOS_DIR / "paper_pbvs.toml"
