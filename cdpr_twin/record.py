@@ -3,9 +3,7 @@
 :class:`cdpr_twin.recorders.Recorders` sends a tick to ``timeseries.csv`` (whose schema
 :mod:`cdpr_twin.timeseries` owns) and to this recording.
 
-Each file is written as ``<name>.partial`` and renamed when complete, so a file under its final
-name is never half-written; ``summary.json``, renamed last, says how the run ended (the
-directory's transaction: :mod:`cdpr_twin.outputs`).
+Written as ``recording.rrd.partial``, renamed when complete (:mod:`cdpr_twin.outputs`).
 
 Rerun entity paths (they follow the frame tree, DESIGN §9):
 
@@ -26,6 +24,7 @@ Rerun entity paths (they follow the frame tree, DESIGN §9):
 | ``deviation/rotation_deg`` | angle of R_estᵀ R_true per estimator [deg] |
 | ``tension`` | measured tensions, one series per cable [N] |
 | ``length`` | encoder (rest) lengths, one series per cable [m] |
+| ``events`` | scenario events (warning) and the robot's faults (error), as a text log |
 """
 
 from __future__ import annotations
@@ -38,13 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_twin.outputs import (
-    OutputError,
-    partial_of,
-    write_json_atomic,  # noqa: F401 (its old home)
-    writing,
-)
-from cdpr_twin.se3 import quat_xyzw_from_matrix
+from cdpr_twin.outputs import OutputError, partial_of, writing
+from cdpr_twin.se3 import covariance_ellipsoids, quat_xyzw_from_matrix
 from cdpr_twin.types import CameraIntrinsics, Measurement, PoseEstimate
 
 SLACK_TENSION = 0.5
@@ -79,7 +73,12 @@ class SceneInfo:
 
 
 class RerunRecorder:
-    """Logs the run to a ``.rrd`` file (and optionally a live viewer)."""
+    """Logs the run to a ``.rrd`` file (and optionally live: a spawned viewer or a server).
+
+    ``spawn`` starts a Rerun viewer and streams to it; ``connect`` streams to a Rerun gRPC server
+    already listening at that URL (``rerun+http://host:port/proxy``). A live stream that cannot
+    be delivered (viewer closed, server gone) does not fail the run: the file is still written.
+    """
 
     def __init__(
         self,
@@ -92,6 +91,7 @@ class RerunRecorder:
         jpeg_quality: int = 80,
         flush_every: int | None = None,
         covariance: tuple[str, ...] = (),
+        connect: str | None = None,
     ) -> None:
         import rerun as rr
 
@@ -102,18 +102,22 @@ class RerunRecorder:
         self.scene, self.estimators, self.jpeg_quality = scene, estimators, jpeg_quality
         # column-wise sending costs ~0.5 ms per entity and call: batch 4 s of a file run, but
         # only 0.4 s when a live viewer watches
-        self.flush_every = flush_every or (10 if spawn else 100)
+        live = spawn or connect is not None
+        self.flush_every = flush_every or (10 if live else 100)
         self._buf = self._new_buffer()
         self.rec = rr.RecordingStream(
             application_id, recording_id=recording_id, send_properties=False
         )
         blueprint = self.blueprint()
-        self.spawned = False
-        if spawn:
+        self.spawned = False  # streaming live (a spawned viewer or a server at ``connect``)
+        if live:
             try:
-                self.rec.spawn(connect=False)
+                if spawn:
+                    self.rec.spawn(connect=False)
                 self.rec.set_sinks(
-                    rr.FileSink(str(self._partial)), rr.GrpcSink(), default_blueprint=blueprint
+                    rr.FileSink(str(self._partial)),
+                    rr.GrpcSink(connect),  # None: the spawned viewer's default address
+                    default_blueprint=blueprint,
                 )
                 self.spawned = True
             except Exception:  # no viewer binary or no display: keep the file only
@@ -253,6 +257,18 @@ class RerunRecorder:
         if len(b["time"]) >= self.flush_every:
             self._flush()
 
+    def mark(self, time: float, marks: tuple[str, ...]) -> None:
+        """Log what happened at ``time`` [s] (events, faults) to ``events``, a text log.
+
+        Faults are logged at level ``ERROR``, scenario events at ``WARN``, so the viewer's
+        text-log view shows them in colour on the run's timeline.
+        """
+        rr, rec = self.rr, self.rec
+        rec.set_time("sim_time", duration=time)
+        for text in marks:
+            level = rr.TextLogLevel.ERROR if text.startswith("fault") else rr.TextLogLevel.WARN
+            rec.log("events", rr.TextLog(text, level=level))
+
     def _new_buffer(self) -> dict[str, list]:
         keys = [
             "time",
@@ -290,7 +306,7 @@ class RerunRecorder:
         for name in self.estimators:
             transforms(f"world/estimates/{name}", b[f"est/{name}"])
         for name in self.covariance:
-            half, quat = ellipsoids(np.array(b[f"cov/{name}"]))
+            half, quat = covariance_ellipsoids(np.array(b[f"cov/{name}"]))
             rec.send_columns(
                 f"world/estimates/{name}/covariance",
                 indexes=index,
@@ -381,11 +397,3 @@ class RerunRecorder:
         """Finish and give the file its final name."""
         self.finish()
         self.commit()
-
-
-def ellipsoids(P: np.ndarray, sigmas: float = 3.0) -> tuple[np.ndarray, np.ndarray]:
-    """Half-axes [m] and orientations (quaternions x, y, z, w) of (n, 3, 3) covariances."""
-    values, vectors = np.linalg.eigh(np.nan_to_num(P))
-    vectors[np.linalg.det(vectors) < 0, :, 2] *= -1.0  # right-handed axes
-    half = sigmas * np.sqrt(np.maximum(values, 0.0))
-    return half, quat_xyzw_from_matrix(vectors)

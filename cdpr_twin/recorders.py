@@ -29,6 +29,7 @@ class Recorders:
         rrd: write ``recording.rrd``.
         spawn: also stream to a live Rerun viewer.
         covariance: the estimators whose estimates carry a covariance (recorded too).
+        connect: also stream to the Rerun gRPC server at this URL.
     """
 
     def __init__(
@@ -41,6 +42,7 @@ class Recorders:
         rrd: bool = True,
         spawn: bool = False,
         covariance: tuple[str, ...] = (),
+        connect: str | None = None,
     ) -> None:
         self.out_dir = out_dir
         self.csv: TimeseriesWriter | None = None
@@ -57,6 +59,7 @@ class Recorders:
                 self.rrd = RerunRecorder(
                     out_dir / "recording.rrd", scene, names, "cdpr-twin", recording_id, spawn,
                     covariance=covariance,
+                    connect=connect,
                 )  # fmt: skip
             except BaseException:
                 self.csv.abort()
@@ -70,12 +73,15 @@ class Recorders:
         deviations: dict[str, tuple[float, float]],
         command: Command | None,
         plan: np.ndarray | None,
+        marks: tuple[str, ...] = (),
     ) -> None:
-        """Record one control tick."""
+        """Record one control tick (``marks``: what happened in it, events and faults)."""
         if self.csv is not None:
-            self.csv.tick(m.time, T_true, estimates, m, command, plan)
+            self.csv.tick(m.time, T_true, estimates, m, command, plan, marks)
         if self.rrd is not None:
             self.rrd.tick(m, T_true, estimates, deviations, plan)
+            if marks:
+                self.rrd.mark(m.time, marks)
 
     def close(self, summary: dict, commit: bool = True) -> None:
         """Complete every file, then give them final names, ``summary.json`` last.

@@ -20,7 +20,6 @@ homed, and the estimators and controller reset, at the *nominal* start pose.
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -29,10 +28,10 @@ from pathlib import Path
 import numpy as np
 
 from cdpr_twin import plugins
-from cdpr_twin.controllers.base import Controller, RunEnd
-from cdpr_twin.estimators.base import Estimator
-from cdpr_twin.events import EventSchedule
-from cdpr_twin.metrics import RunMetrics, pose_error, run_summary
+from cdpr_twin.controllers.base import Controller
+from cdpr_twin.estimators.base import Estimator, update_order
+from cdpr_twin.events import EventSchedule, TagOcclusion
+from cdpr_twin.metrics import RunMetrics
 from cdpr_twin.outputs import OutputDir, OutputError, Terminated
 from cdpr_twin.plugins import OptionError
 from cdpr_twin.procedure import homing, teach
@@ -40,6 +39,7 @@ from cdpr_twin.record import SceneInfo
 from cdpr_twin.recorders import Recorders
 from cdpr_twin.scenario import Scenario, ScenarioError
 from cdpr_twin.statics import InfeasibleTensionError
+from cdpr_twin.tally import Tally, summarize
 from cdpr_twin.types import Measurement, PoseEstimate, Status
 
 
@@ -58,6 +58,8 @@ class RunSetup:
         controller: the controller.
         goal_pose: (4, 4) the controller's goal, or ``None``.
         events: the scenario's timed events, hooked into the physics.
+        monitor: the robot's plausibility monitor (:class:`cdpr_twin.sim.Monitor`), hooked
+            into the physics, or ``None`` (``[monitor] enabled = false``).
         true_start: (4, 4) where the true platform starts: the start pose moved by the homing
             offset (truth: metrics and tests only).
         homing_offset: (6,) this run's homing offset [δp (m), δθ (rad)], or ``None`` (none).
@@ -74,6 +76,7 @@ class RunSetup:
     controller: Controller
     goal_pose: np.ndarray | None
     events: EventSchedule
+    monitor: object = None
     true_start: np.ndarray | None = None
     homing_offset: np.ndarray | None = None
     shown_view: np.ndarray | None = None
@@ -118,30 +121,11 @@ class RunResult:
 
 
 def _update_order(estimators: dict[str, Estimator], s: Scenario) -> tuple[str, ...]:
-    """Names ordered so that each estimator's inputs update before it (Kahn's algorithm)."""
-    src, dropped = s.source, set(s.overrides.get("dropped_estimators", ()))
-    order: list[str] = []
-    pending = dict(estimators)
-    while pending:
-        ready = [n for n, e in pending.items() if all(i in order for i in e.inputs)]
-        if not ready:
-            for name, e in pending.items():
-                missing = [i for i in e.inputs if i not in estimators]
-                if missing and dropped & set(missing):
-                    raise ScenarioError(
-                        f"{src}: estimators: {name!r} reads {missing}, dropped because the "
-                        "camera is off; keep the camera on or read other estimators"
-                    )
-                if missing:
-                    raise ScenarioError(
-                        f"{src}: estimators: {name!r} reads {missing}, which do not run; add "
-                        "them to estimators.passive"
-                    )
-            raise ScenarioError(f"{src}: estimators: {sorted(pending)} read each other in a cycle")
-        order += ready
-        for name in ready:
-            del pending[name]
-    return tuple(order)
+    dropped = frozenset(s.overrides.get("dropped_estimators", ()))
+    try:
+        return update_order(estimators, dropped)
+    except ValueError as exc:
+        raise ScenarioError(f"{s.source}: estimators: {exc}") from None
 
 
 def _build_plugins(scenario: Scenario, geom) -> tuple[Controller, dict[str, Estimator]]:
@@ -174,9 +158,11 @@ def prepare(scenario: Scenario) -> RunSetup:
 
     s, src = scenario, scenario.source
     try:
+        occluder = any(isinstance(e, TagOcclusion) for e in s.events)
         physics, nominal, _ = build_robot(
-            s.model.file, s.truth, s.model.timestep, s.model.align_every, s.realism.winch
-        )
+            s.model.file, s.truth, s.model.timestep, s.model.align_every, s.realism.winch,
+            occluder,
+        )  # fmt: skip
         sensors = Sensors(
             physics,
             nominal,
@@ -219,11 +205,24 @@ def _assemble(s: Scenario, physics, sensors, nominal) -> RunSetup:
     events = EventSchedule(s.events, physics, sensors)
     if s.events:  # no hook, no per-chunk cost, when nothing is scheduled
         physics.add_hook(events)
+    monitor = _monitor(s, physics)
     goal = controller.goal_pose(nominal.T_base_tag)
     return RunSetup(
-        s, physics, sensors, nominal, estimators, order, controller, goal, events,
+        s, physics, sensors, nominal, estimators, order, controller, goal, events, monitor,
         true_start, offset, shown_view,
     )  # fmt: skip
+
+
+def _monitor(s: Scenario, physics):
+    """The robot's monitor, hooked into the physics (after the events), or ``None``."""
+    from cdpr_twin.sim import Monitor, robot_limits
+
+    if not s.monitor.enabled:
+        return None
+    limits = robot_limits(physics.model, s.realism.tension.range_max, s.model.control_period)
+    monitor = Monitor(physics, limits)
+    physics.add_hook(monitor)
+    return monitor
 
 
 def _scene(setup: RunSetup) -> SceneInfo:
@@ -249,6 +248,7 @@ def run(
     progress: Callable[[float, float], None] | None = None,
     spawn: bool = False,
     record_rrd: bool = True,
+    connect: str | None = None,
 ) -> RunResult:
     """Run a scenario headless and write its outputs.
 
@@ -258,31 +258,31 @@ def run(
         progress: called after each tick with (fraction done, simulated time).
         spawn: also stream to a live Rerun viewer.
         record_rrd: write ``recording.rrd`` (with ``out_dir``).
+        connect: also stream to the Rerun gRPC server at this URL (``rerun+http://…/proxy``).
 
     Returns:
-        The :class:`RunResult`. On Ctrl-C (SIGTERM) the outputs so far are completed and
-        flushed, the summary says ``"status": "interrupted"`` (``"terminated"``), and the
-        KeyboardInterrupt (:class:`~cdpr_twin.outputs.Terminated`) is raised again.
+        The :class:`RunResult`. On Ctrl-C (SIGTERM) the outputs so far are completed and flushed,
+        the summary says ``"status": "interrupted"`` (``"terminated"``), and the KeyboardInterrupt
+        (:class:`~cdpr_twin.outputs.Terminated`) is raised again.
 
     Raises:
         ScenarioError: the scenario cannot run (before any output is written).
         OutputDirError: ``out_dir`` cannot be used or another run owns it (nothing touched).
         OutputError: an output could not be written (all left ``*.partial``, no summary).
     """
-    setup = prepare(scenario)
-    s, physics = scenario, setup.physics
-    period, owner = s.model.control_period, OutputDir(out_dir)
+    s, setup, owner = scenario, prepare(scenario), OutputDir(out_dir)
+    physics, period = setup.physics, scenario.model.control_period
     try:
         owner.claim()  # the lock, then an earlier run's files removed
         metrics = RunMetrics(s.estimators.names, setup.controller.checkpoints(s.duration), period)
         recorders = Recorders(out_dir, _scene(setup), s.estimators.names, physics.n_cables,
-                              f"{s.name}-{s.seed}", record_rrd, spawn, setup.cov)  # fmt: skip
+                              f"{s.name}-{s.seed}", record_rrd, spawn, setup.cov,
+                              connect)  # fmt: skip
     except BaseException:
         setup.close()
         owner.release()
         raise
-    tally, status, commit = _Tally(), "running", True
-    started = time.perf_counter()
+    tally, status, commit, started = Tally(), "running", True, time.perf_counter()
     try:
         status = _loop(setup, metrics, recorders, progress, tally)
     except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM as the command raises it
@@ -297,33 +297,12 @@ def run(
     finally:
         wall = time.perf_counter() - started
         try:
-            summary = _summary(setup, metrics, status, tally)
+            summary = summarize(setup, metrics, status, tally)
             recorders.close(summary, commit)
         finally:
             setup.close()
             owner.release()
     return RunResult(summary, wall, out_dir)
-
-
-@dataclass
-class _Tally:
-    """What the run keeps from its measurements for the summary.
-
-    Attributes:
-        last_tag: the last tag detection after a command, or ``None``.
-        clipped: (m,) clipped tension readings per cable (every read of the run, t = 0
-            included), or ``None`` (the sensors never clip).
-    """
-
-    last_tag: object = None
-    clipped: np.ndarray | None = None
-
-    def add(self, m: Measurement) -> None:
-        """Count one measurement's clipped tension readings."""
-        if m.tensions_clipped is not None:
-            if self.clipped is None:
-                self.clipped = np.zeros(len(m.tensions_clipped), dtype=int)
-            self.clipped += m.tensions_clipped
 
 
 def start(setup: RunSetup) -> None:
@@ -339,6 +318,19 @@ def start(setup: RunSetup) -> None:
     setup.controller.reset(s.start_pose)
     for est in setup.estimators.values():
         est.reset(s.start_pose, 0.0)
+    if setup.monitor is not None:
+        setup.monitor.reset()
+
+
+def _marks(setup: RunSetup) -> tuple[tuple[str, ...], list]:
+    """What happened since the last call, in words (events, then faults), and the faults."""
+    marks = [event.describe(phase) for _, event, phase in setup.events.take()]
+    faults = []
+    if setup.monitor is not None:
+        setup.monitor.check()  # the state the tick's last physics chunk left
+        faults = setup.monitor.take()
+        marks += [f"{f.status} ({f.detail})" for f in faults]
+    return tuple(marks), faults
 
 
 def _loop(setup: RunSetup, metrics: RunMetrics, recorders: Recorders, progress, tally) -> str:
@@ -348,17 +340,22 @@ def _loop(setup: RunSetup, metrics: RunMetrics, recorders: Recorders, progress, 
     n_ticks = round(s.duration / period)
     start(setup)
 
-    def record(m: Measurement, estimates: dict[str, PoseEstimate], command) -> None:
+    def record(m: Measurement, estimates: dict[str, PoseEstimate], command) -> str | None:
         tally.add(m)
         T_true = physics.T_base_platform
         deviations = metrics.add(m.time, T_true, estimates)
         plan = controller.planned_pose(m.time)
-        recorders.tick(m, T_true, estimates, deviations, command, plan)
+        marks, faults = _marks(setup)
+        recorders.tick(m, T_true, estimates, deviations, command, plan, marks)
+        tally.faults += faults
+        stop = faults and s.monitor.on_fault == "stop"
+        return faults[0].status if stop else None
 
     setup.events.fire(0.5 * physics.timestep)  # what is due at t = 0, before the first read
     m = sensors.read(None)
     estimates = setup.estimate(m)
-    record(m, estimates, None)
+    if fault := record(m, estimates, None):
+        return fault
     for k in range(n_ticks):
         command = controller.command(k * period, period, estimates[in_loop], m)
         physics.advance(period, command.cable_rates)
@@ -366,35 +363,11 @@ def _loop(setup: RunSetup, metrics: RunMetrics, recorders: Recorders, progress, 
         m = sensors.read(command)
         tally.last_tag = m.tag if m.tag is not None else tally.last_tag
         estimates = setup.estimate(m)
-        record(m, estimates, command)
+        fault = record(m, estimates, command)
         if progress is not None:
             progress((k + 1) / n_ticks, m.time)
+        if fault:  # stopped at the tick the fault happened in
+            return fault
         if command.done:
             return command.status
     return controller.timeout_status
-
-
-def _summary(setup: RunSetup, metrics: RunMetrics, status: str, tally: _Tally) -> dict:
-    p, view = setup.physics, setup.controller.goal_view
-    if view is not None and setup.shown_view is not None:
-        view = setup.shown_view  # a taught view: what the camera truly saw when shown
-    true_tag_error = None
-    if view is not None and p.has_camera and p.has_tag:  # truth stays here: only the error
-        true_tag_error = pose_error(p.T_cam_tag, view)
-    end = RunEnd(status=status, last_tag=tally.last_tag, true_tag_error=true_tag_error)
-    truth = {"time": p.time, "T_base_platform": p.T_base_platform, "tensions": p.tensions}
-    extra = setup.controller.summary(end)
-    out = run_summary(setup.scenario, status, metrics, truth, setup.goal_pose, extra)
-    if setup.homing_offset is not None:
-        off = setup.homing_offset
-        out["homing_offset"] = {
-            "position_m": off[:3].tolist(),
-            "rotation_deg": np.degrees(off[3:]).tolist(),
-        }
-    if tally.clipped is not None:
-        out["tension_clipped_readings"] = tally.clipped.tolist()
-    if setup.events.fired:
-        out["events"] = [
-            {"time_s": t, "type": e.type, **dataclasses.asdict(e)} for t, e in setup.events.fired
-        ]
-    return out

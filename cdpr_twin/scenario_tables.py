@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import functools
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from cdpr_twin import plugins
 from cdpr_twin.deviations import DeviationSpec
-from cdpr_twin.events import EVENT_TYPES, Event
+from cdpr_twin.events import EVENT_KINDS, Event
 from cdpr_twin.options import (
     OptionReader,
     ScenarioError,
@@ -24,16 +25,41 @@ from cdpr_twin.options import (
 from cdpr_twin.realism import PARTS, PROFILES, Realism, profile
 
 
+@dataclass(frozen=True)
+class MonitorConfig:
+    """``[monitor]``: what the run does when the robot reports a fault.
+
+    Attributes:
+        on_fault: ``"stop"`` (the default: the run ends at the tick of the fault with status
+            ``fault: <what>``, exit code 3) or ``"continue"`` (the fault is recorded, the run
+            goes on).
+        enabled: check the robot's limits at all (faults of MuJoCo's divergence stay errors).
+    """
+
+    on_fault: str = "stop"
+    enabled: bool = True
+
+
+def read_monitor(top: OptionReader) -> MonitorConfig:
+    """``[monitor]`` (optional)."""
+    r = top.table_of("monitor", required=False)
+    out = MonitorConfig(
+        r.string("on_fault", "stop", choices=("stop", "continue")), r.boolean("enabled", True)
+    )
+    r.done()
+    return out
+
+
 def read_events(top: OptionReader) -> tuple[Event, ...]:
     """``[[events]]``: timed events, in file order."""
     raw = top.raw("events", [], "array of tables [[events]]")
     if not isinstance(raw, list) or not all(isinstance(e, dict) for e in raw):
-        raise top.fail("events", "must be an array of tables [[events]] (type, time, …)")
+        raise top.fail("events", "must be an array of tables [[events]] (kind, at, …)")
     out = []
     for i, table in enumerate(raw):
         r = OptionReader(top.source, table, f"events[{i}]")
-        cls = EVENT_TYPES.get(r.string("type", choices=tuple(EVENT_TYPES)))
-        out.append(parse_options(r, cls, skip=("type",)))
+        cls = EVENT_KINDS.get(r.string("kind", choices=tuple(EVENT_KINDS)))
+        out.append(parse_options(r, cls, skip=("kind",)))
     return tuple(out)  # in file order (errors name events[i] as the file numbers them)
 
 

@@ -14,6 +14,7 @@ One row per control tick, columns in this order (:func:`header`):
 | ``plan_{x,…,qz}`` | the open-loop plan's pose (empty cells when there is none) |
 | ``tag_{x,…,qz}`` | the detected tag pose T_cam_tag (empty cells when not detected) |
 | ``status`` | the controller's :class:`~cdpr_twin.types.Status` (``start`` on the first row) |
+| ``event`` | the tick's scenario events and robot faults, ``; ``-separated (mostly empty) |
 
 Covariance columns (21: the upper triangle, a ≤ b in x, y, z, rx, ry, rz; [m², m·rad, rad²])
 follow their estimator's ``_valid`` column. Floats are written with ``%.17g``, so every value
@@ -43,7 +44,9 @@ VALID_SUFFIX = "_valid"
 CABLE_PREFIXES = ("tension", "length", "rate")
 """Per-cable column groups, in file order: ``<prefix>_1 … <prefix>_m``."""
 STATUS_COLUMN = "status"
-"""The last column: the controller's status (text)."""
+"""The controller's status (text)."""
+EVENT_COLUMN = "event"
+"""The last column: events and faults of the tick (text, usually empty)."""
 COV_AXES = ("x", "y", "z", "rx", "ry", "rz")
 """Axes of a pose covariance's columns: δ = [v, ω] in F_p."""
 COV_INDEX = tuple((i, j) for i in range(6) for j in range(i, 6))
@@ -80,7 +83,7 @@ def header(estimators: Sequence[str], n_cables: int, covariance: Sequence[str] =
             names += covariance_columns(name)
     for prefix in CABLE_PREFIXES:
         names += cable_columns(prefix, n_cables)
-    return [*names, *pose_columns("plan"), *pose_columns("tag"), STATUS_COLUMN]
+    return [*names, *pose_columns("plan"), *pose_columns("tag"), STATUS_COLUMN, EVENT_COLUMN]
 
 
 class TimeseriesWriter:
@@ -129,6 +132,7 @@ class TimeseriesWriter:
         measurement: Measurement,
         command: Command | None,
         plan: np.ndarray | None,
+        marks: Sequence[str] = (),
     ) -> None:
         """Buffer one row.
 
@@ -139,6 +143,7 @@ class TimeseriesWriter:
             measurement: the sensors' reading (tensions, lengths, rates, tag).
             command: the command that led here, or ``None`` on the start row.
             plan: (4, 4) planned pose, or ``None``.
+            marks: what happened during the tick (events, faults), in words.
         """
         m = measurement
         poses = [
@@ -152,7 +157,8 @@ class TimeseriesWriter:
             valid = [(v, _cov21(estimates[n])) for v, n in zip(valid, self.estimators, strict=True)]
         sensors = [*m.tensions.tolist(), *m.cable_lengths.tolist(), *m.cable_rates.tolist()]
         status = command.status if command is not None else Status.START
-        self._rows.append((time, poses, valid, sensors, status))
+        event = "; ".join(marks).replace(",", ";").replace("\n", " ")
+        self._rows.append((time, poses, valid, sensors, status, event))
         if len(self._rows) >= self.flush_every:
             self.flush()
 
@@ -169,7 +175,7 @@ class TimeseriesWriter:
             cells += ["%.17g"] * (len(CABLE_PREFIXES) * self.n_cables)
             cells += f7 if has_plan else empty7
             cells += f7 if has_tag else empty7
-            cells.append("%s")
+            cells += ["%s", "%s"]
             self._formats[key] = ",".join(cells)
         return self._formats[key]
 
@@ -194,7 +200,7 @@ class TimeseriesWriter:
         pose7, present = self._pose7()
         k = len(self.estimators)
         lines = []
-        for i, (t, _, valid, sensors, status) in enumerate(self._rows):
+        for i, (t, _, valid, sensors, status, event) in enumerate(self._rows):
             has_plan, has_tag = bool(present[i, k + 1]), bool(present[i, k + 2])
             values = [t, *pose7[i, 0].tolist()]
             for j in range(k):
@@ -209,7 +215,7 @@ class TimeseriesWriter:
                 values += pose7[i, k + 1].tolist()
             if has_tag:
                 values += pose7[i, k + 2].tolist()
-            values.append(status)
+            values += [status, event]
             lines.append(self._row_format(has_plan, has_tag) % tuple(values))
         with writing(self._partial):
             self._file.write("\n".join(lines) + "\n")
@@ -250,10 +256,12 @@ class Timeseries:
     Attributes:
         columns: float columns by name, in file order (NaN where the file is empty), each (n,).
         status: (n,) controller status per row (text).
+        event: (n,) events and faults per row (text, mostly empty).
     """
 
     columns: dict[str, np.ndarray]
     status: np.ndarray
+    event: np.ndarray
 
     @classmethod
     def load(cls, path: str | Path) -> Timeseries:
@@ -276,12 +284,12 @@ class Timeseries:
                 f"{path}: not a timeseries.csv header (estimators {list(estimators)}, "
                 f"{_count_cables(names)} cables): got {names}"
             )
-        status = np.array([r[-1] for r in body])
+        status, event = np.array([r[-2] for r in body]), np.array([r[-1] for r in body])
         columns = {
             name: np.array([float(r[j]) if r[j] else np.nan for r in body])
-            for j, name in enumerate(names[:-1])
+            for j, name in enumerate(names[:-2])
         }
-        return cls(columns, status)
+        return cls(columns, status, event)
 
     @property
     def t(self) -> np.ndarray:

@@ -27,7 +27,7 @@ def _mujoco_force(physics, cable: int) -> float:
 def test_a_broken_cable_stays_slack_across_swivel_and_stiffness_refreshes(break_time):
     physics, _, _ = build_robot(align_every=10)
     physics.reset(paper_pose("p1"))
-    schedule = EventSchedule((CableBreak(time=break_time, cable=7),), physics, sensors=None)
+    schedule = EventSchedule((CableBreak(at=break_time, cable=7),), physics, sensors=None)
     physics.add_hook(schedule)
     assert _mujoco_force(physics, 7) < -10.0  # taut (MuJoCo's actuator force is a pull: negative)
     forces, times, others = [], [], []
@@ -55,12 +55,12 @@ def test_a_broken_cable_stays_slack_across_swivel_and_stiffness_refreshes(break_
 
 def test_a_cable_break_from_a_scenario_file(tmp_path):
     text = OPEN_LOOP.replace("duration = 25.0", "duration = 2.0")
-    text += '\n[[events]]\ntype = "cable_break"\ntime = 1.0\ncable = 8\n'
+    text += '\n[[events]]\nkind = "cable_break"\nat = 1.0\ncable = 8\n'
     text = text.replace("tension_noise_std = 0.24", "tension_noise_std = 0.0")
     path = tmp_path / "break.toml"
     path.write_text(text.replace('"../models/', f'"{ROOT}/models/'))
     scenario = load_scenario(path).with_realism("ideal").with_overrides(camera=False)
-    assert scenario.events == (CableBreak(time=1.0, cable=8),)
+    assert scenario.events == (CableBreak(at=1.0, cable=8),)
     run(scenario, tmp_path / "out", record_rrd=False)
     ts = Timeseries.load(tmp_path / "out" / "timeseries.csv")
     tau8 = ts.columns["tension_8"]
@@ -69,7 +69,13 @@ def test_a_cable_break_from_a_scenario_file(tmp_path):
     assert np.all(tau8[ts.t > 1.0 - 1e-9] == 0.0)  # noise-free sensor: exactly no force
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["events"] == [
-        {"time_s": pytest.approx(1.0, abs=1e-9), "type": "cable_break", "time": 1.0, "cable": 8}
+        {
+            "time_s": pytest.approx(1.0, abs=1e-9),
+            "kind": "cable_break",
+            "phase": "start",
+            "at": 1.0,
+            "cable": 8,
+        }
     ]
     # without the event the same run keeps cable 8 taut, and ends elsewhere
     intact = load_scenario(ROOT / "scenarios" / "paper_open_loop.toml").with_realism("ideal")
@@ -83,16 +89,16 @@ def test_a_cable_break_from_a_scenario_file(tmp_path):
 @pytest.mark.parametrize(
     ("event", "field"),
     [
-        ('type = "cable_break"\ntime = 1.0\ncable = 9', "events[0].cable: must be in 1…8"),
+        ('kind = "cable_break"\nat = 1.0\ncable = 9', "events[0].cable: must be in 1…8"),
         (
-            'type = "cable_break"\ntime = 2.0\ncable = 2\n[[events]]\ntype = "cable_break"\n'
-            "time = 1.0\ncable = 9",
+            'kind = "cable_break"\nat = 2.0\ncable = 2\n[[events]]\nkind = "cable_break"\n'
+            "at = 1.0\ncable = 9",
             "events[1].cable: must be in 1…8",
         ),
-        ('type = "cable_break"\ntime = -1.0\ncable = 2', "events[0].time"),
-        ('type = "meteor"\ntime = 1.0', "events[0].type"),
-        ('type = "cable_break"\ncable = 2', "events[0].time: missing"),
-        ('type = "cable_break"\ntime = 1.0\ncable = 2\nwhen = 3', "events[0].when: unknown field"),
+        ('kind = "cable_break"\nat = -1.0\ncable = 2', "events[0].at"),
+        ('kind = "meteor"\nat = 1.0', "events[0].kind"),
+        ('kind = "cable_break"\ncable = 2', "events[0].at: missing"),
+        ('kind = "cable_break"\nat = 1.0\ncable = 2\nwhen = 3', "events[0].when: unknown field"),
     ],
 )
 def test_bad_events_are_errors_naming_the_field(tmp_path, event, field):

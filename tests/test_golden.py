@@ -5,7 +5,8 @@ The fixtures (``tests/fixtures/golden``) were written by the version before the 
 
 - every cell of ``timeseries.csv`` but the quaternions is byte-identical (time, positions,
   tensions, encoder lengths, rates, status): the physics, sensors, estimators and controllers
-  compute exactly what they did;
+  compute exactly what they did; the ``event`` column added later (issue 13) is empty, as
+  these runs have no event and the fault monitor, checking them, raises nothing;
 - quaternion cells are the same rotations to 2e-16: the one SE(3) implementation for one or a
   stack of rotations (Shepperd's method, w ≥ 0) now writes them, where a second vectorised copy
   without sign convention did; so they differ in the last bit, and the tag's quaternions carry
@@ -70,10 +71,15 @@ def _without_new(value):
     return value
 
 
+ADDED_LATER = {"rms_translation_m", "rms_rotation_deg", "true_pose"}
+"""Summary keys added after the fixtures were recorded (issue 12: campaign tables need the
+RMS deviations and the true pose at each checkpoint); every key of the fixtures is compared."""
+
+
 def _assert_json_close(got, want, where=""):
     assert type(got) is type(want) or {type(got), type(want)} <= {int, float}, where
     if isinstance(want, dict):
-        assert list(got) == list(want), where
+        assert [k for k in got if k not in ADDED_LATER] == list(want), where
         for k in want:
             _assert_json_close(got[k], want[k], f"{where}.{k}")
     elif isinstance(want, list):
@@ -96,7 +102,9 @@ def test_outputs_equal_those_of_the_version_before_the_redesign(case, tmp_path):
     want = _rows(gzip.decompress((GOLDEN / case / "timeseries.csv.gz").read_bytes()).decode())
     header = want[0]
     new = [h for h in got[0] if h.startswith(tuple(f"{n}_" for n in NEW_ESTIMATORS))]
-    assert [h for h in got[0] if h not in new] == header and len(got) == len(want)
+    # the one column added since (issue 13): the tick's events and faults, none in these runs
+    assert [h for h in got[0] if h not in new] == [*header, "event"] and len(got) == len(want)
+    assert all(row[-1] == "" for row in got[1:])
     keep = [got[0].index(h) for h in header]  # the fixture's columns, in its order
     got = [[row[j] for j in keep] for row in got]
     quats = {h[: -len("_qw")] for h in header if h.endswith("_qw")}

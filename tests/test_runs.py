@@ -89,6 +89,7 @@ def test_pbvs_converges_with_every_estimator_in_the_loop(open_loop_deviated):
     for name, s in summaries.items():
         assert s["in_loop"] == name
         assert s["status"] == "converged", (name, s["status"])
+        assert "faults" not in s, (name, s["faults"])  # the monitor raised no false alarm
         for err in (s["pbvs"]["final_tag_error"], s["pbvs"]["true_final_tag_error"]):
             assert err["translation_m"] < 2e-3 and err["rotation_deg"] < 0.5, (name, err)
         assert s["final_error_vs_goal"]["translation_m"] < open_loop_miss["translation_m"], name
@@ -121,7 +122,7 @@ def test_timeseries_has_one_row_per_tick(short_run):
     ticks = round(s.duration * s.model.control_rate)
     assert len(lines) == 1 + ticks + 1  # header, the start, one row per tick
     header = lines[0].split(",")
-    assert header[:2] == ["t", "true_x"] and header[-1] == "status"
+    assert header[:2] == ["t", "true_x"] and header[-2:] == ["status", "event"]
     times = [float(line.split(",")[0]) for line in lines[1:]]
     np.testing.assert_allclose(np.diff(times), 1 / s.model.control_rate, atol=1e-9)
     assert all(len(line.split(",")) == len(header) for line in lines[1:])

@@ -29,6 +29,7 @@ class ControlEstimator(Estimator):
         m = measurement
         if (held := self._bad_time(m)) is not None:
             return held
+        watch = self._encoder_flags(m)
         dt = m.time - self._time
         if not np.isfinite(dt) or dt < 0:
             raise ValueError(
@@ -44,4 +45,4 @@ class ControlEstimator(Estimator):
             return self._held(m, NON_FINITE_INPUT)
         self._T = self._T @ se3_exp(np.asarray(twist) * dt)
         self._time = m.time
-        return PoseEstimate(m.time, self._T)
+        return PoseEstimate(m.time, self._T, flags=watch)

@@ -209,6 +209,7 @@ class ModelEstimator(Estimator):
         m = measurement
         if (held := self._bad_time(m)) is not None:
             return held
+        watch = self._encoder_flags(m, tensions=True)
         lengths, tensions = m.cable_lengths, m.tensions
         if not math.isfinite(float(lengths.sum() + tensions.sum())):  # NaN/inf propagate
             return self._held(m, NON_FINITE_INPUT)
@@ -227,7 +228,9 @@ class ModelEstimator(Estimator):
             )
         self._T = T
         self._time = m.time
-        return PoseEstimate(m.time, T, cables=used, residual=residual, iterations=iterations)
+        return PoseEstimate(
+            m.time, T, flags=watch, cables=used, residual=residual, iterations=iterations
+        )
 
     def _update_selected(
         self, m: Measurement, lengths: np.ndarray, tensions: np.ndarray

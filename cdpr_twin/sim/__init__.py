@@ -16,13 +16,18 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from cdpr_twin.deviations import DeviationSpec, TruthDeviations
 from cdpr_twin.sim.model import ModelError, build_model, cable_count, read_geometry
+from cdpr_twin.sim.monitor import Fault, FaultKind, Monitor, MonitorLimits, robot_limits
 from cdpr_twin.sim.physics import Physics, SimulationError, StepHook
 from cdpr_twin.sim.sensors import NominalRobot, Sensors
 from cdpr_twin.sim.twin import Twin, build_robot
 
 __all__ = [
     "DeviationSpec",
+    "Fault",
+    "FaultKind",
     "ModelError",
+    "Monitor",
+    "MonitorLimits",
     "NominalRobot",
     "Physics",
     "Sensors",
@@ -34,4 +39,5 @@ __all__ = [
     "build_robot",
     "cable_count",
     "read_geometry",
+    "robot_limits",
 ]

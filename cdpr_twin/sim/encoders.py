@@ -50,6 +50,13 @@ class Encoders:
         self._offset = np.zeros(physics.n_cables)
         self.ideal = realism.encoder_counts == 0 and realism.drum_radius_error_std == 0.0
         self._l0_home = np.zeros(physics.n_cables)  # true paid-out lengths when homed [m]
+        self._glitch = None  # (m,) jumps of the readings since homing [m], or None
+
+    def glitch(self, i: int, jump: float) -> None:
+        """Encoder i (from 0) jumps by ``jump`` [m]: every later reading is off by it."""
+        if self._glitch is None:
+            self._glitch = np.zeros(self.physics.n_cables)
+        self._glitch[i] += jump
 
     @property
     def quantum(self) -> float:
@@ -66,6 +73,7 @@ class Encoders:
         """
         self._offset = np.zeros(self.physics.n_cables)
         self._l0_home = self.physics.rest_lengths
+        self._glitch = None
         if self.home_enabled:
             g = self.nominal
             l0_nominal = rest_lengths(cable_lengths(g, T_base_platform, "pulley"), tensions, g.es)
@@ -74,8 +82,10 @@ class Encoders:
     def read(self) -> np.ndarray:
         """The lengths the encoders report (m,) [m]."""
         if self.ideal:
-            return self.physics.rest_lengths + self._offset
-        return self._l0_home + self._offset + self.measured_payout()
+            lengths = self.physics.rest_lengths + self._offset
+        else:
+            lengths = self._l0_home + self._offset + self.measured_payout()
+        return lengths if self._glitch is None else lengths + self._glitch
 
     def measured_payout(self) -> np.ndarray:
         """The length the encoders count as paid out since homing (m,) [m].

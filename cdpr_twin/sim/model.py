@@ -16,8 +16,9 @@ import numpy as np
 
 from cdpr_twin.deviations import TruthDeviations
 from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.se3 import matrix_from_quat_wxyz, quat_wxyz_from_matrix, so3_exp
+from cdpr_twin.se3 import matrix_from_quat_wxyz, quat_wxyz_from_matrix, so3_exp, transform
 from cdpr_twin.sim import camera
+from cdpr_twin.sim.occluder import add_occluder
 
 PLATFORM_BODY = "platform"
 TAG_BODY = "tag"
@@ -116,12 +117,16 @@ def _element(getter, name: str, kind: str, path: Path):
     return element
 
 
-def build_model(path: str | Path, deviations: TruthDeviations | None = None) -> mujoco.MjModel:
+def build_model(
+    path: str | Path, deviations: TruthDeviations | None = None, occluder: bool = False
+) -> mujoco.MjModel:
     """Compile a model file, with the robot's truth deviations applied (through MjSpec).
 
     Args:
         path: MJCF file (``models/acrobot/scene.xml`` or a file that includes acrobot.xml).
         deviations: calibration errors of the simulated robot; ``None`` for the nominal robot.
+        occluder: add the sheet that ``tag_occlusion`` events slide over the tag
+            (:mod:`cdpr_twin.sim.occluder`).
 
     Returns:
         The compiled model.
@@ -134,6 +139,8 @@ def build_model(path: str | Path, deviations: TruthDeviations | None = None) -> 
     spec = _load_spec(path)
     if deviations is not None:
         _apply(spec, deviations, path)
+    if occluder:
+        add_occluder(spec, float(_element(spec.geom, "tag_plate", "geom", path).size[0]))
     try:
         model = spec.compile()
     except ValueError as exc:
@@ -203,6 +210,19 @@ def numeric(model: mujoco.MjModel, name: str) -> np.ndarray:
         )
     adr, size = model.numeric_adr[nid], model.numeric_size[nid]
     return np.array(model.numeric_data[adr : adr + size])
+
+
+def static_site_pose(model: mujoco.MjModel, site: int, source: str = "model") -> np.ndarray:
+    """The (4, 4) world pose of a site on a static child body of the world.
+
+    Raises:
+        ModelError: when the site's body is not a static child of the world.
+    """
+    body = model.site_bodyid[site]
+    if model.body_parentid[body] != 0 or model.body_mocapid[body] >= 0:
+        raise ModelError(f"{source}: the tag must be on a static child of the world")
+    T_body = transform(matrix_from_quat_wxyz(model.body_quat[body]), model.body_pos[body])
+    return T_body @ transform(matrix_from_quat_wxyz(model.site_quat[site]), model.site_pos[site])
 
 
 def read_geometry(model: mujoco.MjModel) -> CdprGeometry:

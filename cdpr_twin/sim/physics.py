@@ -7,12 +7,11 @@ integrator``: MuJoCo integrates ctrl, the rate of :mod:`~cdpr_twin.sim.winch`) a
     τ_i = (E·S / l0_i) · (L_i − l0_i) + c_i · L̇_i,   clamped to τ_i ≥ 0 (a cable never pushes),
 
 where L_i is the tendon length less the constant entry segment (A_i → wrap → B_i, the paper's
-l_f of eq. 15) and c_i = η·E·S/l0_i. The stiffness E·S/l0_i and the swivel yaw φ_i (eq. 20, the
-ideal swivel as mocap bodies) are refreshed from Python every ``align_every`` physics steps; a
-disabled cable (a break) gets zero stiffness at every refresh.
+l_f of eq. 15) and c_i = η·E·S/l0_i. The stiffness E·S/l0_i (zero for a broken cable) and the
+swivel yaw φ_i (eq. 20, ideal swivels as mocap bodies) are refreshed every ``align_every`` steps.
 
 Like dm_control's ``Physics`` it owns ``MjModel``/``MjData`` and answers named ground-truth
-questions (``T_base_platform``…); step hooks (timed events) act between steps when they ask.
+questions (``T_base_platform``…); step hooks (events, the fault monitor) act between steps.
 """
 
 from __future__ import annotations
@@ -22,7 +21,7 @@ import math
 import mujoco
 import numpy as np
 
-from cdpr_twin.events import StepHook
+from cdpr_twin.events import StepHook, fire_due
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import cable_lengths, rest_lengths
 from cdpr_twin.realism import WinchRealism, robot_rng
@@ -44,18 +43,21 @@ from cdpr_twin.sim.model import (
     cable_count,
     numeric,
     read_geometry,
+    static_site_pose,
     swivel_body,
 )
-from cdpr_twin.sim.winch import WinchServos, check_lengths, checked_rates, draw_drum_radii
+from cdpr_twin.sim.monitor import divergence
+from cdpr_twin.sim.occluder import occluder_of
+from cdpr_twin.sim.winch import (
+    WinchServos,
+    check_lengths,
+    checked_rates,
+    draw_drum_radii,
+    whole_steps,
+)
 from cdpr_twin.statics import tension_distribution
 
 TAG_SITE = "tag_center"
-_BAD_WARNINGS = (
-    mujoco.mjtWarning.mjWARN_BADQACC,
-    mujoco.mjtWarning.mjWARN_BADQPOS,
-    mujoco.mjtWarning.mjWARN_BADQVEL,
-    mujoco.mjtWarning.mjWARN_BADCTRL,
-)
 
 
 class Physics:
@@ -95,6 +97,7 @@ class Physics:
         self._drum_ratio = self.drum_radius_true / self.winch.drum_radius  # cable per command
         self._hooks: list[StepHook] = []
         self.cable_enabled = np.ones(self.n_cables, dtype=bool)
+        self._running: np.ndarray | None = None  # (m,) 0 for a stalled winch; None: none is
         self._index(model)
         self._entry = float(numeric(model, "cable_entry_height")[0])
         self._damping_time = float(numeric(model, "cable_damping_time")[0])
@@ -113,6 +116,7 @@ class Physics:
         if self._platform < 0 or m.body_jntadr[self._platform] < 0:
             raise ModelError(f"{self.source}: needs a free-floating body named {PLATFORM_BODY!r}")
         self._qpos = m.jnt_qposadr[m.body_jntadr[self._platform]]
+        self._dof = m.jnt_dofadr[m.body_jntadr[self._platform]]
         anchors = [name2id(m, obj.mjOBJ_SITE, anchor_site(i)) for i in range(n)]
         mocap = [m.body_mocapid[name2id(m, obj.mjOBJ_BODY, swivel_body(i))] for i in range(n)]
         actuators = np.array([name2id(m, obj.mjOBJ_ACTUATOR, actuator_name(i)) for i in range(n)])
@@ -133,6 +137,7 @@ class Physics:
         self._ctrl_lo, self._ctrl_hi = m.actuator_ctrlrange[self._actuators].T.copy()
         self._tag_site = name2id(m, obj.mjOBJ_SITE, TAG_SITE)
         self._cam = cam_mod.camera_id(m) if cam_mod.has_camera(m) else -1
+        self._occluder = occluder_of(m, self.data, lambda: self.T_base_tag)
 
     # ------------------------------------------------------------------ ground truth
     @property
@@ -172,6 +177,13 @@ class Physics:
         return self._servos.rate.copy()
 
     @property
+    def platform_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Views (do not write) of [x, y, z, qw, qx, qy, qz] and [v (world), ω (platform)]."""
+        return self.data.qpos[self._qpos : self._qpos + 7], self.data.qvel[
+            self._dof : self._dof + 6
+        ]
+
+    @property
     def has_camera(self) -> bool:
         """Whether the robot carries the onboard camera."""
         return self._cam >= 0
@@ -193,14 +205,7 @@ class Physics:
         """Ground-truth tag pose (pupil-apriltags frame) (4, 4), from the (static) model."""
         if self._tag_site < 0:
             raise ModelError(f"{self.source} has no site {TAG_SITE!r}; use scene.xml")
-        m = self.model
-        body = m.site_bodyid[self._tag_site]
-        if m.body_parentid[body] != 0 or m.body_mocapid[body] >= 0:
-            raise ModelError(f"{self.source}: the tag must be on a static child of the world")
-        T_body = transform(matrix_from_quat_wxyz(m.body_quat[body]), m.body_pos[body])
-        return T_body @ transform(
-            matrix_from_quat_wxyz(m.site_quat[self._tag_site]), m.site_pos[self._tag_site]
-        )
+        return static_site_pose(self.model, self._tag_site, self.source)
 
     @property
     def T_cam_tag(self) -> np.ndarray:
@@ -226,6 +231,24 @@ class Physics:
         self.refresh()
         # and now, not only from the next step: a reading at this instant sees no force
         self.data.actuator_force[self._actuator_ids[i]] = 0.0
+
+    def stall_winch(self, i: int, stalled: bool = True) -> None:
+        """Winch i (from 0) stops turning whatever it is commanded (or follows again)."""
+        running = np.ones(self.n_cables) if self._running is None else self._running
+        running[i] = 0.0 if stalled else 1.0
+        self._running = None if running.all() else running
+        self.data.ctrl[self._actuator_ids[i]] *= running[i]
+
+    def occlude_tag(self, coverage: float) -> None:
+        """Slide the sheet over the fraction ``coverage`` of the tag's code (0: park it).
+
+        Raises:
+            SimulationError: when the model was built without the sheet.
+        """
+        if self._occluder is None:
+            raise SimulationError(f"{self.source} was built without the tag occluder")
+        self._occluder.cover(coverage)
+        mujoco.mj_kinematics(self.model, self.data)  # the next frame sees it
 
     def refresh(self) -> None:
         """Point each swivel at its B_i (eq. 20) and set the cable stiffness E·S/l0.
@@ -256,31 +279,17 @@ class Physics:
         while n > 0:
             chunk = min(n, self.align_every)
             if self._hooks:
-                chunk = self._fire_hooks(chunk)
+                chunk = fire_due(self._hooks, self.time, self.timestep, chunk)
             self.refresh()
             if not self._servos.ideal:  # the chunk's exact mean rate: l0 exact at its end
                 rate = self._servos.run(chunk * self.timestep)  # the drum's, in command units
-                self.data.ctrl[self._actuators] = rate * self._drum_ratio
+                self.data.ctrl[self._actuators] = self._stalled(rate * self._drum_ratio)
             mujoco.mj_step(self.model, self.data, nstep=chunk)
             n -= chunk
         self._check_state()
 
-    def _fire_hooks(self, chunk: int) -> int:
-        """Fire the hooks that are due; shorten the chunk to stop at the next hook time."""
-        dt, t = self.timestep, self.time
-        for hook in self._hooks:
-            if hook.next_time() <= t + 0.5 * dt:
-                hook.fire(t + 0.5 * dt)
-            next_time = hook.next_time()
-            if math.isfinite(next_time):
-                steps = math.ceil((next_time - t) / dt - 0.5)
-                if 0 < steps < chunk:
-                    chunk = steps
-        return chunk
-
     def _check_state(self) -> None:
-        d = self.data
-        bad = [mujoco.mjtWarning(w).name for w in _BAD_WARNINGS if d.warning[w].number > 0]
+        d, bad = self.data, divergence(self.data)
         if bad or not math.isfinite(d.qpos.sum() + d.qvel.sum()):
             raise SimulationError(
                 f"the simulation diverged at t = {d.time:.4f} s (MuJoCo warnings: {bad or 'none'});"
@@ -299,22 +308,14 @@ class Physics:
         check_lengths(self.rest_lengths + paid, self._act_range)
         self._servos.set_command(rates)
         if self._servos.ideal:  # (× 1.0 exactly without drum errors: bit for bit as before)
-            self.data.ctrl[self._actuators] = rates * self._drum_ratio
+            self.data.ctrl[self._actuators] = self._stalled(rates * self._drum_ratio)
+
+    def _stalled(self, ctrl: np.ndarray) -> np.ndarray:
+        return ctrl if self._running is None else ctrl * self._running
 
     def steps_in(self, duration: float) -> int:
-        """The whole number of physics steps in ``duration`` seconds.
-
-        Raises:
-            ValueError: when ``duration`` is negative, not finite, or not a whole number of steps.
-        """
-        if not (math.isfinite(duration) and duration >= 0):
-            raise ValueError(f"duration must be a finite number of seconds ≥ 0, got {duration}")
-        n = round(duration / self.timestep)
-        if not math.isclose(n * self.timestep, duration, rel_tol=1e-9, abs_tol=1e-12):
-            raise ValueError(
-                f"duration {duration} s is not a whole number of physics steps of {self.timestep} s"
-            )
-        return n
+        """The whole number of physics steps in ``duration`` seconds (see :func:`whole_steps`)."""
+        return whole_steps(duration, self.timestep)
 
     def advance(self, duration: float, cable_rates: np.ndarray) -> None:
         """Run the winches at constant rates while physics steps.
@@ -386,6 +387,7 @@ class Physics:
         mujoco.mj_resetData(self.model, self.data)
         self._servos.reset()  # winches at rest
         self.cable_enabled[:] = True
+        self._running = None
         self.data.act[self._actuators] = l0
         self.place(T)
         self.was_reset = True

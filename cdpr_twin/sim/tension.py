@@ -56,6 +56,14 @@ class TensionSensors:
         self.bias = robot_rng.uniform(-half, half, n_cables)
         self.gain_error = robot_rng.normal(0.0, realism.gain_error_std, n_cables)
         self._calibration_error = realism.bias_std > 0 or realism.gain_error_std > 0
+        self._failed = np.zeros(n_cables, dtype=bool)
+        self._stuck = np.zeros(n_cables)  # what a failed sensor reads [N]
+        self._last = np.full(n_cables, np.nan)
+
+    def fail(self, i: int, value: float = math.nan) -> None:
+        """Sensor i (from 0) fails: it reads ``value`` [N] from now on (NaN: its last reading)."""
+        self._failed[i] = True
+        self._stuck[i] = self._last[i] if math.isnan(value) else value
 
     def read(self, true_tensions: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """The sensors' readings of the true tensions.
@@ -72,8 +80,12 @@ class TensionSensors:
             tensions = (1.0 + self.gain_error) * tensions + self.bias
         if self.noise_std > 0:
             tensions = tensions + self._rng.normal(0.0, self.noise_std, self.n_cables)
-        if not self.realism.clip:
-            return tensions, None
-        lo, hi = self.realism.range_min, self.realism.range_max
-        clipped = (tensions <= lo) | (tensions >= hi)
-        return np.clip(tensions, lo, hi), clipped
+        clipped = None
+        if self.realism.clip:
+            lo, hi = self.realism.range_min, self.realism.range_max
+            clipped = (tensions <= lo) | (tensions >= hi)
+            tensions = np.clip(tensions, lo, hi)
+        if self._failed.any():  # (a copy: the caller's array is never written)
+            tensions = np.where(self._failed, self._stuck, tensions)
+        self._last = tensions
+        return tensions, clipped

@@ -182,3 +182,19 @@ def check_lengths(l0_end: np.ndarray, act_range: np.ndarray) -> None:
             f"these rates would run winch lengths to {np.round(l0_end, 4)} m, "
             f"outside the winch range {act_range[0].tolist()} m"
         )
+
+
+def whole_steps(duration: float, timestep: float) -> int:
+    """The whole number of physics steps of ``timestep`` [s] in ``duration`` [s].
+
+    Raises:
+        ValueError: when ``duration`` is negative, not finite, or not a whole number of steps.
+    """
+    if not (math.isfinite(duration) and duration >= 0):
+        raise ValueError(f"duration must be a finite number of seconds ≥ 0, got {duration}")
+    n = round(duration / timestep)
+    if not math.isclose(n * timestep, duration, rel_tol=1e-9, abs_tol=1e-12):
+        raise ValueError(
+            f"duration {duration} s is not a whole number of physics steps of {timestep} s"
+        )
+    return n

@@ -1,0 +1,73 @@
+"""What a run keeps beyond its metrics for ``summary.json``, and the summary itself.
+
+Truth stays here and in :mod:`cdpr_twin.metrics`: the controller's summary fields get only the
+error of its goal view, never a true pose.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from cdpr_twin.controllers.base import RunEnd
+from cdpr_twin.metrics import RunMetrics, pose_error, run_summary
+from cdpr_twin.types import Measurement
+
+
+@dataclass
+class Tally:
+    """What the run keeps from its measurements for the summary.
+
+    Attributes:
+        last_tag: the last tag detection after a command, or ``None``.
+        clipped: (m,) clipped tension readings per cable (every read of the run, t = 0
+            included), or ``None`` (the sensors never clip).
+        faults: the robot's faults (:class:`cdpr_twin.sim.Fault`), in time order.
+    """
+
+    last_tag: object = None
+    clipped: np.ndarray | None = None
+    faults: list = dataclasses.field(default_factory=list)
+
+    def add(self, m: Measurement) -> None:
+        """Count one measurement's clipped tension readings."""
+        if m.tensions_clipped is not None:
+            if self.clipped is None:
+                self.clipped = np.zeros(len(m.tensions_clipped), dtype=int)
+            self.clipped += m.tensions_clipped
+
+
+def summarize(setup, metrics: RunMetrics, status: str, tally: Tally) -> dict:
+    """The content of ``summary.json`` for a run that ended with ``status``.
+
+    Args:
+        setup: the run's :class:`~cdpr_twin.runner.RunSetup`.
+        metrics: its metrics.
+        status: how it ended.
+        tally: what it kept from its measurements and monitor.
+    """
+    p, view = setup.physics, setup.controller.goal_view
+    if view is not None and setup.shown_view is not None:
+        view = setup.shown_view  # a taught view: what the camera truly saw when shown
+    true_tag_error = None
+    if view is not None and p.has_camera and p.has_tag:  # truth stays here: only the error
+        true_tag_error = pose_error(p.T_cam_tag, view)
+    end = RunEnd(status=status, last_tag=tally.last_tag, true_tag_error=true_tag_error)
+    truth = {"time": p.time, "T_base_platform": p.T_base_platform, "tensions": p.tensions}
+    extra = setup.controller.summary(end)
+    out = run_summary(setup.scenario, status, metrics, truth, setup.goal_pose, extra)
+    if setup.homing_offset is not None:
+        off = setup.homing_offset
+        out["homing_offset"] = {
+            "position_m": off[:3].tolist(),
+            "rotation_deg": np.degrees(off[3:]).tolist(),
+        }
+    if tally.clipped is not None:
+        out["tension_clipped_readings"] = tally.clipped.tolist()
+    if setup.events.fired:
+        out["events"] = [e.as_dict(t, phase) for t, e, phase in setup.events.fired]
+    if tally.faults:
+        out["faults"] = [f.as_dict() for f in tally.faults]
+    return out
