@@ -12,6 +12,7 @@ from cdpr_twin import cli, cli_tools, resources
 from cdpr_twin.scenario import ScenarioError, load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
+SHIPPED = tuple(sorted(p.stem for p in (ROOT / "scenarios").glob("*.toml")))
 
 
 def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
@@ -28,11 +29,11 @@ def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
 def test_shipped_robots_and_scenarios_are_found_by_name():
     assert resources.robots() == ("acrobot",)
     assert resources.robot_scene("acrobot").samefile(ROOT / "models" / "acrobot" / "scene.xml")
-    assert resources.scenarios() == ("paper_open_loop", "paper_pbvs")
+    assert resources.scenarios() == SHIPPED
     by_name = load_scenario("paper_pbvs")
     assert by_name.source.samefile(ROOT / "scenarios" / "paper_pbvs.toml")
     assert by_name.model.file.samefile(ROOT / "models" / "acrobot" / "scene.xml")
-    with pytest.raises(ScenarioError, match="no scenario named 'paper'; choose one of paper_open"):
+    with pytest.raises(ScenarioError, match="no scenario named 'paper'; choose one of " + ", ".join(SHIPPED)):
         load_scenario("paper")
     with pytest.raises(resources.ResourceError, match="no robot named 'cogiro'; choose one of"):
         resources.robot_scene("cogiro")
@@ -69,7 +70,7 @@ def test_scenarios_list_and_copy_start_ones_own(tmp_path):
     listed = _cli("scenarios", "list", cwd=tmp_path)
     assert listed.returncode == 0, listed.stderr
     rows = {line.split()[0]: line for line in listed.stdout.splitlines()}
-    assert set(rows) == {"paper_open_loop", "paper_pbvs"}
+    assert set(rows) == set(SHIPPED)
     shipped = tomllib.loads((ROOT / "scenarios" / "paper_pbvs.toml").read_text())
     assert shipped["description"] in rows["paper_pbvs"]
     copied = _cli("scenarios", "copy", "paper_open_loop", "mine", cwd=tmp_path)
@@ -81,7 +82,7 @@ def test_scenarios_list_and_copy_start_ones_own(tmp_path):
     assert again.returncode == 2 and "exists; remove it" in again.stderr
     unknown = _cli("scenarios", "copy", "paper", "mine", cwd=tmp_path)
     assert unknown.returncode == 2 and len(unknown.stderr.strip().splitlines()) == 1
-    assert "choose one of paper_open_loop, paper_pbvs" in unknown.stderr
+    assert "choose one of " + ", ".join(SHIPPED) in unknown.stderr
 
 
 def test_view_opens_the_run_recording_in_the_rerun_viewer(tmp_path, monkeypatch, capsys):
