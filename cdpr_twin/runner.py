@@ -242,6 +242,13 @@ def _scene(setup: RunSetup) -> SceneInfo:
     )
 
 
+def _recorders(setup: RunSetup, out_dir, record_rrd: bool, spawn: bool, connect) -> Recorders:
+    s = setup.scenario
+    names, m = s.estimators.names, setup.physics.n_cables
+    rid = f"{s.name}-{s.seed}"
+    return Recorders(out_dir, _scene(setup), names, m, rid, record_rrd, spawn, setup.cov, connect)
+
+
 def run(
     scenario: Scenario,
     out_dir: Path | None = None,
@@ -271,13 +278,11 @@ def run(
         OutputError: an output could not be written (all left ``*.partial``, no summary).
     """
     s, setup, owner = scenario, prepare(scenario), OutputDir(out_dir)
-    physics, period = setup.physics, scenario.model.control_period
+    period = scenario.model.control_period
     try:
         owner.claim()  # the lock, then an earlier run's files removed
         metrics = RunMetrics(s.estimators.names, setup.controller.checkpoints(s.duration), period)
-        recorders = Recorders(out_dir, _scene(setup), s.estimators.names, physics.n_cables,
-                              f"{s.name}-{s.seed}", record_rrd, spawn, setup.cov,
-                              connect)  # fmt: skip
+        recorders = _recorders(setup, out_dir, record_rrd, spawn, connect)
     except BaseException:
         setup.close()
         owner.release()

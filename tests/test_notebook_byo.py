@@ -38,7 +38,8 @@ def test_the_bring_your_own_estimator_notebook_executes(tmp_path, monkeypatch):
     tables = [o["data"]["text/markdown"] for o in outputs if "text/markdown" in o.get("data", {})]
     assert len(tables) == 1 and "**complementary**" in tables[0]
     ts = Timeseries.load(tmp_path / "run" / "timeseries.csv")
-    assert ts.estimator_names == (*PAPER_ESTIMATORS, "complementary")
+    names = ts.estimator_names  # the scenario's (the paper's six, and more) and the notebook's
+    assert names[-1] == "complementary" and set(PAPER_ESTIMATORS) <= set(names)
     assert ts.t[-1] == pytest.approx(5.0)
     # it predicts with the command and corrects toward the image: smoother than the image
     steps = {n: np.abs(np.diff(ts.deviation(n)[0])).mean() for n in ("image", "complementary")}

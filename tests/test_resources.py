@@ -33,7 +33,8 @@ def test_shipped_robots_and_scenarios_are_found_by_name():
     by_name = load_scenario("paper_pbvs")
     assert by_name.source.samefile(ROOT / "scenarios" / "paper_pbvs.toml")
     assert by_name.model.file.samefile(ROOT / "models" / "acrobot" / "scene.xml")
-    with pytest.raises(ScenarioError, match="no scenario named 'paper'; choose one of " + ", ".join(SHIPPED)):
+    expected = "no scenario named 'paper'; choose one of " + ", ".join(SHIPPED)
+    with pytest.raises(ScenarioError, match=expected):
         load_scenario("paper")
     with pytest.raises(resources.ResourceError, match="no robot named 'cogiro'; choose one of"):
         resources.robot_scene("cogiro")
