@@ -2,8 +2,9 @@
 
 Run: ``python benchmarks/bench_scenarios.py [--repeats N]``.
 
-For each case it runs the full pipeline (sense → six estimators → controller → step → CSV and
-Rerun recording) and reports simulated seconds per wall-clock second. The baseline, measured in
+For each case it runs the full pipeline (sense → the six estimators and ``fused`` → controller →
+step → CSV and Rerun recording; one case without ``fused``, the pipeline the issue-4 bars were
+set for) and reports simulated seconds per wall-clock second. The baseline, measured in
 the same run, is the twin alone stepping the same duration at zero rates with the camera off:
 the ratio says what the rest of the loop costs on top of physics. Bars (issue 4): ≥ 20× real
 time without camera, ≥ 1× with camera, on a 2-core machine; aims 100× and 3×.
@@ -15,6 +16,7 @@ import argparse
 import statistics
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -47,9 +49,11 @@ def physics_only(seconds: float) -> float:
 
 
 def scenario_rtf(
-    path: Path, camera: bool, out: Path, realism: str = "ideal", **overrides
+    path: Path, camera: bool, out: Path, realism: str = "ideal", drop: tuple[str, ...] = ()
 ) -> tuple[float, dict]:
-    s = load_scenario(path).with_realism(realism).with_overrides(camera=camera, **overrides)
+    s = load_scenario(path).with_realism(realism).with_overrides(camera=camera)
+    passive = tuple(n for n in s.estimators.passive if n not in drop)
+    s = replace(s, estimators=replace(s.estimators, passive=passive))
     result = run(s, out)
     return result.real_time_factor, result.summary
 
@@ -62,6 +66,7 @@ def main() -> None:
     ol, pb = ROOT / "scenarios/paper_open_loop.toml", ROOT / "scenarios/paper_pbvs.toml"
     blur = load_scenario(pb).realism.camera.blur_subframes
     cases = [
+        ("paper_open_loop, no camera, ideal, without fused", ol, False, "ideal", 20.0, 100),
         ("paper_open_loop, no camera, ideal", ol, False, "ideal", 20.0, 100),
         ("paper_open_loop, camera, ideal", ol, True, "ideal", 1.0, 3),
         (f"paper_open_loop, camera, acrobot ({blur} sub-frames)", ol, True, "acrobot", 1.0, 3),
@@ -71,18 +76,20 @@ def main() -> None:
     base = statistics.median(physics_only(10.0) for _ in range(args.repeats))
     print(f"cdpr-twin scenario benchmark — median of {args.repeats} runs, outputs written")
     print(f"baseline: twin physics alone (camera off) {base:.1f}× real time\n")
-    print(f"{'case':48s} {'sim [s]':>8s} {'RTF':>7s} {'bar':>5s} {'aim':>5s} {'vs physics':>10s}")
+    print(f"{'case':52s} {'sim [s]':>8s} {'RTF':>7s} {'bar':>5s} {'aim':>5s} {'vs physics':>10s}")
     with tempfile.TemporaryDirectory() as tmp:
         for i, (label, path, camera, realism, bar, aim) in enumerate(cases):
             if args.only not in label:
                 continue
             rtfs, summary = [], {}
             for k in range(args.repeats):
-                rtf, summary = scenario_rtf(path, camera, Path(tmp) / f"case{i}-{k}", realism)
+                drop = ("fused",) if "without fused" in label else ()
+                out = Path(tmp) / f"case{i}-{k}"
+                rtf, summary = scenario_rtf(path, camera, out, realism, drop)
                 rtfs.append(rtf)
             rtf = statistics.median(rtfs)
             print(
-                f"{label:48s} {summary['simulated_time_s']:8.2f} {rtf:6.2f}× "
+                f"{label:52s} {summary['simulated_time_s']:8.2f} {rtf:6.2f}× "
                 f"{'PASS' if rtf >= bar else 'FAIL':>5s} {'yes' if rtf >= aim else 'no':>5s} "
                 f"{rtf / base:9.2f}×"
             )

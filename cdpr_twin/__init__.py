@@ -4,12 +4,16 @@ Importing the package changes no global state; :mod:`cdpr_twin.sim` (the only pa
 MuJoCo) defaults ``MUJOCO_GL`` to ``egl`` before mujoco's first import.
 """
 
-from pathlib import Path
+from cdpr_twin import resources
 
 __version__ = "0.1.0"
 
-MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
-"""Model files shipped with the checkout (``models/acrobot/scene.xml``…)."""
+MODELS_DIR = resources.models_dir()
+"""The shipped robots, one directory each (``models/acrobot/scene.xml``…; see
+:mod:`cdpr_twin.resources`)."""
 
-DEFAULT_SCENE = MODELS_DIR / "acrobot" / "scene.xml"
+SCENARIOS_DIR = resources.scenarios_dir()
+"""The shipped scenario files (``scenarios/paper_open_loop.toml``…)."""
+
+DEFAULT_SCENE = MODELS_DIR / "acrobot" / resources.SCENE_FILE
 """The ACROBOT scene: robot, floor, lights and the AprilTag."""

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_twin import DEFAULT_SCENE, model_cli, se3
+from cdpr_twin import model_cli, se3
+from cdpr_twin.cli_campaign import add_campaign_parser
 
 P0 = (0.112, -0.032, 0.301, -12.0, -10.0, 0.0)
 """The paper's start pose ᵇp_p0 [m, deg]."""
@@ -147,12 +148,16 @@ def _failure(exc: BaseException, out: Path) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from cdpr_twin.cli_tools import live_url
     from cdpr_twin.outputs import OutputDirError, OutputError, sigterm_raises
     from cdpr_twin.runner import run
     from cdpr_twin.scenario import ScenarioError, load_scenario
     from cdpr_twin.sim import SimulationError
 
     try:
+        if args.spawn and args.connect is not None:
+            raise ValueError("give --spawn (a new viewer) or --connect ADDR, not both")
+        connect = None if args.connect is None else live_url(args.connect)
         scenario = load_scenario(args.scenario).with_overrides(
             seed=args.seed,
             in_loop=args.in_loop,
@@ -161,14 +166,14 @@ def _run(args: argparse.Namespace) -> int:
         )
         if args.realism is not None:
             scenario = scenario.with_realism(args.realism)
-    except ScenarioError as exc:
+    except (ScenarioError, ValueError) as exc:
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
         return 2
     out = args.out if args.out is not None else Path("runs") / scenario.name
     progress = _Progress(scenario.name)
     try:
         with sigterm_raises():
-            result = run(scenario, out, progress=progress, spawn=args.spawn)
+            result = run(scenario, out, progress=progress, spawn=args.spawn, connect=connect)
     except (ScenarioError, OutputDirError, OutputError, SimulationError, ValueError,
             KeyboardInterrupt) as exc:  # fmt: skip
         progress.done()
@@ -249,12 +254,14 @@ def _parser() -> argparse.ArgumentParser:
         metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
         help="platform pose [m, m, m, deg, deg, deg] (default: the paper's p0)",
     )
-    demo.add_argument("--model", type=Path, default=DEFAULT_SCENE, help="MJCF scene file")
+    demo.add_argument("--model", default="acrobot", help="robot name or MJCF scene file")
     demo.add_argument("--noise", type=float, default=0.24, help="tension noise std [N]")
     demo.add_argument("--seed", type=int, default=0, help="sensor noise seed")
     demo.set_defaults(func=_demo)
     runp = sub.add_parser("run", help="run a scenario headless and write its outputs")
-    runp.add_argument("scenario", type=Path, help="scenario file (scenarios/*.toml)")
+    runp.add_argument(
+        "scenario", help="scenario file, or a shipped one's name (cdpr-twin scenarios list)"
+    )
     runp.add_argument(
         "--out", type=Path, default=None, help="output directory (default: runs/<scenario name>)"
     )
@@ -264,6 +271,12 @@ def _parser() -> argparse.ArgumentParser:
     runp.add_argument("--no-camera", action="store_true", help="no rendering (drops 'image')")
     runp.add_argument("--spawn", action="store_true", help="also stream to a live Rerun viewer")
     runp.add_argument(
+        "--connect",
+        metavar="ADDR",
+        default=None,
+        help="also stream live to a Rerun gRPC server (port, host:port or rerun+http://…/proxy)",
+    )
+    runp.add_argument(
         "--realism",
         choices=("ideal", "acrobot"),
         default=None,
@@ -272,6 +285,10 @@ def _parser() -> argparse.ArgumentParser:
     runp.set_defaults(func=_run)
     _reproduce_parser(sub)
     model_cli.add_parser(sub)  # cdpr-twin model build|workspace
+    add_campaign_parser(sub)
+    from cdpr_twin.cli_tools import add_parsers
+
+    add_parsers(sub)
     return parser
 
 

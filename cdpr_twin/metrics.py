@@ -34,6 +34,9 @@ class DeviationTrack:
     final_rotation: float = float("nan")
     invalid_updates: int = 0
     flags: Counter = field(default_factory=Counter)
+    sum_sq_translation: float = 0.0
+    sum_sq_rotation: float = 0.0
+    count: int = 0
 
     def add(self, estimate: PoseEstimate, distance: tuple[float, float]) -> None:
         """Account one estimate and its (translation [m], rotation [rad]) deviation."""
@@ -43,6 +46,9 @@ class DeviationTrack:
         if dr > self.max_rotation:
             self.max_rotation, self.max_rotation_time = dr, estimate.time
         self.final_translation, self.final_rotation = dt, dr
+        self.sum_sq_translation += dt * dt
+        self.sum_sq_rotation += dr * dr
+        self.count += 1
         if not estimate.valid:
             self.invalid_updates += 1
         self.flags.update(estimate.flags)
@@ -58,6 +64,10 @@ class DeviationTrack:
             "final_rotation_deg": float(np.degrees(self.final_rotation)),
             "invalid_updates": self.invalid_updates,
             "flags": dict(sorted(self.flags.items())),
+            "rms_translation_m": float(np.sqrt(self.sum_sq_translation / max(self.count, 1))),
+            "rms_rotation_deg": float(
+                np.degrees(np.sqrt(self.sum_sq_rotation / max(self.count, 1)))
+            ),
         }
 
 
@@ -105,6 +115,7 @@ def _segment_end(
         "time_s": time,
         "waypoint": vector_from_pose(waypoint).tolist(),
         "truth_vs_waypoint": pose_error(T_true, waypoint),
+        "true_pose": vector_from_pose(T_true).tolist(),
         "estimates_vs_truth": {
             n: pose_error(e.T_base_platform, T_true) for n, e in estimates.items()
         },

@@ -6,6 +6,18 @@ A plugin is a class with a ``name``, a ``kind`` (``"estimator"`` or ``"controlle
 :func:`option` attaches (unit, bounds, file key). Register a plugin with :func:`register`; a
 scenario file can import modules that register more (``plugins = ["my_module", "file.py"]``).
 
+Installed packages add plugins by entry point, found by the same registry when it is first
+read: in the package's ``pyproject.toml``,
+
+.. code-block:: toml
+
+    [project.entry-points."cdpr_twin.estimators"]
+    my_estimator = "my_package.estimators:MyEstimator"   # the entry-point name is its name
+
+(group ``cdpr_twin.controllers`` for controllers). The class needs no :func:`register`; an
+entry point may also name a module that registers the plugin when imported. One that fails to
+load is skipped with a warning, and naming it says why.
+
 >>> @register
 ... class Mean(Estimator):
 ...     name = "mean"
@@ -17,8 +29,10 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import importlib
+import importlib.metadata
 import importlib.util
 import sys
+import warnings
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import MappingProxyType
@@ -27,7 +41,13 @@ from typing import Any, TypeVar
 KINDS = ("estimator", "controller")
 RESERVED_NAMES = frozenset({"t", "true", "plan", "tag", "status", "tension", "length", "rate"})
 """Column prefixes of ``timeseries.csv`` that no plugin may take as its name."""
+ENTRY_POINT_GROUPS = {"estimator": "cdpr_twin.estimators", "controller": "cdpr_twin.controllers"}
+"""The entry-point group of each kind of plugin."""
 _REGISTRY: dict[str, dict[str, type]] = {kind: {} for kind in KINDS}
+_ORIGIN: dict[str, dict[str, str]] = {kind: {} for kind in KINDS}
+"""Where entry-point plugins came from (``"<name> from <distribution>"``), by kind and name."""
+_BROKEN: dict[str, dict[str, str]] = {kind: {} for kind in KINDS}
+"""Entry points that failed to load: why, by kind and name."""
 _BUILTINS_LOADED = False
 
 C = TypeVar("C", bound=type)
@@ -132,6 +152,37 @@ def _load_builtins() -> None:
         _BUILTINS_LOADED = True
         importlib.import_module("cdpr_twin.estimators")
         importlib.import_module("cdpr_twin.controllers")
+        for kind in KINDS:
+            for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUPS[kind]):
+                _load_entry_point(kind, ep)
+
+
+def _load_entry_point(kind: str, ep: importlib.metadata.EntryPoint) -> None:
+    """Register the plugin an entry point names; a broken one is remembered and skipped."""
+    dist = getattr(ep.dist, "name", None) or "an unknown distribution"
+    known = _REGISTRY[kind].get(ep.name)
+    try:
+        obj = ep.load()
+        if isinstance(obj, type) and (known is None or known is not obj):
+            if getattr(obj, "kind", "") != kind or getattr(obj, "name", "") != ep.name:
+                raise TypeError(
+                    f"{ep.value} must be a {kind} class whose name is {ep.name!r} "
+                    f"(kind {getattr(obj, 'kind', None)!r}, name {getattr(obj, 'name', None)!r})"
+                )
+            register(obj)
+        if ep.name not in _REGISTRY[kind]:
+            raise TypeError(f"{ep.value} registered no {kind} named {ep.name!r}")
+    except Exception as exc:
+        why = f"entry point {ep.name} = {ep.value!r} of {dist} failed to load: {exc}"
+        _BROKEN[kind][ep.name] = why
+        warnings.warn(f"cdpr_twin: {why}; fix or uninstall {dist}", stacklevel=3)
+        return
+    _ORIGIN[kind][ep.name] = f"{ep.name} (from {dist})"
+
+
+def installed(kind: str) -> str:
+    """The registered names of one kind, entry-point plugins with their distribution."""
+    return ", ".join(_ORIGIN[kind].get(n, n) for n in names(kind))
 
 
 def registry(kind: str) -> Mapping[str, type]:
@@ -154,8 +205,11 @@ def lookup(kind: str, name: str) -> type:
     try:
         return registry(kind)[name]
     except KeyError:
+        if name in _BROKEN[kind]:
+            raise ValueError(f"{kind} {name!r}: {_BROKEN[kind][name]}") from None
         raise ValueError(
-            f"unknown {kind} {name!r}; choose one of {', '.join(names(kind))}"
+            f"unknown {kind} {name!r}; choose one of {installed(kind)} (installed; more come from "
+            f"packages' {ENTRY_POINT_GROUPS[kind]!r} entry points or a scenario's plugins list)"
         ) from None
 
 

@@ -3,9 +3,7 @@
 :class:`cdpr_twin.recorders.Recorders` sends a tick to ``timeseries.csv`` (whose schema
 :mod:`cdpr_twin.timeseries` owns) and to this recording.
 
-Each file is written as ``<name>.partial`` and renamed when complete, so a file under its final
-name is never half-written; ``summary.json``, renamed last, says how the run ended (the
-directory's transaction: :mod:`cdpr_twin.outputs`).
+Written as ``recording.rrd.partial``, renamed when complete (:mod:`cdpr_twin.outputs`).
 
 Rerun entity paths (they follow the frame tree, DESIGN §9):
 
@@ -20,11 +18,13 @@ Rerun entity paths (they follow the frame tree, DESIGN §9):
 | ``world/platform/cam/image`` | the rendered frame (JPEG) |
 | ``world/platform/cam/image/tag`` | detected tag outline (image pixels) |
 | ``world/estimates/<name>`` | each estimator's pose, as axes |
+| ``world/estimates/<name>/covariance`` | its 3σ position ellipsoid (F_p), when it has one |
 | ``world/plan`` | the open-loop plan's current pose, as axes |
 | ``deviation/translation_mm`` | ‖t_est − t_true‖ per estimator [mm] (one series each) |
 | ``deviation/rotation_deg`` | angle of R_estᵀ R_true per estimator [deg] |
 | ``tension`` | measured tensions, one series per cable [N] |
 | ``length`` | encoder (rest) lengths, one series per cable [m] |
+| ``events`` | scenario events (warning) and the robot's faults (error), as a text log |
 """
 
 from __future__ import annotations
@@ -37,13 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_twin.outputs import (
-    OutputError,
-    partial_of,
-    write_json_atomic,  # noqa: F401 (its old home)
-    writing,
-)
-from cdpr_twin.se3 import quat_xyzw_from_matrix
+from cdpr_twin.outputs import OutputError, partial_of, writing
+from cdpr_twin.se3 import covariance_ellipsoids, quat_xyzw_from_matrix
 from cdpr_twin.types import CameraIntrinsics, Measurement, PoseEstimate
 
 SLACK_TENSION = 0.5
@@ -78,7 +73,12 @@ class SceneInfo:
 
 
 class RerunRecorder:
-    """Logs the run to a ``.rrd`` file (and optionally a live viewer)."""
+    """Logs the run to a ``.rrd`` file (and optionally live: a spawned viewer or a server).
+
+    ``spawn`` starts a Rerun viewer and streams to it; ``connect`` streams to a Rerun gRPC server
+    already listening at that URL (``rerun+http://host:port/proxy``). A live stream that cannot
+    be delivered (viewer closed, server gone) does not fail the run: the file is still written.
+    """
 
     def __init__(
         self,
@@ -90,27 +90,34 @@ class RerunRecorder:
         spawn: bool = False,
         jpeg_quality: int = 80,
         flush_every: int | None = None,
+        covariance: tuple[str, ...] = (),
+        connect: str | None = None,
     ) -> None:
         import rerun as rr
 
+        self.covariance = tuple(covariance)
         self.rr = rr
         self.path = path
         self._partial = partial_of(path)
         self.scene, self.estimators, self.jpeg_quality = scene, estimators, jpeg_quality
         # column-wise sending costs ~0.5 ms per entity and call: batch 4 s of a file run, but
         # only 0.4 s when a live viewer watches
-        self.flush_every = flush_every or (10 if spawn else 100)
+        live = spawn or connect is not None
+        self.flush_every = flush_every or (10 if live else 100)
         self._buf = self._new_buffer()
         self.rec = rr.RecordingStream(
             application_id, recording_id=recording_id, send_properties=False
         )
         blueprint = self.blueprint()
-        self.spawned = False
-        if spawn:
+        self.spawned = False  # streaming live (a spawned viewer or a server at ``connect``)
+        if live:
             try:
-                self.rec.spawn(connect=False)
+                if spawn:
+                    self.rec.spawn(connect=False)
                 self.rec.set_sinks(
-                    rr.FileSink(str(self._partial)), rr.GrpcSink(), default_blueprint=blueprint
+                    rr.FileSink(str(self._partial)),
+                    rr.GrpcSink(connect),  # None: the spawned viewer's default address
+                    default_blueprint=blueprint,
                 )
                 self.spawned = True
             except Exception:  # no viewer binary or no display: keep the file only
@@ -228,6 +235,9 @@ class RerunRecorder:
         b["length"].append(m.cable_lengths)
         for name in self.estimators:
             b[f"est/{name}"].append(estimates[name].T_base_platform)
+        for name in self.covariance:
+            P = estimates[name].covariance
+            b[f"cov/{name}"].append(np.full((3, 3), np.nan) if P is None else P[:3, :3])
         b["deviation"].append([deviations[name] for name in self.estimators])
         if plan is not None:
             b["plan_time"].append(m.time)
@@ -269,6 +279,7 @@ class RerunRecorder:
             "plan_time",
             "plan",
             *(f"est/{n}" for n in self.estimators),
+            *(f"cov/{n}" for n in self.covariance),
         ]
         return {k: [] for k in keys}
 
@@ -294,6 +305,13 @@ class RerunRecorder:
         transforms("world/platform", b["platform"])
         for name in self.estimators:
             transforms(f"world/estimates/{name}", b[f"est/{name}"])
+        for name in self.covariance:
+            half, quat = covariance_ellipsoids(np.array(b[f"cov/{name}"]))
+            rec.send_columns(
+                f"world/estimates/{name}/covariance",
+                indexes=index,
+                columns=rr.Ellipsoids3D.columns(half_sizes=half, quaternions=quat),
+            )
         if b["plan"]:
             transforms(
                 "world/plan",

@@ -28,6 +28,8 @@ class Recorders:
         recording_id: the Rerun recording id.
         rrd: write ``recording.rrd``.
         spawn: also stream to a live Rerun viewer.
+        covariance: the estimators whose estimates carry a covariance (recorded too).
+        connect: also stream to the Rerun gRPC server at this URL.
     """
 
     def __init__(
@@ -39,6 +41,8 @@ class Recorders:
         recording_id: str,
         rrd: bool = True,
         spawn: bool = False,
+        covariance: tuple[str, ...] = (),
+        connect: str | None = None,
     ) -> None:
         self.out_dir = out_dir
         self.csv: TimeseriesWriter | None = None
@@ -47,12 +51,16 @@ class Recorders:
             return
         with writing(out_dir):
             out_dir.mkdir(parents=True, exist_ok=True)
-        self.csv = TimeseriesWriter(out_dir / "timeseries.csv", names, n_cables)
+        self.csv = TimeseriesWriter(
+            out_dir / "timeseries.csv", names, n_cables, covariance=covariance
+        )
         if rrd:
             try:
                 self.rrd = RerunRecorder(
-                    out_dir / "recording.rrd", scene, names, "cdpr-twin", recording_id, spawn
-                )
+                    out_dir / "recording.rrd", scene, names, "cdpr-twin", recording_id, spawn,
+                    covariance=covariance,
+                    connect=connect,
+                )  # fmt: skip
             except BaseException:
                 self.csv.abort()
                 raise

@@ -90,6 +90,11 @@ class RunSetup:
             out[name] = est.update(m, inputs) if inputs else est.update(m)
         return {name: out[name] for name in self.estimators}
 
+    @property
+    def cov(self) -> tuple[str, ...]:
+        """The estimators whose estimates carry a covariance (recorded with them)."""
+        return tuple(n for n, e in self.estimators.items() if e.reports_covariance)
+
     def close(self) -> None:
         """Free the renderer."""
         self.sensors.close()
@@ -237,12 +242,20 @@ def _scene(setup: RunSetup) -> SceneInfo:
     )
 
 
+def _recorders(setup: RunSetup, out_dir, record_rrd: bool, spawn: bool, connect) -> Recorders:
+    s = setup.scenario
+    names, m = s.estimators.names, setup.physics.n_cables
+    rid = f"{s.name}-{s.seed}"
+    return Recorders(out_dir, _scene(setup), names, m, rid, record_rrd, spawn, setup.cov, connect)
+
+
 def run(
     scenario: Scenario,
     out_dir: Path | None = None,
     progress: Callable[[float, float], None] | None = None,
     spawn: bool = False,
     record_rrd: bool = True,
+    connect: str | None = None,
 ) -> RunResult:
     """Run a scenario headless and write its outputs.
 
@@ -252,31 +265,29 @@ def run(
         progress: called after each tick with (fraction done, simulated time).
         spawn: also stream to a live Rerun viewer.
         record_rrd: write ``recording.rrd`` (with ``out_dir``).
+        connect: also stream to the Rerun gRPC server at this URL (``rerun+http://…/proxy``).
 
     Returns:
-        The :class:`RunResult`. On Ctrl-C (SIGTERM) the outputs so far are completed and
-        flushed, the summary says ``"status": "interrupted"`` (``"terminated"``), and the
-        KeyboardInterrupt (:class:`~cdpr_twin.outputs.Terminated`) is raised again.
+        The :class:`RunResult`. On Ctrl-C (SIGTERM) the outputs so far are completed and flushed,
+        the summary says ``"status": "interrupted"`` (``"terminated"``), and the KeyboardInterrupt
+        (:class:`~cdpr_twin.outputs.Terminated`) is raised again.
 
     Raises:
         ScenarioError: the scenario cannot run (before any output is written).
         OutputDirError: ``out_dir`` cannot be used or another run owns it (nothing touched).
         OutputError: an output could not be written (all left ``*.partial``, no summary).
     """
-    setup = prepare(scenario)
-    s, physics = scenario, setup.physics
-    period, owner = s.model.control_period, OutputDir(out_dir)
+    s, setup, owner = scenario, prepare(scenario), OutputDir(out_dir)
+    period = scenario.model.control_period
     try:
         owner.claim()  # the lock, then an earlier run's files removed
         metrics = RunMetrics(s.estimators.names, setup.controller.checkpoints(s.duration), period)
-        recorders = Recorders(out_dir, _scene(setup), s.estimators.names, physics.n_cables,
-                              f"{s.name}-{s.seed}", record_rrd, spawn)  # fmt: skip
+        recorders = _recorders(setup, out_dir, record_rrd, spawn, connect)
     except BaseException:
         setup.close()
         owner.release()
         raise
-    tally, status, commit = Tally(), "running", True
-    started = time.perf_counter()
+    tally, status, commit, started = Tally(), "running", True, time.perf_counter()
     try:
         status = _loop(setup, metrics, recorders, progress, tally)
     except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM as the command raises it

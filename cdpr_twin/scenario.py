@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from cdpr_twin import plugins
+from cdpr_twin import plugins, resources
 from cdpr_twin.deviations import DeviationSpec
 from cdpr_twin.events import Event
 from cdpr_twin.options import (
@@ -185,11 +185,10 @@ class Scenario:
             s = replace(s, sensors=replace(s.sensors, camera=bool(camera)))
             done["camera"] = bool(camera)
         if in_loop is not None:
-            known = plugins.names("estimator")
-            if in_loop not in known:
-                raise ScenarioError(
-                    f"--in-loop {in_loop!r}: unknown estimator; choose one of {', '.join(known)}"
-                )
+            try:
+                plugins.lookup("estimator", in_loop)
+            except ValueError as exc:
+                raise ScenarioError(f"--in-loop: {exc}") from None
             passive = tuple(n for n in s.estimators.names if n != in_loop)
             s = replace(s, estimators=replace(s.estimators, in_loop=in_loop, passive=passive))
             done["in_loop"] = in_loop
@@ -269,25 +268,31 @@ def _without_camera(s: Scenario, done: dict) -> Scenario:
     return s
 
 
+def _plugin(r: OptionReader, key: str, kind: str, name: str) -> type:
+    """The registered class of a name the file gives; unknown: the installed ones listed."""
+    try:
+        return plugins.lookup(kind, name)
+    except ValueError as exc:
+        raise r.fail(key, str(exc)) from None
+
+
 def _controller(r: OptionReader) -> ControllerConfig:
-    kind = r.string("type", choices=plugins.names("controller"))
-    cls = plugins.lookup("controller", kind)
+    kind = r.string("type")
+    cls = _plugin(r, "type", "controller", kind)
     return ControllerConfig(kind, parse_options(r, cls.Options, skip=("type",)))
 
 
 def _estimators(r: OptionReader) -> EstimatorConfig:
-    known = plugins.names("estimator")
-    in_loop = r.string("in_loop", choices=known)
+    in_loop = r.string("in_loop")
+    _plugin(r, "in_loop", "estimator", in_loop)
     passive = r.raw("passive", [], "list of estimator names")
-    if not isinstance(passive, list) or any(p not in known for p in passive):
-        raise r.fail(
-            "passive", f"must list estimator names among {', '.join(known)}, got {passive!r}"
-        )
+    if not isinstance(passive, list) or not all(isinstance(p, str) for p in passive):
+        raise r.fail("passive", f"must be a list of estimator names, got {passive!r}")
+    for name in passive:
+        _plugin(r, "passive", "estimator", name)
     options: dict[str, Any] = {}
     for name in [k for k in r.table if k not in ("in_loop", "passive")]:
-        if name not in known:
-            raise r.fail(name, f"unknown estimator; choose one of {', '.join(known)}")
-        cls = plugins.lookup("estimator", name)
+        cls = _plugin(r, name, "estimator", name)
         options[name] = parse_options(r.table_of(name), cls.Options)
     r.done()
     passive_t = tuple(p for p in dict.fromkeys(passive) if p != in_loop)
@@ -296,8 +301,7 @@ def _estimators(r: OptionReader) -> EstimatorConfig:
 
 def _model(top: OptionReader, source: Path) -> ModelConfig:
     m = top.table_of("model", required=False)
-    file = Path(m.string("file", "../models/acrobot/scene.xml"))
-    file = file if file.is_absolute() else (source.parent / file).resolve()
+    file = _model_file(m, source)
     timestep = m.number("timestep", 0.0005, minimum=MIN_TIMESTEP, unit="s")
     if timestep > MAX_TIMESTEP:
         raise m.fail("timestep", f"must be ≤ {MAX_TIMESTEP} s for stiff cables, got {timestep}")
@@ -313,6 +317,20 @@ def _model(top: OptionReader, source: Path) -> ModelConfig:
             " choose a rate or timestep that divide evenly",
         )
     return ModelConfig(file, timestep, control_rate, align_every)
+
+
+def _model_file(m: OptionReader, source: Path) -> Path:
+    """``robot = "<name>"`` (a shipped robot, the default ``acrobot``) or ``file = "<path>"``."""
+    if m.has("robot") and m.has("file"):
+        raise m.fail("robot", "give either robot (a shipped robot's name) or file, not both")
+    if m.has("file"):
+        file = Path(m.string("file"))
+        return file if file.is_absolute() else (source.parent / file).resolve()
+    name = m.string("robot", "acrobot")
+    try:
+        return resources.robot_scene(name)
+    except resources.ResourceError as exc:
+        raise m.fail("robot", str(exc)) from None
 
 
 def _read(source: Path) -> OptionReader:
@@ -331,13 +349,27 @@ def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario file.
 
     Args:
-        path: a TOML scenario file.
+        path: a TOML scenario file, or a shipped scenario's name (``paper_open_loop``).
 
     Raises:
         ScenarioError: naming the file, the field and the fix.
     """
-    source = Path(path)
-    top = _read(source)
+    try:
+        source = resources.scenario_file(path)
+    except resources.ResourceError as exc:
+        raise ScenarioError(str(exc)) from None
+    return _scenario(_read(source), source)
+
+
+def scenario_from_data(data: Mapping[str, Any], source: str | Path) -> Scenario:
+    """Validate a scenario given as parsed TOML ``data`` (a campaign's variation of a file).
+
+    Relative paths resolve beside ``source``, and errors name it (:class:`ScenarioError`).
+    """
+    return _scenario(OptionReader(Path(source), dict(data), ""), Path(source))
+
+
+def _scenario(top: OptionReader, source: Path) -> Scenario:
     loaded = read_plugins(top)  # first: the file may name what they register
     name = top.string("name", source.stem)
     if not name or any(c in name for c in "/\\") or name in (".", ".."):

@@ -354,3 +354,14 @@ def pose_distance(T_a: np.ndarray, T_b: np.ndarray) -> tuple:
     if trans.ndim == 0:
         return float(trans), float(rot)
     return trans, rot
+
+
+def covariance_ellipsoids(P: np.ndarray, sigmas: float = 3.0) -> tuple[np.ndarray, np.ndarray]:
+    """Half-axes [m] and orientations (quaternions x, y, z, w) of (n, 3, 3) covariances.
+
+    The ``sigmas``-σ ellipsoid of each covariance: half-axes (n, 3), quaternions (n, 4).
+    """
+    values, vectors = np.linalg.eigh(np.nan_to_num(P))
+    vectors[np.linalg.det(vectors) < 0, :, 2] *= -1.0  # right-handed axes
+    half = sigmas * np.sqrt(np.maximum(values, 0.0))
+    return half, quat_xyzw_from_matrix(vectors)

@@ -7,6 +7,7 @@ One row per control tick, columns in this order (:func:`header`):
 | ``t`` | time [s] |
 | ``true_{x,y,z,qw,qx,qy,qz}`` | ground-truth platform pose T_base_platform [m, unit quaternion] |
 | ``<name>_{x,…,qz}``, ``<name>_valid`` | each estimator's pose, and 1 if this tick updated it |
+| ``<name>_cov_<a>_<b>`` | covariance of δ (F_p) of an estimator that reports one (``fused``) |
 | ``tension_1 … tension_m`` | measured tensions [N] |
 | ``length_1 … length_m`` | encoder (unstretched) cable lengths [m] |
 | ``rate_1 … rate_m`` | commanded winch rates [m/s] |
@@ -15,8 +16,10 @@ One row per control tick, columns in this order (:func:`header`):
 | ``status`` | the controller's :class:`~cdpr_twin.types.Status` (``start`` on the first row) |
 | ``event`` | the tick's scenario events and robot faults, ``; ``-separated (mostly empty) |
 
-Floats are written with ``%.17g``, so every value reads back exactly. The file is written as
-``timeseries.csv.partial`` and renamed when complete: a file under its final name is whole.
+Covariance columns (21: the upper triangle, a ≤ b in x, y, z, rx, ry, rz; [m², m·rad, rad²])
+follow their estimator's ``_valid`` column. Floats are written with ``%.17g``, so every value
+reads back exactly. The file is written as ``timeseries.csv.partial`` and renamed when
+complete: a file under its final name is whole.
 """
 
 from __future__ import annotations
@@ -44,6 +47,15 @@ STATUS_COLUMN = "status"
 """The controller's status (text)."""
 EVENT_COLUMN = "event"
 """The last column: events and faults of the tick (text, usually empty)."""
+COV_AXES = ("x", "y", "z", "rx", "ry", "rz")
+"""Axes of a pose covariance's columns: δ = [v, ω] in F_p."""
+COV_INDEX = tuple((i, j) for i in range(6) for j in range(i, 6))
+"""The (row, column) of each covariance column, upper triangle row by row (21)."""
+
+
+def covariance_columns(prefix: str) -> list[str]:
+    """The 21 covariance columns ``<prefix>_cov_<a>_<b>`` of an estimator, a ≤ b."""
+    return [f"{prefix}_cov_{COV_AXES[i]}_{COV_AXES[j]}" for i, j in COV_INDEX]
 
 
 def pose_columns(prefix: str) -> list[str]:
@@ -56,11 +68,19 @@ def cable_columns(prefix: str, n_cables: int) -> list[str]:
     return [f"{prefix}_{i + 1}" for i in range(n_cables)]
 
 
-def header(estimators: Sequence[str], n_cables: int) -> list[str]:
-    """Every column name of a run with these estimators (in this order) and cables."""
+def header(estimators: Sequence[str], n_cables: int, covariance: Sequence[str] = ()) -> list[str]:
+    """Every column name of a run with these estimators (in this order) and cables.
+
+    Args:
+        estimators: estimator names, in column order.
+        n_cables: cable count m.
+        covariance: the estimators that report a covariance (their columns follow ``_valid``).
+    """
     names = ["t", *pose_columns("true")]
     for name in estimators:
         names += [*pose_columns(name), f"{name}{VALID_SUFFIX}"]
+        if name in covariance:
+            names += covariance_columns(name)
     for prefix in CABLE_PREFIXES:
         names += cable_columns(prefix, n_cables)
     return [*names, *pose_columns("plan"), *pose_columns("tag"), STATUS_COLUMN, EVENT_COLUMN]
@@ -83,16 +103,23 @@ class TimeseriesWriter:
     """
 
     def __init__(
-        self, path: Path, estimators: tuple[str, ...], n_cables: int, flush_every: int = 25
+        self,
+        path: Path,
+        estimators: tuple[str, ...],
+        n_cables: int,
+        flush_every: int = 25,
+        covariance: tuple[str, ...] = (),
     ) -> None:
         self.path = Path(path)
         self._partial = partial_of(self.path)
         self.estimators = tuple(estimators)
+        self.covariance = tuple(n for n in self.estimators if n in covariance)
         self.n_cables = n_cables
         self.flush_every = flush_every
         with writing(self._partial):
             self._file = self._partial.open("w", newline="", encoding="utf-8")
-            self._file.write(",".join(header(self.estimators, n_cables)) + "\n")
+            line = ",".join(header(self.estimators, n_cables, self.covariance))
+            self._file.write(line + "\n")
         self._rows: list[tuple] = []
         self._formats: dict[tuple[bool, bool], str] = {}
         self.rows = 0
@@ -126,6 +153,8 @@ class TimeseriesWriter:
             None if m.tag is None else m.tag.T_cam_tag,
         ]
         valid = [int(estimates[n].valid) for n in self.estimators]
+        if self.covariance:
+            valid = [(v, _cov21(estimates[n])) for v, n in zip(valid, self.estimators, strict=True)]
         sensors = [*m.tensions.tolist(), *m.cable_lengths.tolist(), *m.cable_rates.tolist()]
         status = command.status if command is not None else Status.START
         event = "; ".join(marks).replace(",", ";").replace("\n", " ")
@@ -139,8 +168,10 @@ class TimeseriesWriter:
         if key not in self._formats:
             f7, empty7 = ["%.17g"] * 7, [""] * 7
             cells = ["%.17g", *f7]
-            for _ in self.estimators:
+            for name in self.estimators:
                 cells += [*f7, "%d"]
+                if name in self.covariance:
+                    cells += ["%.17g"] * len(COV_INDEX)
             cells += ["%.17g"] * (len(CABLE_PREFIXES) * self.n_cables)
             cells += f7 if has_plan else empty7
             cells += f7 if has_tag else empty7
@@ -173,7 +204,12 @@ class TimeseriesWriter:
             has_plan, has_tag = bool(present[i, k + 1]), bool(present[i, k + 2])
             values = [t, *pose7[i, 0].tolist()]
             for j in range(k):
-                values += [*pose7[i, 1 + j].tolist(), valid[j]]
+                if self.covariance:
+                    v, cov = valid[j]
+                    cov = cov if self.estimators[j] in self.covariance else []
+                    values += [*pose7[i, 1 + j].tolist(), v, *cov]
+                else:
+                    values += [*pose7[i, 1 + j].tolist(), valid[j]]
             values += sensors
             if has_plan:
                 values += pose7[i, k + 1].tolist()
@@ -241,7 +277,8 @@ class Timeseries:
             raise ValueError(f"{path}: empty file, expected a timeseries.csv header")
         names, body = rows[0], rows[1:]
         estimators = _estimators_in(names)
-        expected = header(estimators, _count_cables(names))
+        with_cov = [n for n in estimators if covariance_columns(n)[0] in names]
+        expected = header(estimators, _count_cables(names), with_cov)
         if names != expected:
             raise ValueError(
                 f"{path}: not a timeseries.csv header (estimators {list(estimators)}, "
@@ -288,9 +325,29 @@ class Timeseries:
         """Translational [m] and rotational [rad] distance of ``prefix`` poses to ``reference``."""
         return pose_distance(self.poses(prefix), self.poses(reference))
 
+    def covariance(self, prefix: str) -> np.ndarray:
+        """An estimator's covariances as (n, 6, 6) (NaN where it gave none).
+
+        Raises:
+            KeyError: the estimator wrote no covariance.
+        """
+        cols = covariance_columns(prefix)
+        P = np.zeros((len(self.t), 6, 6))
+        for (i, j), c in zip(COV_INDEX, cols, strict=True):
+            P[:, i, j] = P[:, j, i] = self.columns[c]
+        return P
+
     def matrix(self, prefix: str) -> np.ndarray:
         """Per-cable columns ``<prefix>_1 … <prefix>_m`` (e.g. ``tension``) as (n, m)."""
         return np.stack([self.columns[c] for c in cable_columns(prefix, self.n_cables)], axis=1)
+
+
+def _cov21(estimate: PoseEstimate) -> list[float]:
+    """The 21 upper-triangle entries of an estimate's covariance (NaN when it has none)."""
+    P = estimate.covariance
+    if P is None:
+        return [float("nan")] * len(COV_INDEX)
+    return [float(P[i, j]) for i, j in COV_INDEX]
 
 
 def load_timeseries(path: str | Path) -> Timeseries:

@@ -192,7 +192,8 @@ def test_winch_stall_encoder_glitch_and_sensor_failure_act_as_their_hardware_wou
 
 def _flags(out: Path) -> dict[str, dict]:
     summary = json.loads((out / "summary.json").read_text())
-    return {n: e["flags"] for n, e in summary["estimators"].items() if n != "image"}
+    paper = ("control", "model_simple", "model_elastic", "model_pulley", "model_elastic_pulley")
+    return {n: e["flags"] for n, e in summary["estimators"].items() if n in paper}
 
 
 @pytest.mark.parametrize(

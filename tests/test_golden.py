@@ -15,6 +15,11 @@ The fixtures (``tests/fixtures/golden``) were written by the version before the 
   come from the one pose-distance implementation, last bits: measured ≤ 2e-15°). Only
   ``source`` (the path the scenario was given by) is ignored, and ``overrides.realism``: the
   paper scenarios now default to the ``acrobot`` profile, so the test asks for ``ideal``.
+
+Est. 7 (``fused``, issue 11) now runs beside the paper's six in the paper scenarios: its columns
+(pose, ``_valid``, covariance) and its entries in ``summary.json`` are new and left out of the
+comparison, which covers every column the fixtures have, by name and in their order, cell by
+cell as above.
 """
 
 import csv
@@ -31,6 +36,8 @@ from cdpr_twin.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 GOLDEN = Path(__file__).resolve().parent / "fixtures" / "golden"
+NEW_ESTIMATORS = ("fused",)
+"""Estimators added after the fixtures were recorded (their outputs are new, not compared)."""
 
 CASES = {
     "open_loop": ("paper_open_loop.toml", {"duration": 2.0, "seed": 3}),
@@ -55,10 +62,24 @@ def _same_rotation(got: list[str], want: list[str]) -> bool:
     return min(np.abs(a - b).max(), np.abs(a + b).max()) <= 2e-16
 
 
+def _without_new(value):
+    """``value`` with every dict key and list item naming a new estimator removed."""
+    if isinstance(value, dict):
+        return {k: _without_new(v) for k, v in value.items() if k not in NEW_ESTIMATORS}
+    if isinstance(value, list):
+        return [_without_new(v) for v in value if v not in NEW_ESTIMATORS]
+    return value
+
+
+ADDED_LATER = {"rms_translation_m", "rms_rotation_deg", "true_pose"}
+"""Summary keys added after the fixtures were recorded (issue 12: campaign tables need the
+RMS deviations and the true pose at each checkpoint); every key of the fixtures is compared."""
+
+
 def _assert_json_close(got, want, where=""):
     assert type(got) is type(want) or {type(got), type(want)} <= {int, float}, where
     if isinstance(want, dict):
-        assert list(got) == list(want), where
+        assert [k for k in got if k not in ADDED_LATER] == list(want), where
         for k in want:
             _assert_json_close(got[k], want[k], f"{where}.{k}")
     elif isinstance(want, list):
@@ -80,10 +101,12 @@ def test_outputs_equal_those_of_the_version_before_the_redesign(case, tmp_path):
     got = _rows((tmp_path / "timeseries.csv").read_text(encoding="utf-8"))
     want = _rows(gzip.decompress((GOLDEN / case / "timeseries.csv.gz").read_bytes()).decode())
     header = want[0]
+    new = [h for h in got[0] if h.startswith(tuple(f"{n}_" for n in NEW_ESTIMATORS))]
     # the one column added since (issue 13): the tick's events and faults, none in these runs
-    assert got[0] == [*header, "event"] and len(got) == len(want)
+    assert [h for h in got[0] if h not in new] == [*header, "event"] and len(got) == len(want)
     assert all(row[-1] == "" for row in got[1:])
-    got = [row[:-1] for row in got]
+    keep = [got[0].index(h) for h in header]  # the fixture's columns, in its order
+    got = [[row[j] for j in keep] for row in got]
     quats = {h[: -len("_qw")] for h in header if h.endswith("_qw")}
     q_cols = {p: [header.index(f"{p}_q{k}") for k in "wxyz"] for p in quats}
     other = [j for j in range(len(header)) if not any(j in c for c in q_cols.values())]
@@ -96,5 +119,6 @@ def test_outputs_equal_those_of_the_version_before_the_redesign(case, tmp_path):
     expected = json.loads((GOLDEN / case / "summary.json").read_text(encoding="utf-8"))
     summary.pop("source")
     expected.pop("source")
+    summary = _without_new(summary)
     assert summary["overrides"].pop("realism") == "ideal"  # asked for here, as the old default
     _assert_json_close(summary, expected)

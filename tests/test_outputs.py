@@ -105,7 +105,8 @@ def test_a_second_run_on_a_locked_directory_is_refused(tmp_path):
     assert first.returncode == 0, err
     assert {p.name for p in out.iterdir()} == FINAL
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["ticks_recorded"] == _check_csv(out / "timeseries.csv") > 50
+    # (≥ 50: the signal may land right after the second batch of 25 rows was written)
+    assert summary["ticks_recorded"] == _check_csv(out / "timeseries.csv") >= 50
 
 
 def test_sigterm_completes_the_outputs_marked_terminated(tmp_path):
@@ -118,7 +119,8 @@ def test_sigterm_completes_the_outputs_marked_terminated(tmp_path):
     assert "terminated" in _one_error_line(stderr)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "terminated"
-    assert summary["ticks_recorded"] == _check_csv(out / "timeseries.csv") > 50
+    # (≥ 50: the signal may land right after the second batch of 25 rows was written)
+    assert summary["ticks_recorded"] == _check_csv(out / "timeseries.csv") >= 50
     assert {p.name for p in out.iterdir()} == FINAL  # no *.partial, no lock
 
 

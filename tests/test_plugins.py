@@ -132,7 +132,7 @@ def test_a_seventh_estimator_goes_through_reproduce(tmp_path):
     rep = reproduce(out, workers=2, runs_scale=0.1, duration=3.0, scenarios=scenarios)
     records = json.loads((out / "runs.json").read_text())
     names = {r["name"] for r in records}
-    assert "pbvs_midpoint_seed1" in names and len(records) == 1 + 7
+    assert "pbvs_midpoint_seed1" in names and len(records) == 1 + 8  # the six, fused, midpoint
     assert all(r["ok"] for r in records), [r["status"] for r in records if not r["ok"]]
     assert "midpoint" in rep["open_loop"]["estimators"]
     assert "midpoint" in rep["pbvs"]

@@ -38,8 +38,8 @@ def test_reproduce_writes_every_artefact(small):
 
     out, rep = small
     records = json.loads((out / "runs.json").read_text())
-    assert len(records) == 1 + 6 and all(r["ok"] for r in records)
-    assert rep["runs"] == {"total": 7, "ok": 7, "failed": []}
+    assert len(records) == 1 + 7 and all(r["ok"] for r in records)  # PBVS: the six and fused
+    assert rep["runs"] == {"total": 8, "ok": 8, "failed": []}
     for name in ("fig5a", "fig5b", "fig7a", "fig7b", "fig8"):
         img = cv2.imread(str(out / f"{name}.png"))
         assert img is not None and img.shape == (600, 1200, 3), name
@@ -65,7 +65,7 @@ def test_report_numbers_are_recomputed_from_the_run_files(small):
     assert f"{miss * 100:.2f} cm" in report_md
     # accuracy at p1: open loop at t = 10 s, PBVS at the end of each run
     expected = {"open loop": [np.linalg.norm(_xyz(at10, "true") - P1)]}
-    for name in PAPER_ESTIMATORS:
+    for name in (*PAPER_ESTIMATORS, "fused"):  # the PBVS file's estimators, each in the loop
         run_dir = out / "runs" / f"pbvs_{name}_seed1"
         summary = json.loads((run_dir / "summary.json").read_text())
         if summary["status"] != "converged":
@@ -126,7 +126,10 @@ def test_the_plan_follows_the_pbvs_scenario_estimators(tmp_path):
     ]
     in_loop = [s.in_loop for s in specs if s.kind == "pbvs"]
     assert in_loop == [
-        n for n in PAPER_ESTIMATORS if n not in ("image", "model_simple") for _ in range(2)
+        n
+        for n in (*PAPER_ESTIMATORS, "fused")
+        if n not in ("image", "model_simple")
+        for _ in range(2)
     ]
     assert all(s.record_rrd == (s.seed == 1) for s in specs)
 

@@ -41,7 +41,7 @@ def test_open_loop_nominal_returns_to_p0_and_estimates_end_on_truth():
     summary = run(s, None).summary
     assert summary["status"] == "done"
     assert summary["final_error_vs_goal"]["translation_m"] < 1e-3  # back at p0
-    assert set(summary["estimators"]) == set(ESTIMATORS) - {"image"}
+    assert set(summary["estimators"]) == ({*ESTIMATORS, "fused"} - {"image"})  # camera off
     for name, e in summary["estimators"].items():
         assert e["final_translation_m"] < 1e-3, name
 

@@ -131,11 +131,12 @@ def test_readings_clip_at_the_range_and_say_so():
 
 def test_clipped_readings_are_counted_per_cable_in_the_summary():
     s = _scenario(tension=TensionRealism(clip=True, range_max=1.0))  # every cable holds > 2 N
-    # the monitor reports the tensions beyond the sensors' range as a fault: record, go on
+    # a tension beyond the sensor range is also a fault of the robot: here, go on regardless
     s = dataclasses.replace(s, monitor=MonitorConfig(on_fault="continue"))
     summary = run(s).summary
     reads = round(s.duration / s.model.control_period) + 1  # t = 0 and each tick
     assert summary["tension_clipped_readings"] == [reads] * M
+    assert summary["faults"][0]["kind"] == "tension beyond the sensor range"
     assert "tension_clipped_readings" not in run(_scenario()).summary
 
 

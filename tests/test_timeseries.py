@@ -107,11 +107,11 @@ def test_rows_are_exact_and_the_start_row_says_start(tmp_path):
     assert w.rows == 1  # written at once with flush_every=1
     w.close()
     row = path.read_text().splitlines()[1].split(",")
-    assert row[0] == "0.10000000000000001" and row[-2:] == ["start", ""]  # status, no event
+    assert row[0] == "0.10000000000000001" and row[-2:] == ["start", ""]
     position = ["0.10000000000000001", "-0.20000000000000001", "0.29999999999999999"]
     assert row[8:16] == [*position, "1", "0", "0", "0", "1"]  # x y z qw qx qy qz valid
     assert row[16:22] == ["10", "20", "0.33333333333333331", "0.5", "0", "0"]
-    assert row[22:] == [*[""] * 14, "start", ""]
+    assert row[22:] == [*[""] * 14, "start", ""]  # no plan, no tag; no event
 
 
 def test_a_file_of_another_schema_is_refused(tmp_path):

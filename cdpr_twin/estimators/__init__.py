@@ -1,4 +1,4 @@
-"""The six moving-platform pose estimators of the paper (§III), chosen by name.
+"""The six moving-platform pose estimators of the paper (§III) and ``fused`` (Est. 7), by name.
 
 >>> est = make_estimator("model_elastic_pulley", geometry)
 >>> est.reset(T_base_platform0)
@@ -23,6 +23,10 @@ from cdpr_twin.estimators.model import (
     PulleyModelEstimator,
     SimpleModelEstimator,
 )
+
+# isort: split
+# Est. 7 registers after the paper's six, so listings keep the paper's order first.
+from cdpr_twin.estimators.fused import FusedEstimator
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.types import PoseEstimate
 
@@ -38,6 +42,8 @@ PAPER_ESTIMATORS = tuple(
     )
 )
 """The paper's six estimators, in its order (Est. 1 … Est. 6)."""
+EXTRA_ESTIMATORS = (FusedEstimator.name,)
+"""Estimators beyond the paper: Est. 7, the fused filter (issue 11)."""
 
 # Est. 7 (issue 10), registered after the paper's six so that their order stays the paper's
 from cdpr_twin.estimators import catenary as _catenary  # noqa: E402, F401
@@ -59,6 +65,7 @@ def make_estimator(name: str, geometry: CdprGeometry, **options: Any) -> Estimat
 
 
 __all__ = [
+    "EXTRA_ESTIMATORS",
     "PAPER_ESTIMATORS",
     "Estimator",
     "ModelEstimator",

@@ -31,6 +31,9 @@ NO_TWIST = "no_twist"
 """Time advanced but no commanded twist was recorded: the control-based estimate is held."""
 NOT_CONVERGED = "not_converged"
 """The least-squares solve did not converge: the estimate is held."""
+ILL_CONDITIONED = "ill_conditioned"
+"""The cables available form a nearly singular set (Jacobian condition number above the
+estimator's ``max_condition``): the estimate is held rather than jump."""
 REANCHORED = "reanchored"
 """Image-based: no successive detection pair; the reference restarts at the held estimate."""
 ENCODER_MISMATCH = "encoder_mismatch"
@@ -116,6 +119,8 @@ class Estimator(ABC):
     Options: ClassVar[type] = NoOptions
     needs_camera: ClassVar[bool] = False
     """Whether it reads tag detections (dropped from the passive set when the camera is off)."""
+    reports_covariance: ClassVar[bool] = False
+    """Whether its estimates carry a covariance (recorded in ``timeseries.csv`` and Rerun)."""
 
     def __init__(self, geometry: CdprGeometry, options: Any = None) -> None:
         self.geometry = geometry

@@ -168,6 +168,7 @@ class Monitor:
         )
         self._active: set[FaultKind] = set()
         self._slack_since = math.nan
+        self._other = np.array(_OTHER_WARNINGS)
         self._warnings = np.zeros(len(_OTHER_WARNINGS), dtype=int)
         self._taken = 0
 
@@ -175,7 +176,7 @@ class Monitor:
         """Forget every fault and onset (the robot was just reset)."""
         self.faults, self._taken, self._active = [], 0, set()
         self._slack_since = math.nan
-        self._warnings[:] = [self.physics.data.warning[w].number for w in _OTHER_WARNINGS]
+        self._warnings = self.physics.data.warning.number[self._other]
 
     def next_time(self) -> float:
         """Always due: the monitor looks at every refresh chunk."""
@@ -213,15 +214,16 @@ class Monitor:
 
     def _placement(self, seen: dict) -> None:
         p, lim = self.physics, self.limits
-        T = p.T_base_platform
-        pos = T[:3, 3]
+        q, v = p.platform_state  # views: no copy on the hot path
+        pos = q[:3]
         if np.any(pos < self._lo) or np.any(pos > self._hi):
             seen[FaultKind.OUTSIDE_FRAME] = (f"origin at {np.round(pos, 3).tolist()} m", 0)
-        low = float(np.min(self._corners @ T[:3, :3].T[:, 2] + pos[2]))
+        w, x, y, z = q[3:]
+        row_z = np.array([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)])
+        low = float(np.min(self._corners @ row_z) + pos[2])  # third row of R: the corners' z
         if low <= lim.floor_z:
             seen[FaultKind.ON_FLOOR] = (f"lowest corner at z = {low:.4f} m", 0)
-        v, w = p.platform_velocity
-        speed, turn = float(np.linalg.norm(v)), float(np.linalg.norm(w))
+        speed, turn = math.sqrt(float(v[:3] @ v[:3])), math.sqrt(float(v[3:] @ v[3:]))
         if speed > lim.max_speed or turn > lim.max_angular_speed:
             seen[FaultKind.SPEED] = (
                 f"{speed:.2f} m/s, {turn:.2f} rad/s > {lim.max_speed:g} m/s, "
@@ -245,7 +247,7 @@ class Monitor:
 
     def _mujoco(self, seen: dict) -> None:
         d = self.physics.data
-        counts = np.array([d.warning[w].number for w in _OTHER_WARNINGS])
+        counts = d.warning.number[self._other]
         new = np.flatnonzero(counts > self._warnings)
         self._warnings = counts
         if new.size:

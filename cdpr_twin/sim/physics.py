@@ -7,12 +7,11 @@ integrator``: MuJoCo integrates ctrl, the rate of :mod:`~cdpr_twin.sim.winch`) a
     τ_i = (E·S / l0_i) · (L_i − l0_i) + c_i · L̇_i,   clamped to τ_i ≥ 0 (a cable never pushes),
 
 where L_i is the tendon length less the constant entry segment (A_i → wrap → B_i, the paper's
-l_f of eq. 15) and c_i = η·E·S/l0_i. The stiffness E·S/l0_i and the swivel yaw φ_i (eq. 20, the
-ideal swivel as mocap bodies) are refreshed from Python every ``align_every`` physics steps; a
-disabled cable (a break) gets zero stiffness at every refresh.
+l_f of eq. 15) and c_i = η·E·S/l0_i. The stiffness E·S/l0_i (zero for a broken cable) and the
+swivel yaw φ_i (eq. 20, ideal swivels as mocap bodies) are refreshed every ``align_every`` steps.
 
 Like dm_control's ``Physics`` it owns ``MjModel``/``MjData`` and answers named ground-truth
-questions (``T_base_platform``…); step hooks (timed events) act between steps when they ask.
+questions (``T_base_platform``…); step hooks (events, the fault monitor) act between steps.
 """
 
 from __future__ import annotations
@@ -178,10 +177,11 @@ class Physics:
         return self._servos.rate.copy()
 
     @property
-    def platform_velocity(self) -> tuple[np.ndarray, np.ndarray]:
-        """True linear (world frame) [m/s] and angular (platform frame) [rad/s] velocities."""
-        v = self.data.qvel[self._dof : self._dof + 6]
-        return v[:3].copy(), v[3:].copy()
+    def platform_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Views (do not write) of [x, y, z, qw, qx, qy, qz] and [v (world), ω (platform)]."""
+        return self.data.qpos[self._qpos : self._qpos + 7], self.data.qvel[
+            self._dof : self._dof + 6
+        ]
 
     @property
     def has_camera(self) -> bool:

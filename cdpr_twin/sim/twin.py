@@ -17,13 +17,14 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from cdpr_twin import DEFAULT_SCENE
+from cdpr_twin import resources
 from cdpr_twin.deviations import DeviationSpec, TruthDeviations
 from cdpr_twin.realism import WinchRealism
 from cdpr_twin.se3 import matrix_from_quat_wxyz, transform
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim.model import (
     TAG_BODY,
+    ModelError,
     SimulationError,
     build_model,
     cable_count,
@@ -58,7 +59,7 @@ def _nominal_robot(model: mujoco.MjModel) -> NominalRobot:
 
 
 def build_robot(
-    model_path: str | Path = DEFAULT_SCENE,
+    model_path: str | Path | None = None,
     deviations: DeviationSpec | TruthDeviations | None = None,
     timestep: float | None = None,
     align_every: int = 10,
@@ -68,7 +69,7 @@ def build_robot(
     """The simulated robot (with its calibration errors) and what its software believes.
 
     Args:
-        model_path: MJCF scene.
+        model_path: MJCF scene, or a shipped robot's name (``None``: ``acrobot``).
         deviations: a :class:`DeviationSpec` (drawn with its seed for the model's cable count),
             concrete :class:`TruthDeviations`, or ``None`` for the nominal robot.
         timestep: physics step [s]; ``None`` keeps the model file's.
@@ -81,7 +82,10 @@ def build_robot(
         ModelError: when the model file is missing, malformed or not a cable robot.
         ValueError: for a bad timestep or refresh interval.
     """
-    path = Path(model_path)
+    try:
+        path = resources.robot_model(model_path)
+    except resources.ResourceError as exc:
+        raise ModelError(str(exc)) from None
     robot_seed = deviations.seed if isinstance(deviations, DeviationSpec) else 0
     nominal_model = build_model(path)
     nominal = _nominal_robot(nominal_model)
@@ -112,7 +116,7 @@ class Twin:
     """The simulated robot with its sensors.
 
     Args:
-        model_path: MJCF scene (default: ``models/acrobot/scene.xml``).
+        model_path: MJCF scene, or a shipped robot's name (default: ``acrobot``).
         deviations: the robot's calibration errors (see :func:`build_robot`).
         tension_noise_std: std of the tension-sensor noise [N]; 0 switches it off.
         noise_seed: seed of this run's sensor noise.
@@ -123,14 +127,17 @@ class Twin:
         tau_max: highest tension of that distribution [N] (default: likewise, else 75 N).
         timestep: physics step [s]; ``None`` keeps the model file's.
         home_encoders: home the encoders at :meth:`reset` (see :class:`Sensors`).
+        robot: a shipped robot's name (``Twin(robot="acrobot")``), instead of ``model_path``.
 
     Raises:
-        ModelError: when the model file is missing, malformed or not a cable robot.
+        ModelError: when the model file is missing, malformed or not a cable robot, or the
+            robot is not shipped.
+        ValueError: when both ``model_path`` and ``robot`` are given.
     """
 
     def __init__(
         self,
-        model_path: str | Path = DEFAULT_SCENE,
+        model_path: str | Path | None = None,
         deviations: DeviationSpec | TruthDeviations | None = None,
         tension_noise_std: float = 0.24,
         noise_seed: int = 0,
@@ -140,13 +147,17 @@ class Twin:
         tau_max: float | None = None,
         timestep: float | None = None,
         home_encoders: bool = True,
+        robot: str | None = None,
     ) -> None:
+        if model_path is not None and robot is not None:
+            raise ValueError("give either model_path or robot (a shipped robot's name), not both")
+        model_path = robot if robot is not None else model_path
         if not (np.isfinite(tension_noise_std) and tension_noise_std >= 0):
             raise ValueError(f"tension_noise_std must be ≥ 0 N, got {tension_noise_std}")
-        self.model_path = Path(model_path)
         self.physics, self.nominal, self.deviations = build_robot(
             model_path, deviations, timestep, align_every
         )
+        self.model_path = Path(self.physics.source)
         g = self.physics.geometry  # None: the model's tension range (cable_tension_range)
         self.tau_min = g.tension_min if tau_min is None else float(tau_min)
         self.tau_max = g.tension_max if tau_max is None else float(tau_max)

@@ -187,8 +187,17 @@ def _estimator_deviations(ts: Timeseries, names: tuple[str, ...]) -> dict:
             "final_translation_m": float(dt[-1]),
             "final_rotation_deg": float(np.degrees(dr[-1])),
             "roughness_m": roughness(ts, n),
+            **_rms(dt, dr),
         }
     return out
+
+
+def _rms(dt: np.ndarray, dr: np.ndarray) -> dict:
+    """RMS over the run of a translational [m] and rotational [rad] deviation."""
+    return {
+        "rms_translation_m": float(np.sqrt(np.nanmean(dt**2))),
+        "rms_rotation_deg": float(np.degrees(np.sqrt(np.nanmean(dr**2)))),
+    }
 
 
 def _at_p1(ts: Timeseries, names: tuple[str, ...], t1: float) -> dict:
@@ -253,8 +262,14 @@ def analyse_pbvs(run_dir: Path, in_loop: str) -> dict:
         "max_rotation_deg": float(np.degrees(np.nanmax(dr))),
         "roughness_m": roughness(ts, in_loop),
         "final_tag_error": s.get("pbvs", {}).get("final_tag_error"),
+        **_rms(dt, dr),
         "others_roughness_m": {
             m: roughness(ts, m) for m in ordered_estimators(ts.estimator_names) if m != in_loop
+        },
+        "others_rms": {
+            m: _rms(*ts.deviation(m))
+            for m in ordered_estimators(ts.estimator_names)
+            if m != in_loop
         },
         **_jumps(ts, [m for m in ordered_estimators(ts.estimator_names) if m != in_loop]),
     }

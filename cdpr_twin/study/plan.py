@@ -9,18 +9,14 @@ from __future__ import annotations
 
 import json
 import math
-import multiprocessing
 import traceback
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import NamedTuple
 
-from cdpr_twin import MODELS_DIR
+from cdpr_twin import SCENARIOS_DIR
 
-SCENARIOS_DIR = MODELS_DIR.parent / "scenarios"
-"""The scenario files shipped with the checkout."""
 OPEN_LOOP_SCENARIO = SCENARIOS_DIR / "paper_open_loop.toml"
 """The paper's open-loop experiment (Fig. 5)."""
 PBVS_SCENARIO = SCENARIOS_DIR / "paper_pbvs.toml"
@@ -187,18 +183,15 @@ def run_study(
         One record per run, in the order of ``specs``: the spec's fields, ``ok``, ``status``,
         ``dir`` (the run's output directory), and ``wall_time_s`` or ``traceback``.
     """
+    from cdpr_twin.campaign.executor import run_local  # the one engine of parallel runs
+
     runs_dir = out / "runs"
     runs_dir.mkdir(parents=True, exist_ok=True)
     records = []
-    # spawn: a forked child would inherit the parent's Rerun/EGL threads' locks
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        futures = [pool.submit(_run_one, s, str(runs_dir)) for s in specs]
-        for done, fut in enumerate(as_completed(futures), 1):
-            record = fut.result()
-            records.append(record)
-            if progress is not None:
-                progress(done, len(specs), record)
+    for done, record in enumerate(run_local(_run_one, specs, workers, str(runs_dir)), 1):
+        records.append(record)
+        if progress is not None:
+            progress(done, len(specs), record)
     order = {s.name: i for i, s in enumerate(specs)}
     records.sort(key=lambda r: order[r["name"]])
     (out / "runs.json").write_text(json.dumps(records, indent=2) + "\n", encoding="utf-8")

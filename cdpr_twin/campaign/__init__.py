@@ -1,0 +1,116 @@
+"""Campaigns: many runs of varied scenarios, on local cores or a Ray cluster, into one table.
+
+``cdpr-twin campaign CAMPAIGN.toml`` (:func:`run_campaign`): the campaign file
+(:mod:`.spec`) is expanded into validated tasks before anything runs; the tasks run in spawned
+local processes or on Ray (:mod:`.executor`); each run's row is appended to a Parquet table
+(:mod:`.table`) as it ends; a report with figures is computed from the table (:mod:`.report`).
+``--resume`` skips the runs already in the table: after a crash or a stop only the missing
+runs run, and a finished campaign runs nothing.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from cdpr_twin.campaign.executor import ExecutorError, run_local, run_ray
+from cdpr_twin.campaign.spec import Campaign, CampaignError, Task, load_campaign
+from cdpr_twin.campaign.table import RESULTS, ResultTable, load_table
+from cdpr_twin.campaign.worker import run_task
+from cdpr_twin.outputs import OutputDir, OutputDirError, write_json_atomic
+
+__all__ = [
+    "Campaign",
+    "CampaignError",
+    "ExecutorError",
+    "Task",
+    "load_campaign",
+    "load_table",
+    "run_campaign",
+]
+
+Progress = Callable[[int, int, dict], None]
+"""``progress(done, total, row)``, called as each run ends."""
+
+
+def run_campaign(
+    campaign: Campaign,
+    out: Path,
+    workers: int | None = None,
+    ray_address: str | bool | None = False,
+    resume: bool = False,
+    progress: Progress | None = None,
+) -> dict:
+    """Run a campaign's missing runs and write its table and ``campaign.json``.
+
+    Args:
+        campaign: a loaded campaign (:func:`load_campaign`).
+        out: output directory: ``parts/``, ``results.parquet``, ``campaign.json``, ``runs/``
+            (per-run artefacts, where the campaign asks for them).
+        workers: parallel runs (default: every CPU, or every CPU of the Ray cluster).
+        ray_address: ``False``: local processes; ``None`` or ``True``: a local Ray cluster;
+            a string: the address of a Ray cluster to join.
+        resume: run only the runs not yet in the table; without it a directory that already
+            holds results is refused.
+        progress: called as each run ends.
+
+    Returns:
+        ``campaign.json``'s content: counts, timings, the table's path.
+
+    Raises:
+        OutputDirError: ``out`` is in use, or holds results and ``resume`` is off.
+        ExecutorError: Ray is asked for but cannot start.
+    """
+    owner = OutputDir(out)
+    owner.claim()
+    try:
+        # parts of ≤ 1/10 of the runs (≤ 20 rows): a kill loses at most that much work
+        table = ResultTable(out, every=max(1, min(20, len(campaign.tasks) // 10)))
+        done_ids = table.done_ids()
+        if done_ids and not resume:
+            raise OutputDirError(
+                f"{out} already holds {len(done_ids)} runs of a campaign; pass --resume to run "
+                "only the missing ones, or choose another --out"
+            )
+        todo = [t for t in campaign.tasks if t.run_id not in done_ids]
+        return _execute(campaign, out, table, todo, workers, ray_address, progress)
+    finally:
+        owner.release()
+
+
+def _execute(campaign, out, table, todo, workers, ray_address, progress) -> dict:
+    runs_dir = str(Path(out) / "runs")
+    start, n, status = time.perf_counter(), 0, "completed"
+    if ray_address is False:
+        rows = run_local(run_task, todo, workers or multiprocessing.cpu_count(), runs_dir)
+    else:
+        address = ray_address if isinstance(ray_address, str) else None
+        rows = run_ray(run_task, todo, workers, address, runs_dir)
+    try:
+        for row in rows:
+            table.add(row)
+            n += 1
+            if progress is not None:
+                progress(n, len(todo), row)
+    except KeyboardInterrupt:
+        status = "interrupted"
+        raise
+    finally:
+        if n or not (Path(out) / RESULTS).exists():
+            table.flush()
+        summary = {
+            "campaign": campaign.name,
+            "source": str(campaign.source),
+            "status": status,
+            "runs": len(campaign.tasks),
+            "ran_now": n,
+            "skipped_done": len(campaign.tasks) - len(todo),
+            "wall_time_s": time.perf_counter() - start,
+            "executor": "local" if ray_address is False else "ray",
+        }
+        if any(Path(out, "parts").glob("part-*.parquet")):
+            summary["table"] = str(table.gather())
+        write_json_atomic(Path(out) / "campaign.json", summary)
+    return summary

@@ -1,0 +1,213 @@
+"""A campaign's report, computed from its table: distributions, per-axis effects, attributions.
+
+``report.md`` and figures beside ``results.parquet``:
+
+- the headline metric's distribution over the runs (``cp1.t_m``, the platform's true error at
+  the first checkpoint — p1 in the open-loop runs — when the runs have checkpoints, else
+  ``final_t_m``, the error vs the controller's goal): quantiles and a histogram;
+- per grid axis (a varied key with few values): the metric's median and spread per value, and
+  a box plot;
+- when the robot varies (``truth.seed``): which calibration error drives the error at the
+  checkpoint. Each run's deviations are drawn again from its scenario's truth spec (the draw is
+  deterministic), the 3-D error vector is regressed on all of them (least squares), and each
+  group's share of the error's variance is ``var(X_g·β_g) / var(y)``, with the fit's R².
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from cdpr_twin.campaign.spec import Campaign
+from cdpr_twin.campaign.table import load_table
+from cdpr_twin.outputs import writing
+
+GROUPS = ("exit points", "anchor points", "E·S", "sheave radii", "camera mount", "tag placement")
+
+
+def _metric(columns: dict) -> tuple[str, str]:
+    if "cp1.t_m" in columns and np.isfinite(columns["cp1.t_m"]).any():
+        return "cp1.t_m", "true error at the first checkpoint (p1) [mm]"
+    return "final_t_m", "final error vs the goal [mm]"
+
+
+def _quantiles(x: np.ndarray) -> str:
+    x = x[np.isfinite(x)]
+    if not x.size:
+        return "no finite value"
+    q = np.percentile(x, [5, 50, 95])
+    return (
+        f"median {q[1]:.2f}, 5–95 % {q[0]:.2f}–{q[2]:.2f}, max {x.max():.2f} "
+        f"(mean {x.mean():.2f}, n = {x.size})"
+    )
+
+
+def deviation_matrix(tasks: dict, rows: list[dict]) -> np.ndarray:
+    """Each run's drawn calibration errors, one row per run: (n, 8m + 12).
+
+    Columns: exit points (3m), anchor points (3m), E·S scale − 1 (m), sheave radii (m), camera
+    mount (6), tag placement (6), as :class:`~cdpr_twin.deviations.TruthDeviations` holds them.
+    """
+    from cdpr_twin.scenario import scenario_from_data
+
+    out = []
+    for row in rows:
+        task = tasks[row["run_id"]]
+        spec = scenario_from_data(task.data, task.source).truth
+        m = len(json.loads(row["summary"])["final_tensions_n"])
+        d = spec.draw(m)
+        out.append(np.concatenate([
+            d.exit_offsets.ravel(), d.anchor_offsets.ravel(), d.es_scale - 1.0,
+            d.pulley_radius_offsets, d.camera_offset, d.tag_offset,
+        ]))  # fmt: skip
+    return np.array(out)
+
+
+def attribution(X: np.ndarray, Y: np.ndarray, m: int) -> tuple[dict[str, float], float]:
+    """Variance shares of each deviation group in a linear fit of ``Y`` (n, 3) on ``X``.
+
+    Returns:
+        ``({group: share}, R²)``; shares of the total variance of ``Y`` (summed over axes).
+    """
+    sizes = (3 * m, 3 * m, m, m, 6, 6)
+    Xc, Yc = X - X.mean(axis=0), Y - Y.mean(axis=0)
+    beta, *_ = np.linalg.lstsq(Xc, Yc, rcond=None)
+    total = float(np.sum(Yc.var(axis=0)))
+    shares, start = {}, 0
+    for name, size in zip(GROUPS, sizes, strict=True):
+        part = Xc[:, start : start + size] @ beta[start : start + size]
+        shares[name] = float(np.sum(part.var(axis=0)) / total) if total > 0 else math.nan
+        start += size
+    residual = Yc - Xc @ beta
+    return shares, 1.0 - float(np.sum(residual.var(axis=0)) / total) if total > 0 else math.nan
+
+
+def _miss_vectors(rows: list[dict]) -> np.ndarray:
+    out = []
+    for row in rows:
+        cp = json.loads(row["summary"])["segment_ends"][0]
+        out.append(np.subtract(cp["true_pose"][:3], cp["waypoint"][:3]))
+    return np.array(out)
+
+
+def _figure(path: Path, draw) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=110)
+    draw(ax)
+    fig.tight_layout()
+    partial = path.with_name(path.name + ".partial")
+    with writing(partial):
+        fig.savefig(partial, format="png")
+    plt.close(fig)
+    with writing(path):
+        partial.replace(path)
+
+
+def _axis_section(columns: dict, key: str, metric: str, label: str, out: Path) -> list[str]:
+    values = columns[f"param.{key}"]
+    levels = sorted(set(values.tolist()), key=str)
+    y = columns[metric] * 1e3
+    lines = [f"### Effect of `{key}`", "", f"| {key} | runs | {label} |", "|---|---|---|"]
+    groups = []
+    for v in levels:
+        sel = values == v
+        groups.append(y[sel & np.isfinite(y)])
+        lines.append(f"| {v} | {int(sel.sum())} | {_quantiles(y[sel])} |")
+    name = f"effect_{key.replace('.', '_')}.png"
+
+    def draw(ax):
+        ax.boxplot(groups, tick_labels=[str(v) for v in levels])
+        ax.set_xlabel(key)
+        ax.set_ylabel(label)
+
+    _figure(out / name, draw)
+    return [*lines, "", f"![{key}]({name})", ""]
+
+
+def _attribution_section(campaign: Campaign, rows: list[dict]) -> list[str]:
+    tasks = {t.run_id: t for t in campaign.tasks}
+    rows = [r for r in rows if r["ok"] and r["run_id"] in tasks and r.get("cp1.t_m") is not None]
+    if len(rows) < 100:
+        return []
+    X, Y = deviation_matrix(tasks, rows), _miss_vectors(rows)
+    m = len(json.loads(rows[0]["summary"])["final_tensions_n"])
+    shares, r2 = attribution(X, Y, m)
+    lines = [
+        "## Which calibration error drives the error at p1",
+        "",
+        f"Linear least squares of the 3-D error at the first checkpoint on the {X.shape[1]} "
+        f"drawn deviations of each of the {len(rows)} robots (R² = {r2:.3f}); each group's "
+        "share of the error's variance:",
+        "",
+        "| deviation group | share of variance |",
+        "|---|---|",
+    ]
+    lines += [
+        f"| {g} | {100 * s:.1f} % |" for g, s in sorted(shares.items(), key=lambda kv: -kv[1])
+    ]
+    return [*lines, ""]
+
+
+def write_report(out: str | Path, campaign: Campaign) -> Path:
+    """Compute ``report.md`` and its figures from the campaign's table; returns its path."""
+    out = Path(out)
+    table = load_table(out)
+    rows = table.to_pylist()
+    columns = {
+        c: np.array(table.column(c).to_pylist(), dtype=float if _numeric(table, c) else object)
+        for c in table.column_names
+    }
+    metric, label = _metric(columns)
+    y = columns[metric] * 1e3
+    ok = columns["ok"].astype(bool)
+    faults = [f for f in columns["fault"].tolist() if f]
+    lines = [
+        f"# Campaign `{campaign.name}`",
+        "",
+        campaign.description,
+        "",
+        f"{len(rows)} runs: {int(ok.sum())} ran, {int((~ok).sum())} failed, "
+        f"{len(faults)} stopped by a fault of the robot"
+        + (f" ({', '.join(sorted(set(faults)))})" if faults else "")
+        + f". Total run time {np.nansum(columns['wall_time_s']) / 60:.1f} CPU-min.",
+        "",
+        f"## {label[0].upper()}{label[1:]}",
+        "",
+        _quantiles(y),
+        "",
+        "![distribution](distribution.png)",
+        "",
+    ]
+
+    def hist(ax):
+        ax.hist(y[np.isfinite(y)], bins=min(50, max(5, int(np.sqrt(ok.sum())))))
+        ax.set_xlabel(label)
+        ax.set_ylabel("runs")
+
+    _figure(out / "distribution.png", hist)
+    for c in table.column_names:  # grid axes: few values, each repeated
+        levels = len(set(columns[c].tolist()))
+        if c.startswith("param.") and c != "param.sample" and 1 < levels <= min(20, len(rows) - 1):
+            lines += _axis_section(columns, c[len("param.") :], metric, label, out)
+    lines += _attribution_section(campaign, rows)
+    path = out / "report.md"
+    partial = path.with_name("report.md.partial")
+    with writing(partial):
+        partial.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    with writing(path):
+        partial.replace(path)
+    return path
+
+
+def _numeric(table, column: str) -> bool:
+    import pyarrow as pa
+
+    t = table.schema.field(column).type
+    return pa.types.is_floating(t) or pa.types.is_integer(t)

@@ -1,0 +1,281 @@
+"""Campaign files: a base scenario and the axes to vary → the validated list of runs (tasks).
+
+A campaign file (TOML) names a base scenario and how to vary it::
+
+    name = "pbvs_gain_sweep"
+    scenario = "../scenarios/paper_pbvs.toml"   # relative to this file
+    seed = 1                                    # seeds the random draws below
+    samples = 1                                 # random draws per grid point
+    artefacts = "none"                          # per-run files: "none", "csv" or "all"
+
+    [overrides]                                 # every run: dotted scenario keys
+    "sensors.camera" = true
+
+    [[axes]]                                    # a grid axis: every value
+    key = "controller.gain"
+    values = [0.2, 0.4, 0.8]
+
+    [[axes]]                                    # a random axis: one draw per run
+    key = "truth.seed"
+    draw = "integers"                           # integers | uniform | normal | choice
+    low = 1
+    high = 1000000
+
+Grid axes combine as a product (file order); each grid point runs ``samples`` times, each with
+its own draws of the random axes (from ``seed``, the block and the point: reproducible). A
+campaign of several experiments lists them as ``[[blocks]]``, each with the keys above but
+``name``/``seed``. Any scenario key can be varied by its dotted path (``truth.exit_point_std``,
+``controller.gain``, ``realism.camera.exposure_s``, ``estimators.in_loop``, ``seed``); a value
+may be a table (``key = "controller"`` with whole controller tables). Every run's scenario is
+built and validated before any run starts; a bad key is a one-line error naming the campaign
+file, the axis and the scenario field.
+
+Each run's id is a hash of its fully resolved scenario (the base file's content with every
+override applied), so a campaign can be resumed, and re-running a finished one does nothing.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import itertools
+import json
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+DRAWS = ("integers", "uniform", "normal", "choice")
+ARTEFACTS = ("none", "csv", "all")
+
+
+class CampaignError(ValueError):
+    """A campaign file is invalid (one line: file, field, fix)."""
+
+
+@dataclass(frozen=True)
+class Task:
+    """One run of a campaign.
+
+    Attributes:
+        run_id: hash of the resolved scenario (16 hex digits).
+        block: the block it belongs to.
+        name: readable name (block, then the varied values).
+        source: the base scenario file (relative paths in the scenario resolve beside it).
+        data: the resolved scenario, as parsed TOML.
+        params: the varied values by dotted key (``sample``: the draw's index).
+        artefacts: which per-run files to keep (``none``, ``csv``, ``all``).
+    """
+
+    run_id: str
+    block: str
+    name: str
+    source: str
+    data: dict
+    params: dict
+    artefacts: str = "none"
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """A parsed campaign.
+
+    Attributes:
+        name: its name (default: the file's stem).
+        source: the campaign file.
+        description: free text.
+        tasks: every run, validated, in a stable order.
+    """
+
+    name: str
+    source: Path
+    description: str
+    tasks: tuple[Task, ...]
+
+
+def set_dotted(data: dict, key: str, value: Any) -> None:
+    """Set ``data[a][b]…[z] = value`` for ``key = "a.b….z"`` (tables created as needed).
+
+    Raises:
+        KeyError: a part of the path is not a table.
+    """
+    parts = key.split(".")
+    node = data
+    for part in parts[:-1]:
+        node = node.setdefault(part, {})
+        if not isinstance(node, dict):
+            raise KeyError(f"{part!r} in {key!r} is not a table")
+    node[parts[-1]] = copy.deepcopy(value)
+
+
+def run_id(data: dict) -> str:
+    """The id of a resolved scenario: 16 hex digits of its canonical JSON's SHA-256."""
+    text = json.dumps(data, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _fail(source: Path, where: str, problem: str) -> CampaignError:
+    return CampaignError(f"{source}: {where}: {problem}")
+
+
+def _axis(source: Path, where: str, axis: Any) -> dict:
+    if not isinstance(axis, dict) or not isinstance(axis.get("key"), str) or not axis["key"]:
+        raise _fail(source, where, 'must be a table with a key = "dotted.scenario.key"')
+    known = {"key", "values", "draw", "low", "high", "mean", "std"}
+    if unknown := sorted(set(axis) - known):
+        raise _fail(source, f"{where}.{unknown[0]}", f"unknown field; use {sorted(known)}")
+    if ("values" in axis) == ("draw" in axis) and axis.get("draw") != "choice":
+        raise _fail(source, where, "give either values = [...] (a grid) or draw = ... (random)")
+    if "draw" in axis and axis["draw"] not in DRAWS:
+        raise _fail(source, f"{where}.draw", f"must be one of {', '.join(DRAWS)}")
+    if "values" in axis and (not isinstance(axis["values"], list) or not axis["values"]):
+        raise _fail(source, f"{where}.values", "must be a non-empty list")
+    need = {"integers": ("low", "high"), "uniform": ("low", "high"), "normal": ("mean", "std")}
+    for field in need.get(axis.get("draw", ""), ()):
+        if not isinstance(axis.get(field), int | float) or not math.isfinite(axis[field]):
+            raise _fail(source, f"{where}.{field}", "missing, or not a finite number")
+    if axis.get("draw") in ("integers", "uniform") and not axis["low"] < axis["high"]:
+        raise _fail(source, f"{where}.high", f"must exceed low = {axis['low']}")
+    return axis
+
+
+def _draw(axis: dict, rng: np.random.Generator) -> Any:
+    kind = axis["draw"]
+    if kind == "integers":
+        return int(rng.integers(int(axis["low"]), int(axis["high"]), endpoint=True))
+    if kind == "uniform":
+        return float(rng.uniform(axis["low"], axis["high"]))
+    if kind == "normal":
+        return float(rng.normal(axis["mean"], axis["std"]))
+    return copy.deepcopy(axis["values"][int(rng.integers(len(axis["values"])))])
+
+
+def _label(value: Any) -> str:
+    if isinstance(value, dict):
+        return str(value.get("type", run_id(value)[:6]))
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+@dataclass(frozen=True)
+class _Block:
+    name: str
+    index: int
+    scenario: Path
+    base: dict
+    overrides: dict
+    grid: tuple[dict, ...]
+    random: tuple[dict, ...]
+    samples: int
+    artefacts: str
+
+
+def _read_toml(path: Path, what: str) -> dict:
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise CampaignError(f"{path}: {what} not found") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise CampaignError(f"{path}: not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise CampaignError(f"{path}: cannot read the {what}: {exc.strerror}") from None
+
+
+def _block(source: Path, table: dict, index: int, where: str) -> _Block:
+    known = {"name", "scenario", "overrides", "axes", "samples", "artefacts", "description"}
+    if unknown := sorted(set(table) - known - {"seed", "blocks"}):
+        raise _fail(source, f"{where}{unknown[0]}", f"unknown field; use {sorted(known)}")
+    if not isinstance(table.get("scenario"), str):
+        raise _fail(source, f"{where}scenario", "missing: the base scenario file (a path)")
+    scenario = (source.parent / table["scenario"]).resolve()
+    overrides = table.get("overrides", {})
+    if not isinstance(overrides, dict):
+        raise _fail(source, f"{where}overrides", 'must be a table of "dotted.key" = value')
+    axes = table.get("axes", [])
+    if not isinstance(axes, list):
+        raise _fail(source, f"{where}axes", "must be an array of tables [[axes]]")
+    axes = [_axis(source, f"{where}axes[{i}]", a) for i, a in enumerate(axes)]
+    samples, artefacts = table.get("samples", 1), table.get("artefacts", "none")
+    if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
+        raise _fail(source, f"{where}samples", f"must be an integer ≥ 1, got {samples!r}")
+    if artefacts not in ARTEFACTS:
+        raise _fail(source, f"{where}artefacts", f"must be one of {', '.join(ARTEFACTS)}")
+    random = tuple(a for a in axes if "draw" in a)
+    if samples > 1 and not random:
+        raise _fail(source, f"{where}samples", "> 1 repeats identical runs: add a random axis")
+    return _Block(
+        str(table.get("name", "main" if not where else f"block{index}")), index, scenario,
+        _read_toml(scenario, "scenario file"), overrides,
+        tuple(a for a in axes if "draw" not in a), random, samples, artefacts,
+    )  # fmt: skip
+
+
+def _tasks(source: Path, block: _Block, seed: int, where: str) -> list[Task]:
+    from cdpr_twin.scenario import ScenarioError, scenario_from_data
+
+    out = []
+    points = itertools.product(*(a["values"] for a in block.grid))
+    for p, point in enumerate(points):
+        for sample in range(block.samples):
+            rng = np.random.default_rng([seed, block.index, p, sample])
+            params = {a["key"]: v for a, v in zip(block.grid, point, strict=True)}
+            params |= {a["key"]: _draw(a, rng) for a in block.random}
+            data = copy.deepcopy(block.base)
+            for key, value in [*block.overrides.items(), *params.items()]:
+                try:
+                    set_dotted(data, key, value)
+                except KeyError as exc:
+                    raise _fail(source, f"{where}{key}", str(exc.args[0])) from None
+            try:
+                scenario_from_data(data, block.scenario)
+            except ScenarioError as exc:
+                varied = ", ".join(f"{k} = {_label(v)}" for k, v in params.items()) or "none"
+                raise _fail(source, f"{where.rstrip('.') or 'run'} ({varied})", str(exc)) from None
+            if block.samples > 1:
+                params["sample"] = sample
+            label = "_".join(f"{k.rsplit('.', 1)[-1]}{_label(v)}" for k, v in params.items())
+            out.append(
+                Task(
+                    run_id(data),
+                    block.name,
+                    f"{block.name}_{label}".rstrip("_"),
+                    str(block.scenario),
+                    data,
+                    params,
+                    block.artefacts,
+                )
+            )
+    return out
+
+
+def load_campaign(path: str | Path) -> Campaign:
+    """Read a campaign file and build and validate every run's scenario.
+
+    Raises:
+        CampaignError: naming the file and the field (and the scenario's own error).
+    """
+    source = Path(path)
+    top = _read_toml(source, "campaign file")
+    seed = top.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise _fail(source, "seed", f"must be an integer ≥ 0, got {seed!r}")
+    blocks = top.get("blocks")
+    if blocks is None:
+        parsed = [_block(source, top, 0, "")]
+    elif not isinstance(blocks, list) or not blocks:
+        raise _fail(source, "blocks", "must be a non-empty array of tables [[blocks]]")
+    else:
+        parsed = [_block(source, b, i, f"blocks[{i}].") for i, b in enumerate(blocks)]
+    tasks = [t for i, b in enumerate(parsed) for t in _tasks(source, b, seed,
+             f"blocks[{i}]." if blocks else "")]  # fmt: skip
+    seen: dict[str, str] = {}
+    for t in tasks:
+        if t.run_id in seen:
+            raise _fail(source, "axes", f"runs {seen[t.run_id]} and {t.name} are identical")
+        seen[t.run_id] = t.name
+    name = top.get("name", source.stem)
+    if not isinstance(name, str) or not name or "/" in name:
+        raise _fail(source, "name", f"must be a plain name, got {name!r}")
+    return Campaign(name, source, str(top.get("description", "")), tuple(tasks))

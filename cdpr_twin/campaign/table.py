@@ -1,0 +1,178 @@
+"""A campaign's results: one row per run, in Parquet, written as the runs end.
+
+Rows are buffered and written as complete part files (``parts/part-NNNNN.parquet``, each
+written as ``*.partial`` and renamed), so the table on disk is valid at every instant — after a
+crash, Ctrl-C or SIGKILL at most the buffered rows are lost, and those runs are run again by
+``--resume``. When a campaign ends (or is stopped) the parts are gathered into
+``results.parquet`` (also written whole, then renamed)::
+
+    import pandas as pd; runs = pd.read_parquet("campaign_out/results.parquet")
+
+Columns (:func:`flatten`): ``run_id``, ``block``, ``name``, ``param.<dotted key>`` (each varied
+value), ``status``, ``ok``, ``error``, ``wall_time_s``, ``simulated_time_s``, ``seed``,
+``truth_seed``, ``in_loop``, ``fault``, ``final_t_m``/``final_r_deg`` (end vs the controller's
+goal), per estimator ``est.<name>.{max_t_m, max_r_deg, rms_t_m, rms_r_deg, final_t_m,
+final_r_deg, invalid}``, per checkpoint ``cp<k>.{t_m, r_deg, x, y, z, rx, ry, rz}`` (truth vs
+the waypoint, and where the platform truly was [m, deg]), and ``summary`` (the run's whole
+``summary.json`` as text).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from cdpr_twin.outputs import OutputError, fsync_dir, partial_of, writing
+
+PARTS = "parts"
+RESULTS = "results.parquet"
+
+
+def _param(value: Any) -> Any:
+    if isinstance(value, bool | int | float | str):
+        return value
+    return json.dumps(value, sort_keys=True)
+
+
+def flatten(task_fields: dict, summary: dict | None, error: str = "", wall: float = math.nan):
+    """One table row from a run's summary (or its error).
+
+    Args:
+        task_fields: ``run_id``, ``block``, ``name`` and ``params`` of the task.
+        summary: the run's ``summary.json`` content, or ``None`` when it failed.
+        error: the failure, in one line ("" when it ran).
+        wall: wall-clock seconds the run took.
+    """
+    row: dict[str, Any] = {k: task_fields[k] for k in ("run_id", "block", "name")}
+    row |= {f"param.{k}": _param(v) for k, v in task_fields["params"].items()}
+    s = summary or {}
+    faults = s.get("faults") or [{}]
+    row |= {
+        "status": s.get("status", f"failed: {error}"),
+        "ok": summary is not None,
+        "error": error,
+        "wall_time_s": float(wall),
+        "simulated_time_s": float(s.get("simulated_time_s", math.nan)),
+        "seed": int(s.get("seed", -1)),
+        "truth_seed": int(s.get("truth_seed", -1)),
+        "in_loop": str(s.get("in_loop", "")),
+        "fault": str(faults[0].get("kind", "")),
+    }
+    goal = s.get("final_error_vs_goal") or {}
+    row["final_t_m"] = float(goal.get("translation_m", math.nan))
+    row["final_r_deg"] = float(goal.get("rotation_deg", math.nan))
+    keys = ("max_translation_m", "max_rotation_deg", "rms_translation_m", "rms_rotation_deg",
+            "final_translation_m", "final_rotation_deg")  # fmt: skip
+    short = ("max_t_m", "max_r_deg", "rms_t_m", "rms_r_deg", "final_t_m", "final_r_deg")
+    for name, e in s.get("estimators", {}).items():
+        for k, c in zip(keys, short, strict=True):
+            row[f"est.{name}.{c}"] = float(e[k])
+        row[f"est.{name}.invalid"] = int(e["invalid_updates"])
+    for k, cp in enumerate(s.get("segment_ends", []), 1):
+        row[f"cp{k}.t_m"] = float(cp["truth_vs_waypoint"]["translation_m"])
+        row[f"cp{k}.r_deg"] = float(cp["truth_vs_waypoint"]["rotation_deg"])
+        for axis, v in zip(("x", "y", "z", "rx", "ry", "rz"), cp["true_pose"], strict=True):
+            row[f"cp{k}.{axis}"] = float(v)
+    row["summary"] = json.dumps(summary) if summary is not None else ""
+    return row
+
+
+class ResultTable:
+    """The campaign's table in ``out``: rows appended, written in complete parts.
+
+    Args:
+        out: the campaign's output directory.
+        every: rows buffered before a part is written.
+        interval: seconds after which buffered rows are written anyway.
+    """
+
+    def __init__(self, out: Path, every: int = 20, interval: float = 10.0) -> None:
+        self.out, self.every, self.interval = Path(out), every, interval
+        self._flushed = time.monotonic()
+        self.parts = self.out / PARTS
+        self._rows: list[dict] = []
+        with writing(self.parts):
+            self.parts.mkdir(parents=True, exist_ok=True)
+        self._next = 1 + max((int(p.stem.split("-")[1]) for p in self._files()), default=0)
+
+    def _files(self) -> list[Path]:
+        return sorted(self.parts.glob("part-*.parquet"))
+
+    def done_ids(self) -> set[str]:
+        """Run ids already in the table (their runs ended, ran or failed)."""
+        import pyarrow.parquet as pq
+
+        ids: set[str] = set()
+        for path in self._files():
+            ids.update(pq.read_table(path, columns=["run_id"]).column("run_id").to_pylist())
+        return ids
+
+    def add(self, row: dict) -> None:
+        """Buffer a row; write a part when ``every`` are buffered or ``interval`` has passed."""
+        self._rows.append(row)
+        if len(self._rows) >= self.every or time.monotonic() - self._flushed >= self.interval:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the buffered rows as one complete part file."""
+        if not self._rows:
+            return
+        import pyarrow as pa
+
+        path = self.parts / f"part-{self._next:05d}.parquet"
+        _write(pa.Table.from_pylist(self._rows), path)
+        self._next += 1
+        self._rows = []
+        self._flushed = time.monotonic()
+
+    def gather(self) -> Path:
+        """Write every part into ``results.parquet`` (whole, then renamed); returns its path."""
+        self.flush()
+        table = load_parts(self.parts)
+        path = self.out / RESULTS
+        _write(table, path)
+        return path
+
+
+def _write(table, path: Path) -> None:
+    import pyarrow.parquet as pq
+
+    partial = partial_of(path)
+    with writing(partial):
+        with partial.open("wb") as f:
+            pq.write_table(table, f)
+            f.flush()
+            os.fsync(f.fileno())
+    with writing(path):
+        os.replace(partial, path)
+    with contextlib.suppress(OutputError):  # (some filesystems cannot fsync a directory)
+        fsync_dir(path.parent)
+
+
+def load_parts(parts: Path):
+    """Every part file of a table, as one ``pyarrow.Table`` (columns unified; missing: null)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    tables = [pq.read_table(p) for p in sorted(Path(parts).glob("part-*.parquet"))]
+    if not tables:
+        raise OutputError(Path(parts), "no results yet")
+    return pa.concat_tables(tables, promote_options="default")
+
+
+def load_table(out: str | Path):
+    """A campaign's results as a ``pyarrow.Table`` (``.to_pandas()`` for a DataFrame).
+
+    Reads ``results.parquet`` when the campaign ended, else the parts written so far.
+    """
+    import pyarrow.parquet as pq
+
+    out = Path(out)
+    if (out / RESULTS).is_file():
+        return pq.read_table(out / RESULTS)
+    return load_parts(out / PARTS)

@@ -1,0 +1,118 @@
+"""The ``scenarios`` and ``view`` subcommands of ``cdpr-twin``, and ``run --connect``'s address.
+
+- ``cdpr-twin scenarios list`` — the shipped scenarios, with their descriptions;
+- ``cdpr-twin scenarios copy NAME DIR`` — a shipped scenario copied into ``DIR`` to start one's
+  own (it names its robot, so it runs from anywhere);
+- ``cdpr-twin view RUN_DIR`` — the run's ``recording.rrd`` in the Rerun viewer.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+from cdpr_twin import resources
+
+LIVE_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
+"""URL schemes of a Rerun gRPC server (``run --connect``)."""
+
+
+def live_url(address: str) -> str:
+    """A Rerun gRPC server's URL from what ``run --connect`` was given.
+
+    A port (``9876``) or ``host:port`` expands to ``rerun+http://<host>:<port>/proxy``, as the
+    ``rerun --connect`` option does; a URL is kept.
+
+    Raises:
+        ValueError: for anything else, saying what to give.
+    """
+    if address.isdigit():
+        return f"rerun+http://127.0.0.1:{address}/proxy"
+    if address.startswith(LIVE_SCHEMES):
+        return address
+    host, _, port = address.rpartition(":")
+    if "://" not in address and host and port.isdigit():
+        return f"rerun+http://{host}:{port}/proxy"
+    raise ValueError(
+        f"--connect {address!r}: give a port, host:port or a URL rerun+http://host:port/proxy"
+    )
+
+
+def viewer_command(run_dir: Path) -> list[str]:
+    """The command that opens a run's recording in the Rerun viewer.
+
+    Args:
+        run_dir: a run's output directory, or a ``.rrd`` file.
+
+    Raises:
+        FileNotFoundError: when there is no recording there (one line saying what to give).
+    """
+    rrd = run_dir if run_dir.suffix == ".rrd" else run_dir / "recording.rrd"
+    if not rrd.is_file():
+        raise FileNotFoundError(
+            f"{rrd}: no recording; give a run directory written by cdpr-twin run (or a .rrd)"
+        )
+    return [sys.executable, "-m", "rerun", str(rrd)]  # the rerun-sdk installed beside us
+
+
+def _view(args: argparse.Namespace) -> int:
+    try:
+        command = viewer_command(args.run_dir)
+    except FileNotFoundError as exc:
+        print(f"cdpr-twin view: error: {exc}", file=sys.stderr)
+        return 2
+    if args.print_command:
+        print(" ".join(command))
+        return 0
+    try:
+        viewer = subprocess.Popen(command)
+    except OSError as exc:
+        print(f"cdpr-twin view: error: cannot start the viewer: {exc}", file=sys.stderr)
+        return 1
+    try:
+        return viewer.wait()
+    except KeyboardInterrupt:
+        viewer.terminate()
+        return 130
+
+
+def _description(path: Path) -> str:
+    try:
+        return str(tomllib.loads(path.read_text(encoding="utf-8")).get("description", ""))
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
+        return "(unreadable)"
+
+
+def _scenarios(args: argparse.Namespace) -> int:
+    if args.action == "list":
+        folder = resources.scenarios_dir()
+        for name in resources.scenarios():
+            print(f"{name:20s} {_description(folder / f'{name}.toml')}")
+        return 0
+    try:
+        target = resources.copy_scenario(args.name, args.dir)
+    except resources.ResourceError as exc:
+        print(f"cdpr-twin scenarios copy: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"{target} (run it: cdpr-twin run {target})")
+    return 0
+
+
+def add_parsers(sub) -> None:
+    """Add the ``scenarios`` and ``view`` subcommands to ``cdpr-twin``'s subparsers."""
+    sc = sub.add_parser("scenarios", help="list the shipped scenarios, or copy one to edit")
+    actions = sc.add_subparsers(dest="action", required=True)
+    actions.add_parser("list", help="the shipped scenarios and what each reproduces")
+    copy = actions.add_parser("copy", help="copy a shipped scenario into a directory")
+    copy.add_argument("name", help="a shipped scenario (see: cdpr-twin scenarios list)")
+    copy.add_argument("dir", type=Path, help="directory to copy it into (created if needed)")
+    sc.set_defaults(func=_scenarios)
+    view = sub.add_parser("view", help="open a run's recording in the Rerun viewer")
+    view.add_argument("run_dir", type=Path, help="a run's output directory (or a .rrd file)")
+    view.add_argument(
+        "--print-command", action="store_true", help="print the viewer command, do not start it"
+    )
+    view.set_defaults(func=_view)

@@ -1,0 +1,327 @@
+"""Est. 7, ``fused``: an error-state Kalman filter on SE(3) over every sensor (issue 11).
+
+Prediction: the control-based model, ``T ← T · exp(ξ Δt)`` with ξ the commanded platform twist
+(eq. 9), and process noise from the winch model — a velocity loop of time constant τ_w lags
+each change of the command, leaving ≈ τ_w |Δξ| of unmodelled motion, plus a random-walk floor.
+Updates (models and error state: :mod:`cdpr_twin.estimators.fused_models`):
+
+- cable lengths — every taut cable (measured tension above ``taut_threshold`` and not clipped),
+  elastic and pulley model, relative to the reading at reset (the encoders are homed there, so
+  they measure motion; the start pose's own error, the homing repeatability, is a state); the
+  drums' radius errors are states too; cables near slack are trusted less, and each cable's
+  innovation is gated (Mahalanobis, ``gate_probability``) so a sagging cable cannot pull;
+- tag detections — the first one anchors the tag in F_b (a state, correlated with the pose), the
+  later ones update pose and tag; the detection's covariance follows the corners' pixel noise
+  through the projection (it grows with distance); a detection failing the gate is rejected.
+
+Tag lost, slack cables, rejected readings: the filter predicts and says so in ``flags``; its
+covariance (the pose block, ``PoseEstimate.covariance``) grows accordingly.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from cdpr_twin.estimators import fused_models as fm
+from cdpr_twin.estimators.base import NO_INPUTS, NON_FINITE_INPUT, TAG_LOST, Estimator
+from cdpr_twin.estimators.solvers import _cable_tuples, _kernel, _pose
+from cdpr_twin.geometry import CdprGeometry
+from cdpr_twin.plugins import OptionError, option, register
+from cdpr_twin.se3 import adjoint, se3_exp
+from cdpr_twin.types import Measurement, PoseEstimate
+
+SLACK_CABLES = "slack_cables"
+"""Some cables read below the taut threshold (or clipped): their lengths were not used."""
+CABLE_OUTLIER = "cable_outlier"
+"""A cable's innovation failed the Mahalanobis gate: its length was not used."""
+TAG_OUTLIER = "tag_outlier"
+"""The tag detection failed the Mahalanobis gate: it was not used."""
+PREDICTED = "predicted_only"
+"""No measurement was used this tick: the estimate is the prediction."""
+
+
+@dataclass(frozen=True)
+class FusedOptions:
+    """Options of the fused filter; defaults: the ``acrobot`` profile's magnitudes.
+
+    Attributes:
+        initial_position_std: per-axis std of the start position (homing) [m].
+        initial_rotation_std: per-axis std of the start orientation [rad] (file: ``_deg``).
+        drum_scale_std: relative std of each drum's radius.
+        process_position_std: random-walk std of the position [m/√s].
+        process_rotation_std: random-walk std of the orientation [rad/√s] (file: ``_deg``).
+        winch_time_constant: τ_w of the winches' velocity loop [s].
+        encoder_quantum: length of one encoder count [m] (0: exact encoders).
+        length_noise_std: a floor under each reading's noise std [m].
+        tension_noise_std: random error of a tension reading [N].
+        damping_time: the cables' damping time η [s].
+        taut_threshold: cables reading below this tension are not used [N].
+        pixel_std: std of a detected corner [px].
+        focal_px: the camera's focal length [px].
+        tag_size: edge of the tag's black square [m].
+        tag_latency: age of a detection when it arrives [s] (latency + half the exposure).
+        gate_probability: Mahalanobis gate (χ² quantile) for each cable and each detection.
+        use_tag: fuse tag detections.
+        drum_consider: treat the drum scale errors as consider states (Schmidt): accounted
+            for, never estimated. Estimating them from the redundant cables learns the
+            encoders' quantisation (a floor: its error persists while a drum turns slowly)
+            as drum errors, and the filter grows overconfident.
+        exit_point_std: per-axis std of the exit points' calibration error [m]; with this or
+            ``anchor_point_std`` above 0 the filter considers both (6m consider states).
+        anchor_point_std: per-axis std of the anchor points' calibration error [m].
+        camera_position_std: per-axis std of the camera mount's position error [m]; with this
+            or ``camera_rotation_std`` above 0 the mount is considered (6 states).
+        camera_rotation_std: per-axis std of the camera mount's rotation error [rad].
+    """
+
+    initial_position_std: float = option(0.001, minimum=0.0, unit="m")
+    initial_rotation_std: float = option(math.radians(0.2), minimum=0.0, unit="deg")
+    drum_scale_std: float = option(0.005, minimum=0.0)
+    process_position_std: float = option(1e-3, minimum=0.0, exclusive=True, unit="m")
+    process_rotation_std: float = option(math.radians(0.05), minimum=0.0, exclusive=True,
+                                         unit="deg")  # fmt: skip
+    winch_time_constant: float = option(1.0 / (2.0 * math.pi * 20.0), minimum=0.0, unit="s")
+    encoder_quantum: float = option(2.0 * math.pi * 0.02 / 4096, minimum=0.0, unit="m")
+    length_noise_std: float = option(2e-6, minimum=0.0, exclusive=True, unit="m")
+    tension_noise_std: float = option(0.01, minimum=0.0, unit="N")
+    damping_time: float = option(0.0005, minimum=0.0, unit="s")
+    taut_threshold: float = option(1.0, minimum=0.0, unit="N")
+    pixel_std: float = option(1.0, minimum=0.0, exclusive=True, unit="px")
+    focal_px: float = option(415.69219381653056, minimum=0.0, exclusive=True, unit="px")
+    tag_size: float = option(0.04, minimum=0.0, exclusive=True, unit="m")
+    tag_latency: float = option(0.044, minimum=0.0, unit="s")
+    gate_probability: float = option(0.9999, minimum=0.0, exclusive=True)
+    use_tag: bool = option(True)
+    drum_consider: bool = option(True)
+    exit_point_std: float = option(0.0, minimum=0.0, unit="m")
+    anchor_point_std: float = option(0.0, minimum=0.0, unit="m")
+    camera_position_std: float = option(0.0, minimum=0.0, unit="m")
+    camera_rotation_std: float = option(0.0, minimum=0.0, unit="deg")
+
+    def __post_init__(self) -> None:
+        flags = ("use_tag", "drum_consider")
+        for name, value in vars(self).items():
+            if name not in flags and not (math.isfinite(value) and value >= 0):
+                raise OptionError(name, f"must be a finite number ≥ 0, got {value}")
+        if not self.gate_probability < 1.0:
+            raise OptionError("gate_probability", "must be below 1")
+
+
+@register
+class FusedEstimator(Estimator):
+    """Est. 7: error-state EKF on SE(3) fusing the commanded twist, cable lengths and the tag.
+
+    Args:
+        geometry: nominal geometry (exit and anchor points, sheave radii, E·S, camera mount).
+        options: :class:`FusedOptions`.
+    """
+
+    name = "fused"
+    Options = FusedOptions
+    reports_covariance = True
+
+    def __init__(self, geometry: CdprGeometry, options: FusedOptions | None = None) -> None:
+        super().__init__(geometry, options)
+        m = geometry.n_cables
+        o = self.options
+        geometry_errors = o.exit_point_std > 0 or o.anchor_point_std > 0
+        camera_errors = o.camera_position_std > 0 or o.camera_rotation_std > 0
+        self.layout = fm.Layout.build(m, geometry_errors, camera_errors, o.drum_consider)
+        self._m, self._n = m, self.layout.n
+        self._drum, self._tag_slice = self.layout.drum, self.layout.tag
+        self._cables = _cable_tuples(geometry.a_base, geometry.b_platform, geometry.pulley_radius)
+        self._gate1 = fm.chi2_gate(1, self.options.gate_probability)
+        self._gate6 = fm.chi2_gate(6, self.options.gate_probability)
+        self.P = np.zeros((self._n, self._n))
+
+    def reset(self, T_base_platform0: np.ndarray, time: float = 0.0) -> None:
+        """Start at a known pose, known to the homing repeatability; the tag is forgotten."""
+        super().reset(T_base_platform0, time)
+        o = self.options
+        self._T0 = self._T.copy()
+        self._rho = np.zeros(self._m)
+        self._T_tag: np.ndarray | None = None
+        self._ref: tuple[np.ndarray, np.ndarray] | None = None  # (lengths, corrected) at t₀
+        self._last_twist = np.zeros(6)
+        P0 = np.diag([o.initial_position_std**2] * 3 + [o.initial_rotation_std**2] * 3)
+        self.P = np.zeros((self._n, self._n))
+        for a in (fm.POSE, fm.START):
+            for b in (fm.POSE, fm.START):
+                self.P[a, b] = P0  # the start pose is the current one: fully correlated
+        L, P = self.layout, self.P
+        P[L.drum, L.drum] = np.eye(self._m) * o.drum_scale_std**2
+        P[L.exit, L.exit] = np.eye(L.exit.stop - L.exit.start) * o.exit_point_std**2
+        P[L.anchor, L.anchor] = np.eye(L.anchor.stop - L.anchor.start) * o.anchor_point_std**2
+        if L.cam.stop > L.cam.start:
+            cam = [o.camera_position_std**2] * 3 + [o.camera_rotation_std**2] * 3
+            P[L.cam, L.cam] = np.diag(cam)
+
+    @property
+    def T_base_tag(self) -> np.ndarray | None:
+        """The tag's estimated pose in F_b (4, 4), or ``None`` before the first detection."""
+        return None if self._T_tag is None else self._T_tag.copy()
+
+    def predict(self, twist: np.ndarray, dt: float, rates: np.ndarray, taut: np.ndarray) -> None:
+        """Propagate with the commanded twist ξ (F_p) over dt [s]; process noise added.
+
+        The winches pay out (1 + ρ_i) times what they are commanded, so the platform moves by
+        ξ dt + A⁺ (ρ ⊙ l̇ dt) (A the taut cables' Jacobian): the prediction shares the drum
+        errors with the length readings, and the filter knows it.
+
+        Args:
+            twist: (6,) commanded platform twist [m/s, rad/s].
+            dt: time step [s].
+            rates: (m,) commanded winch rates [m/s].
+            taut: (m,) bool, the cables the platform hangs on (last reading).
+        """
+        o = self.options
+        twist = np.asarray(twist, dtype=float)
+        step = twist * dt
+        self._T = self._T @ se3_exp(step)
+        F = np.zeros((6, self._n))  # the pose rows of the transition; the others are I's
+        F[:, fm.POSE] = adjoint(se3_exp(-step))
+        if taut.sum() >= 6 and np.any(step):
+            _, rows = _kernel(self._cables, True, _pose(self._T))
+            rows = np.asarray(rows)
+            A = rows[taut]
+            A_pinv = np.linalg.solve(A.T @ A, A.T)
+            F[:, np.flatnonzero(taut) + self._drum.start] = A_pinv * (rates[taut] * dt)
+            if self.layout.exit.stop > self.layout.exit.start:
+                T_prev = self._T @ se3_exp(-step)
+                _, rows_prev = _kernel(self._cables, True, _pose(T_prev))
+                G = fm.geometry_rows(self.layout, rows, self._T[:3, :3])
+                G -= fm.geometry_rows(self.layout, np.asarray(rows_prev), T_prev[:3, :3])
+                F -= A_pinv @ G[taut]
+        X = F @ self.P  # F P Fᵀ, touching only the pose rows and columns
+        self.P[fm.POSE, :] = X
+        self.P[:, fm.POSE] = X.T
+        self.P[fm.POSE, fm.POSE] = X @ F.T
+        lag = (o.winch_time_constant * np.abs(twist - self._last_twist)) ** 2
+        q = np.array([o.process_position_std**2] * 3 + [o.process_rotation_std**2] * 3) * dt
+        self.P[fm.POSE, fm.POSE] += np.diag(q + lag)
+        self._last_twist = twist
+
+    def _inject(self, dx: np.ndarray) -> None:
+        self._T = self._T @ se3_exp(dx[fm.POSE])
+        self._T0 = self._T0 @ se3_exp(dx[fm.START])
+        self._rho = self._rho + dx[self._drum]
+        if self._T_tag is not None:
+            self._T_tag = self._T_tag @ se3_exp(dx[self._tag_slice])
+
+    def _taut(self, m: Measurement) -> np.ndarray:
+        """(m,) bool: cables reading above the taut threshold, not clipped."""
+        taut = np.asarray(m.tensions) > self.options.taut_threshold
+        if m.tensions_clipped is not None:
+            taut &= ~np.asarray(m.tensions_clipped)
+        return taut
+
+    def update_cables(self, m: Measurement) -> set[str]:
+        """Fuse the taut cables' lengths; returns the flags raised."""
+        o, g = self.options, self.geometry
+        c = fm.corrected_readings(m.cable_lengths, m.tensions, m.cable_rates, g.es, o.damping_time)
+        if self._ref is None:
+            self._ref = (np.asarray(m.cable_lengths).copy(), c)
+            return set()
+        flags: set[str] = set()
+        taut = self._taut(m)
+        if not taut.all():
+            flags.add(SLACK_CABLES)
+        lengths_now, rows_now = _kernel(self._cables, True, _pose(self._T))
+        lengths_0, rows_0 = _kernel(self._cables, True, _pose(self._T0))
+        moved = np.asarray(m.cable_lengths) - self._ref[0]
+        y = c - self._ref[1] + np.where(moved != 0.0, 0.5 * o.encoder_quantum, 0.0)
+        h = np.subtract(lengths_now, lengths_0) - self._rho * moved
+        H = np.zeros((self._m, self._n))
+        H[:, fm.POSE] = rows_now
+        H[:, fm.START] = -np.asarray(rows_0)
+        H[:, self._drum] = -np.diag(moved)
+        H += fm.geometry_rows(self.layout, np.asarray(rows_now), self._T[:3, :3])
+        H -= fm.geometry_rows(self.layout, np.asarray(rows_0), self._T0[:3, :3])
+        var = fm.cable_noise_var(
+            np.asarray(m.cable_lengths), np.maximum(m.tensions, 1e-9), g.es, o.encoder_quantum,
+            o.length_noise_std, o.tension_noise_std, o.taut_threshold,
+        )  # fmt: skip
+        r = y - h
+        s = np.einsum("ij,jk,ik->i", H, self.P, H) + var
+        gated = r**2 > self._gate1 * s
+        if np.any(gated & taut):
+            flags.add(CABLE_OUTLIER)
+        use = taut & ~gated
+        if use.sum() == 0:
+            return flags | {PREDICTED}
+        c = self.layout.consider
+        dx, self.P, _ = fm.joseph_update(self.P, H[use], np.diag(var[use]), r[use], c)
+        self._inject(dx)
+        return flags
+
+    def update_tag(self, m: Measurement) -> set[str]:
+        """Fuse a tag detection (the first one anchors the tag); returns the flags raised."""
+        o, g = self.options, self.geometry
+        if m.tag is None:
+            return {TAG_LOST} if m.camera_on else set()
+        z = np.asarray(m.tag.T_cam_tag)
+        if not np.all(np.isfinite(z)):
+            return {NON_FINITE_INPUT}
+        R = fm.tag_covariance(z, o.tag_size, o.focal_px, o.pixel_std)
+        lag = self._last_twist * o.tag_latency
+        R = R + np.diag((o.winch_time_constant * np.abs(self._last_twist)) ** 2 + 1e-12)
+        if self._T_tag is None:
+            self._anchor_tag(z, R, lag)
+            return set()
+        r, H_pose, z_hat = fm.tag_residual(self._T, self._T_tag, g.T_platform_cam, z, lag)
+        H = np.zeros((6, self._n))
+        H[:, fm.POSE] = H_pose
+        H[:, self._tag_slice] = np.eye(6)
+        if self.layout.cam.stop > self.layout.cam.start:
+            H[:, self.layout.cam] = -adjoint(np.linalg.inv(z_hat))
+        S = H @ self.P @ H.T + R
+        if r @ np.linalg.solve(S, r) > self._gate6:
+            return {TAG_OUTLIER}
+        dx, self.P, _ = fm.joseph_update(self.P, H, R, r, self.layout.consider)
+        self._inject(dx)
+        return set()
+
+    def _anchor_tag(self, z: np.ndarray, R: np.ndarray, lag: np.ndarray) -> None:
+        """Put the tag in F_b from this detection: ᵇT_o = T_lag ᵖT_c z, with its covariance."""
+        M = self.geometry.T_platform_cam @ z
+        self._T_tag = self._T @ se3_exp(-lag) @ M
+        J = np.zeros((6, self._n))  # δ_o = J x − n
+        J[:, fm.POSE] = adjoint(np.linalg.inv(M)) @ adjoint(se3_exp(lag))
+        if self.layout.cam.stop > self.layout.cam.start:
+            J[:, self.layout.cam] = adjoint(np.linalg.inv(z))
+        t, P = self._tag_slice, self.P
+        P[t, :] = J @ P
+        P[:, t] = P[t, :].T
+        P[t, t] = J @ P @ J.T + R
+
+    def update(
+        self, measurement: Measurement, inputs: Mapping[str, PoseEstimate] = NO_INPUTS
+    ) -> PoseEstimate:
+        """Predict with the last command, then fuse the cables and the tag."""
+        self._check_reset()
+        m = measurement
+        if (held := self._bad_time(m)) is not None:
+            return held
+        dt = m.time - self._time
+        if not dt >= 0:
+            raise ValueError(f"fused: measurement time {m.time} s precedes {self._time} s")
+        twist = m.twist_platform
+        if not np.all(np.isfinite(m.cable_lengths)) or not np.all(np.isfinite(m.tensions)):
+            return self._held(m, NON_FINITE_INPUT, covariance=self.P[fm.POSE, fm.POSE])
+        if dt > 0:
+            moving = twist is not None and np.all(np.isfinite(twist))
+            self.predict(
+                twist if moving else np.zeros(6), dt, m.cable_rates if moving else
+                np.zeros(self._m), self._taut(m),
+            )  # fmt: skip
+        flags = self.update_cables(m)
+        if self.options.use_tag:
+            flags |= self.update_tag(m)
+        self._time = m.time
+        return PoseEstimate(
+            m.time, self._T, flags=frozenset(flags), covariance=self.P[fm.POSE, fm.POSE]
+        )

@@ -1,0 +1,263 @@
+"""A Gymnasium environment over the twin: a policy takes the place of a scenario's controller.
+
+Each episode is a run of the scenario (its robot model, calibration-error magnitudes, sensors,
+realism profile, control rate, start pose and events, as ``cdpr-twin run`` would build it) in
+which the policy commands the winches at every control tick:
+
+- **action** (``Box(-1, 1)``, scaled by :attr:`CdprEnv.action_scale`): the platform twist
+  ᵇv_p = [v (m/s), ω (rad/s)] in the base frame, turned into cable rates through the *nominal*
+  Jacobian at the estimator's current pose (``action="twist"``, eq. 30), or the cable rates
+  l̇ (m/s) themselves (``action="cable_rates"``);
+- **observation** (a ``Dict``): the :class:`~cdpr_twin.types.Measurement` — ``cable_lengths``
+  (encoders, m), ``tensions`` (N), ``tag_detected`` (0/1) and ``tag_pose`` (the detected
+  ᶜT_o as [t (m), θu (rad)], pupil-apriltags' tag frame; zeros when not detected),
+  ``image`` (with ``image=True``) — and ``pose_estimate``, the configured estimator's
+  ᵇT_p from those measurements as [t (m), θu (rad)]. No ground truth;
+- **reward, termination** from the task (:mod:`cdpr_twin.gym.tasks`), scored on the truth;
+  truncation at the task's horizon. ``info`` carries the truth (``T_base_platform``, errors)
+  for evaluation only;
+- ``reset(seed=)`` draws the robot (its calibration errors; ``random_robot=False`` keeps the
+  scenario's) and the run seed (sensor noise, homing offset) from the seed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from types import MappingProxyType
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from cdpr_twin.gym.tasks import Score, Truth, make_task
+from cdpr_twin.kinematics import jacobian
+from cdpr_twin.runner import RunSetup, prepare, start
+from cdpr_twin.scenario import EstimatorConfig, Scenario, load_scenario
+from cdpr_twin.se3 import so3_log
+from cdpr_twin.sim import SimulationError
+from cdpr_twin.types import Command, Measurement, PoseEstimate
+
+ACTIONS = ("twist", "cable_rates")
+"""What an action commands."""
+SEED_BOUND = 2**31
+"""Robot and run seeds are drawn in [0, SEED_BOUND)."""
+FAILURE_REWARD = -10.0
+"""The reward of a step in which the simulation failed (the episode terminates)."""
+_POSITION, _LENGTH, _TENSION = 3.0, 5.0, 1000.0  # observation bounds [m, m, N]
+
+
+def pose6(T: np.ndarray) -> np.ndarray:
+    """A pose as the observations write it: [t (m), θu (rad)], (6,)."""
+    return np.concatenate([T[:3, 3], so3_log(T[:3, :3])])
+
+
+def _configure(
+    scenario: str | Scenario, estimator: str, camera: bool, scale: float, realism: str | None
+) -> Scenario:
+    """The scenario an episode runs: one estimator, the camera as asked, scaled truth."""
+    s = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    s = s if realism is None else s.with_realism(realism)
+    opts = {n: o for n, o in s.estimators.options.items() if n == estimator}
+    s = dataclasses.replace(s, estimators=EstimatorConfig(estimator, (), MappingProxyType(opts)))
+    if not (np.isfinite(scale) and scale >= 0):
+        raise ValueError(f"truth_scale must be ≥ 0 (0: the nominal robot), got {scale}")
+    stds = {f.name: getattr(s.truth, f.name) * scale for f in dataclasses.fields(s.truth)}
+    del stds["seed"]
+    s = dataclasses.replace(s, truth=dataclasses.replace(s.truth, **stds))
+    return s.with_overrides(in_loop=estimator, camera=camera)
+
+
+class CdprEnv(gym.Env):
+    """The twin as a Gymnasium environment (see the module's description).
+
+    Args:
+        task: ``"reach"`` (:class:`~cdpr_twin.gym.tasks.ReachPose`, to p1 by default),
+            ``"servo"`` (:class:`~cdpr_twin.gym.tasks.ServoToTag`, the paper's PBVS goal
+            view), or a task instance.
+        scenario: a shipped scenario's name, a scenario file or a :class:`Scenario`.
+        action: ``"twist"`` or ``"cable_rates"``.
+        estimator: the registered estimator behind ``pose_estimate`` (and the twist's Jacobian).
+        camera: render the camera and detect the tag (default: when the task, ``image`` or the
+            render mode needs it).
+        image: add the camera frame to the observation.
+        random_robot: draw the robot's calibration errors at each seeded reset.
+        truth_scale: factor on the scenario's calibration-error magnitudes (0: nominal robot).
+        realism: a realism profile (``"ideal"``, ``"acrobot"``) instead of the scenario's.
+        max_speed: |v| per axis at action ±1 [m/s] (twist).
+        max_angular_speed: |ω| per axis at action ±1 [rad/s] (twist).
+        max_cable_rate: |l̇| at action ±1 [m/s] (cable rates).
+        render_mode: ``None`` or ``"rgb_array"`` (the onboard camera's frame).
+
+    Raises:
+        ValueError: for an unknown task, action, estimator or render mode, or a bad scenario.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 25}  # noqa: RUF012 (gymnasium's)
+
+    def __init__(
+        self,
+        task: Any = "reach",
+        scenario: str | Scenario = "paper_open_loop",
+        action: str = "twist",
+        estimator: str = "model_elastic_pulley",
+        camera: bool | None = None,
+        image: bool = False,
+        random_robot: bool = True,
+        truth_scale: float = 1.0,
+        realism: str | None = None,
+        max_speed: float = 0.1,
+        max_angular_speed: float = 0.3,
+        max_cable_rate: float = 0.1,
+        render_mode: str | None = None,
+    ) -> None:
+        self.task = make_task(task)
+        if action not in ACTIONS:
+            raise ValueError(f"unknown action {action!r}; choose one of {', '.join(ACTIONS)}")
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"unknown render_mode {render_mode!r}; use None or 'rgb_array'")
+        wants_camera = self.task.needs_camera or image or render_mode is not None
+        if camera is None:
+            camera = wants_camera
+        elif wants_camera and not camera:
+            raise ValueError("the task, image=True or render_mode needs camera=True")
+        self.action_kind, self.image, self.render_mode = action, bool(image), render_mode
+        self.random_robot, self.estimator = bool(random_robot), estimator
+        self.scenario = _configure(scenario, estimator, bool(camera), truth_scale, realism)
+        self._period = self.scenario.model.control_period
+        self._horizon = max(1, round(self.task.horizon / self._period))
+        self._setup: RunSetup | None = prepare(self.scenario)  # the robot: cable count, camera
+        n = self._setup.physics.n_cables
+        twist = [max_speed] * 3 + [max_angular_speed] * 3
+        self.action_scale = np.array(twist if action == "twist" else [max_cable_rate] * n)
+        """Units of an action of 1: [m/s ×3, rad/s ×3] (twist) or m/s per cable."""
+        self.action_space = spaces.Box(-1.0, 1.0, (len(self.action_scale),), np.float32)
+        self.observation_space = self._observation_space(n)
+        self._m: Measurement | None = None
+        self._estimate: PoseEstimate | None = None
+        self._steps, self._seeds = 0, (self.scenario.truth.seed, self.scenario.seed)
+
+    @property
+    def nominal_geometry(self):
+        """The nominal geometry (what a policy may believe: exit/anchor points, camera mount)."""
+        return self._setup.nominal.geometry
+
+    def _observation_space(self, n: int) -> spaces.Dict:
+        pose_high = np.array([_POSITION] * 3 + [np.pi] * 3)
+        space = {
+            "cable_lengths": spaces.Box(0.0, _LENGTH, (n,), np.float64),
+            "tensions": spaces.Box(-_TENSION, _TENSION, (n,), np.float64),
+            "tag_detected": spaces.Discrete(2),
+            "tag_pose": spaces.Box(-pose_high, pose_high, (6,), np.float64),
+            "pose_estimate": spaces.Box(-pose_high, pose_high, (6,), np.float64),
+        }
+        if self.image:
+            k = self._setup.nominal.intrinsics
+            space["image"] = spaces.Box(0, 255, (k.height, k.width, 3), np.uint8)
+        return spaces.Dict(space)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Start an episode: a robot and run drawn from the seed, settled at the start pose.
+
+        Returns:
+            ``(observation, info)``.
+        """
+        super().reset(seed=seed)
+        robot_seed, run_seed = (int(v) for v in self.np_random.integers(SEED_BOUND, size=2))
+        if not self.random_robot:
+            robot_seed = self.scenario.truth.seed
+        s = dataclasses.replace(
+            self.scenario,
+            seed=run_seed,
+            truth=dataclasses.replace(self.scenario.truth, seed=robot_seed),
+        )
+        self.close()
+        self._setup = prepare(s)
+        start(self._setup)
+        physics = self._setup.physics
+        self._setup.events.fire(0.5 * physics.timestep)  # what is due at t = 0
+        self._steps, self._seeds = 0, (robot_seed, run_seed)
+        self._read(None)
+        return self._observation(), self._info(self.task.score(self._truth()))
+
+    def step(self, action):
+        """Command the winches for one control period, then read the sensors.
+
+        Returns:
+            ``(observation, reward, terminated, truncated, info)``.
+        """
+        if self._setup is None or self._m is None:
+            raise RuntimeError("call reset() before step()")
+        a = np.clip(np.asarray(action, dtype=float), -1.0, 1.0) * self.action_scale
+        command = self._command(a)
+        physics = self._setup.physics
+        try:
+            physics.advance(self._period, command.cable_rates)
+            self._setup.events.fire(physics.time + 0.5 * physics.timestep)
+            self._read(command)
+        except SimulationError as exc:
+            score = self.task.score(self._truth())
+            info = {**self._info(score), "failure": str(exc)}
+            return self._observation(), FAILURE_REWARD, True, False, info
+        self._steps += 1
+        score = self.task.score(self._truth())
+        truncated = self._steps >= self._horizon and not score.success
+        return self._observation(), float(score.reward), score.success, truncated, self._info(score)
+
+    def _command(self, a: np.ndarray) -> Command:
+        """The winch command of an action (and the platform twist it implies, ᵖv_p)."""
+        geometry = self._setup.nominal.geometry
+        T = self._estimate.T_base_platform
+        R = T[:3, :3]
+        if self.action_kind == "twist":
+            rates = jacobian(geometry, T, "base") @ a
+            return Command(rates, np.concatenate([R.T @ a[:3], R.T @ a[3:]]))
+        twist, *_ = np.linalg.lstsq(jacobian(geometry, T, "platform"), a, rcond=None)
+        return Command(a, twist)
+
+    def _read(self, command: Command | None) -> None:
+        self._m = self._setup.sensors.read(command)
+        self._estimate = self._setup.estimate(self._m)[self.estimator]
+
+    def _truth(self) -> Truth:
+        p = self._setup.physics
+        view = p.T_cam_tag.copy() if p.has_camera and p.has_tag else None
+        return Truth(p.T_base_platform.copy(), view)
+
+    def _observation(self) -> dict[str, Any]:
+        m = self._m
+        obs = {
+            "cable_lengths": np.array(m.cable_lengths, dtype=np.float64),
+            "tensions": np.array(m.tensions, dtype=np.float64),
+            "tag_detected": np.int64(m.tag is not None),
+            "tag_pose": pose6(m.tag.T_cam_tag) if m.tag is not None else np.zeros(6),
+            "pose_estimate": pose6(self._estimate.T_base_platform),
+        }
+        if self.image:
+            obs["image"] = np.array(m.image, dtype=np.uint8)
+        return obs
+
+    def _info(self, score: Score) -> dict[str, Any]:
+        """Truth and scores, for evaluation (a policy must not read them)."""
+        return {
+            "time": float(self._m.time),
+            "T_base_platform": self._setup.physics.T_base_platform.copy(),
+            "translation_error": score.translation_error,
+            "rotation_error": score.rotation_error,
+            "is_success": score.success,
+            "estimate_valid": bool(self._estimate.valid),
+            "robot_seed": self._seeds[0],
+            "run_seed": self._seeds[1],
+        }
+
+    def render(self) -> np.ndarray | None:
+        """The onboard camera's current frame (``render_mode="rgb_array"``), else ``None``."""
+        if self.render_mode != "rgb_array" or self._setup is None:
+            return None
+        return self._setup.sensors.render()
+
+    def close(self) -> None:
+        """Free the renderer (safe to call more than once)."""
+        if self._setup is not None:
+            self._setup.close()
+            self._setup = None

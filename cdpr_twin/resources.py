@@ -1,0 +1,139 @@
+"""The robots and scenarios shipped with the package, by name or by path.
+
+They live at the top of the repository (``models/<robot>/scene.xml``, ``scenarios/*.toml``) and
+are mapped into the package at build time as ``cdpr_twin.models`` and ``cdpr_twin.scenarios``
+(``pyproject.toml``), so :mod:`importlib.resources` finds them in a wheel and in an editable
+install alike. Only the standard library is imported here.
+
+>>> robot_scene("acrobot")            # …/models/acrobot/scene.xml
+>>> scenario_file("paper_open_loop")  # …/scenarios/paper_open_loop.toml
+"""
+
+from __future__ import annotations
+
+import importlib.resources
+import shutil
+from pathlib import Path
+
+_CHECKOUT = Path(__file__).resolve().parent.parent
+SCENE_FILE = "scene.xml"
+"""The file a robot directory is loaded from (its MJCF scene)."""
+
+
+class ResourceError(ValueError):
+    """A robot or scenario name that is not shipped, or a copy that cannot be made."""
+
+
+def _root(package: str) -> Path:
+    """The directory of a shipped resource package (the checkout's when not installed)."""
+    try:
+        root = importlib.resources.files(f"cdpr_twin.{package}")
+    except ModuleNotFoundError:  # a bare checkout on sys.path, never installed
+        return _CHECKOUT / package
+    if not isinstance(root, Path):
+        raise ResourceError(
+            f"cdpr_twin.{package} is not a directory ({root!r}); install cdpr-twin unzipped"
+        )
+    return root
+
+
+def models_dir() -> Path:
+    """The directory holding one subdirectory per shipped robot."""
+    return _root("models")
+
+
+def scenarios_dir() -> Path:
+    """The directory holding the shipped scenario files."""
+    return _root("scenarios")
+
+
+def robots() -> tuple[str, ...]:
+    """Names of the shipped robots (directories with a ``scene.xml``), sorted."""
+    return tuple(sorted(p.parent.name for p in models_dir().glob(f"*/{SCENE_FILE}")))
+
+
+def scenarios() -> tuple[str, ...]:
+    """Names of the shipped scenarios (file stems), sorted."""
+    return tuple(sorted(p.stem for p in scenarios_dir().glob("*.toml")))
+
+
+def robot_scene(name: str) -> Path:
+    """The MJCF scene of a shipped robot.
+
+    Raises:
+        ResourceError: for a name that is not shipped, listing those that are.
+    """
+    path = models_dir() / name / SCENE_FILE
+    if "/" in name or "\\" in name or not path.is_file():
+        raise ResourceError(
+            f"no robot named {name!r}; choose one of {', '.join(robots())} or give a model file"
+        )
+    return path
+
+
+def robot_model(ref: str | Path | None = None) -> Path:
+    """A robot's MJCF scene: a shipped robot's name, or a model file's path as given.
+
+    Args:
+        ref: a name (``"acrobot"``), a path, or ``None`` for the default robot ``acrobot``.
+
+    Raises:
+        ResourceError: for a bare name that is neither a file nor a shipped robot.
+    """
+    if ref is None:
+        return robot_scene("acrobot")
+    if is_name(ref) and not Path(ref).is_file():
+        return robot_scene(str(ref))
+    return Path(ref)
+
+
+def is_name(ref: str | Path) -> bool:
+    """Whether a reference is a bare name (no directory part, no suffix) rather than a path."""
+    text = str(ref)
+    return bool(text) and "/" not in text and "\\" not in text and not Path(text).suffix
+
+
+def scenario_file(ref: str | Path) -> Path:
+    """A scenario file: a shipped scenario's name, or a path returned as given.
+
+    A bare name (``paper_open_loop``) that is not a file in the working directory is looked up
+    among the shipped scenarios.
+
+    Raises:
+        ResourceError: for a bare name that is neither a file nor a shipped scenario.
+    """
+    path = Path(ref)
+    if not is_name(ref) or path.is_file():
+        return path
+    try:
+        return _shipped_scenario(str(ref))
+    except ResourceError as exc:
+        raise ResourceError(f"{exc} or give a .toml file") from None
+
+
+def _shipped_scenario(name: str) -> Path:
+    shipped = scenarios_dir() / f"{name}.toml"
+    if not is_name(name) or not shipped.is_file():
+        raise ResourceError(f"no scenario named {name!r}; choose one of {', '.join(scenarios())}")
+    return shipped
+
+
+def copy_scenario(name: str, dest: str | Path) -> Path:
+    """Copy a shipped scenario into a directory (created if needed) to start one's own.
+
+    Returns:
+        The new file's path.
+
+    Raises:
+        ResourceError: for an unknown name, an existing file, or an unwritable directory.
+    """
+    source = _shipped_scenario(name)
+    target = Path(dest) / source.name
+    if target.exists():
+        raise ResourceError(f"{target} exists; remove it or copy into another directory")
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(source, target)
+    except OSError as exc:
+        raise ResourceError(f"cannot write {target}: {exc.strerror}") from None
+    return target

@@ -1,0 +1,1 @@
+"""Scenario files shipped with cdpr-twin (installed as cdpr_twin.scenarios)."""

@@ -1,0 +1,178 @@
+"""Campaigns: validated before they run, the same table from local processes and from Ray, each
+row equal to its run's own summary.json, resumable after a kill, stoppable with a valid table."""
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from cdpr_twin.campaign import CampaignError, load_campaign, load_table, run_campaign
+from cdpr_twin.cli import main
+from cdpr_twin.timeseries import Timeseries
+
+ROOT = Path(__file__).resolve().parent.parent
+SMALL = f"""
+name = "small"
+scenario = "{ROOT}/scenarios/paper_open_loop.toml"
+seed = 7
+samples = 3
+artefacts = "csv"
+
+[overrides]
+"sensors.camera" = false
+duration = 1.0
+
+[[axes]]
+key = "truth.exit_point_std"
+values = [0.0, 0.012]
+
+[[axes]]
+key = "seed"
+values = [1, 2]
+
+[[axes]]
+key = "truth.seed"
+draw = "integers"
+low = 1
+high = 1000
+"""
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    path = tmp_path_factory.mktemp("campaign") / "small.toml"
+    path.write_text(SMALL)
+    campaign = load_campaign(path)
+    out = path.parent / "local"
+    info = run_campaign(campaign, out, workers=2)
+    return campaign, out, info
+
+
+def test_a_campaign_expands_its_axes_reproducibly(small):
+    campaign, _, _ = small
+    assert len(campaign.tasks) == 12  # 2 × 2 grid points × 3 random draws
+    again = load_campaign(campaign.source)
+    assert [t.run_id for t in again.tasks] == [t.run_id for t in campaign.tasks]
+    assert len({t.run_id for t in campaign.tasks}) == 12
+    robots = {t.params["truth.seed"] for t in campaign.tasks}
+    assert len(robots) > 6 and all(1 <= r <= 1000 for r in robots)
+
+
+def test_every_row_equals_its_runs_own_summary(small):
+    campaign, out, info = small
+    assert info["ran_now"] == 12 and info["status"] == "completed"
+    rows = load_table(out).to_pylist()
+    assert sorted(r["run_id"] for r in rows) == sorted(t.run_id for t in campaign.tasks)
+    for row in rows:
+        s = json.loads((out / "runs" / row["run_id"] / "summary.json").read_text())
+        assert row["status"] == s["status"] and row["ok"]
+        assert row["simulated_time_s"] == s["simulated_time_s"] and row["seed"] == s["seed"]
+        for name, e in s["estimators"].items():
+            assert row[f"est.{name}.max_t_m"] == e["max_translation_m"]
+            assert row[f"est.{name}.rms_r_deg"] == e["rms_rotation_deg"]
+            assert row[f"est.{name}.final_t_m"] == e["final_translation_m"]
+        task = next(t for t in campaign.tasks if t.run_id == row["run_id"])
+        assert row["param.truth.seed"] == task.params["truth.seed"] == s["truth_seed"]
+    # the RMS deviation itself, recomputed from the run's timeseries
+    row = rows[0]
+    ts = Timeseries.load(out / "runs" / row["run_id"] / "timeseries.csv")
+    dt, _ = ts.deviation("model_elastic_pulley")
+    assert row["est.model_elastic_pulley.rms_t_m"] == pytest.approx(np.sqrt(np.mean(dt**2)))
+    # one line of pandas, as in a notebook
+    import pandas as pd
+
+    assert len(pd.read_parquet(out / "results.parquet")) == 12
+
+
+def test_a_finished_campaign_resumed_runs_nothing_and_is_refused_without_resume(small):
+    campaign, out, _ = small
+    assert run_campaign(campaign, out, workers=2, resume=True)["ran_now"] == 0
+    code = main(["campaign", str(campaign.source), "--out", str(out)])
+    assert code == 2  # holds results: refused, nothing touched
+    assert len(load_table(out)) == 12
+    # the command resumed: nothing runs, the report is computed from the table
+    assert main(["campaign", str(campaign.source), "--out", str(out), "--resume"]) == 0
+    report = (out / "report.md").read_text()
+    rows = load_table(out).to_pylist()
+    err = [1e3 * r["final_t_m"] for r in rows if r["param.truth.exit_point_std"] == 0.012]
+    assert f"| 0.012 | 6 | median {np.median(err):.2f}" in report
+    assert (out / "distribution.png").stat().st_size > 1000
+
+
+def test_ray_runs_the_same_campaign_to_the_same_numbers(small, tmp_path):
+    ray = pytest.importorskip("ray", reason="Ray has no wheel for this platform")
+    campaign, out, _ = small
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        info = run_campaign(campaign, tmp_path / "ray", ray_address=True)
+    finally:
+        ray.shutdown()
+    assert info["executor"] == "ray" and info["ran_now"] == 12
+    local = {r["run_id"]: r for r in load_table(out).to_pylist()}
+    for row in load_table(tmp_path / "ray").to_pylist():
+        want = local[row["run_id"]]
+        for key in want:
+            if key not in ("wall_time_s", "summary"):
+                assert row[key] == want[key], key  # same seeds ⇒ the same numbers
+
+
+def test_resume_after_a_killed_campaign_reruns_only_the_missing_runs(small, tmp_path):
+    campaign, _, _ = small
+    out = tmp_path / "killed"
+    cmd = [sys.executable, "-m", "cdpr_twin", "campaign", str(campaign.source), "--out", str(out),
+           "--workers", "1"]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 300
+    while not list((out / "parts").glob("part-*.parquet")) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGKILL)  # no chance to clean up
+    proc.wait()
+    done = {r for p in (out / "parts").glob("part-*.parquet")
+            for r in pq.read_table(p).column("run_id").to_pylist()}  # fmt: skip
+    assert 0 < len(done) < 12
+    info = run_campaign(campaign, out, workers=2, resume=True)  # takes over the stale lock
+    assert info["ran_now"] == 12 - len(done) and info["skipped_done"] == len(done)
+    ids = load_table(out).column("run_id").to_pylist()
+    assert sorted(ids) == sorted(t.run_id for t in campaign.tasks)
+
+
+def test_ctrl_c_stops_with_a_valid_table(small, tmp_path):
+    campaign, _, _ = small
+    out = tmp_path / "stopped"
+
+    def stop(done, total, row):
+        if done == 4:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_campaign(campaign, out, workers=2, progress=stop)
+    info = json.loads((out / "campaign.json").read_text())
+    assert info["status"] == "interrupted" and info["ran_now"] == 4
+    assert len(pq.read_table(out / "results.parquet")) == 4
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (('key = "seed"', 'key = "sede"'), "sede: unknown field"),
+        (('key = "truth.exit_point_std"', 'key = "truth.exit_pont_std"'), "exit_pont_std"),
+        (("values = [0.0, 0.012]", "values = [0.0, -1.0]"), "exit_point_std"),
+        (('draw = "integers"', 'draw = "gaussian"'), "axes[2].draw: must be one of"),
+        (("samples = 3", "samples = 0"), "samples: must be an integer ≥ 1"),
+    ],
+)
+def test_a_bad_campaign_is_a_one_line_error_before_anything_runs(tmp_path, capsys, change, message):
+    path = tmp_path / "bad.toml"
+    path.write_text(SMALL.replace(*change))
+    with pytest.raises(CampaignError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        load_campaign(path)
+    assert main(["campaign", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(path) in err and message.split(":")[0] in err
+    assert not (tmp_path / "out").exists()

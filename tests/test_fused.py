@@ -1,0 +1,155 @@
+"""Est. 7, ``fused`` (issue 11): consistency against the twin's ground truth, and its cases.
+
+The Monte Carlo: 50 runs of the paper's open-loop path (its first 4 s, camera off: the cables
+and the commanded twist only), each on a robot built to the nominal model whose per-robot
+realism draws (drum radii, tension-sensor bias and gain) and per-run noise (tension readings,
+encoder quantisation, homing offset) come from its own seeds, with the ``acrobot`` profile.
+Each estimate's error against the twin's ground truth, normalised by the filter's own covariance
+(NEES), averaged over the runs, must lie within the 95 % χ²(6N)/N bounds (Bar-Shalom §5.4).
+"""
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import paper_pose
+
+from cdpr_twin import se3
+from cdpr_twin.estimators import make_estimator
+from cdpr_twin.estimators.base import TAG_LOST
+from cdpr_twin.estimators.fused import CABLE_OUTLIER, PREDICTED, SLACK_CABLES, TAG_OUTLIER
+from cdpr_twin.runner import run
+from cdpr_twin.scenario import load_scenario
+from cdpr_twin.study.nees import monte_carlo
+from cdpr_twin.timeseries import load_timeseries
+from cdpr_twin.types import Command, Measurement, TagDetection
+
+ROOT = Path(__file__).resolve().parent.parent
+RUNS = 50
+
+
+def _open_loop(duration: float, camera: bool, nominal_geometry: bool):
+    s = load_scenario(ROOT / "scenarios" / "paper_open_loop.toml")
+    options = dict(s.estimators.options)
+    if nominal_geometry:  # the robot is built to the model: the filter is told so
+        options["fused"] = replace(
+            options["fused"], exit_point_std=0.0, anchor_point_std=0.0,
+            camera_position_std=0.0, camera_rotation_std=0.0,
+        )  # fmt: skip
+    s = replace(s, estimators=replace(s.estimators, passive=("fused",), options=options))
+    return s.with_overrides(duration=duration, camera=camera)
+
+
+def test_nees_over_50_runs_lies_within_the_95_percent_chi2_bounds():
+    result = monte_carlo(_open_loop(4.0, camera=False, nominal_geometry=True), "fused", RUNS)
+    lo, hi = result.bounds(0.95)
+    average = result.average[1:]  # t = 0 is the reset pose: the prior itself
+    anees = float(average.mean())
+    inside = float(np.mean((average > lo) & (average < hi)))
+    print(f"ANEES {anees:.2f} within [{lo:.2f}, {hi:.2f}]; {inside:.0%} of ticks inside")
+    assert lo < anees < hi
+    assert inside >= 0.95
+    # not consistent by being vague: the errors are millimetres and so are the sigmas
+    assert 2e-4 < np.sqrt(np.mean(result.errors[:, -1, :3] ** 2)) < 3e-3
+
+
+def _static_measurement(twin, T, t=0.0, **changes):
+    m = twin.sense()
+    fields = {"time": t, "cable_lengths": m.cable_lengths, "tensions": m.tensions}
+    fields.update(changes)
+    return Measurement(**fields)
+
+
+def test_outlier_cable_is_gated_and_slack_cables_are_left_out(twin):
+    T = paper_pose("p2")
+    twin.reset(T)
+    est = make_estimator("fused", twin.nominal_geometry)
+    est.reset(T)
+    m0 = _static_measurement(twin, T)
+    est.update(m0)
+    zero = Command(np.zeros(8), np.zeros(6))
+    bad = m0.cable_lengths.copy()
+    bad[2] += 0.005  # a 5 mm encoder glitch on cable 3
+    e = est.update(Measurement(0.04, bad, m0.tensions, command=zero))
+    assert CABLE_OUTLIER in e.flags
+    assert se3.pose_distance(e.T_base_platform, twin.T_base_platform)[0] < 20e-6
+    slack = m0.tensions.copy()
+    slack[[0, 5]] = 0.2
+    e = est.update(Measurement(0.08, m0.cable_lengths, slack, command=zero))
+    assert SLACK_CABLES in e.flags and CABLE_OUTLIER not in e.flags
+    assert se3.pose_distance(e.T_base_platform, twin.T_base_platform)[0] < 20e-6
+
+
+def test_without_usable_readings_it_predicts_and_its_covariance_grows(twin):
+    T = paper_pose("p0")
+    twin.reset(T)
+    est = make_estimator("fused", twin.nominal_geometry)
+    est.reset(T)
+    m0 = _static_measurement(twin, T)
+    est.update(m0)
+    twist = np.array([0.01, 0.0, 0.0, 0.0, 0.0, 0.0])
+    traces = []
+    for k in range(1, 6):  # every cable reads slack, the tag is lost: prediction only
+        command, image = Command(np.zeros(8), twist), np.zeros((2, 2, 3), np.uint8)
+        m = Measurement(0.04 * k, m0.cable_lengths, np.zeros(8), command=command, image=image)
+        e = est.update(m)
+        assert {PREDICTED, TAG_LOST, SLACK_CABLES} <= e.flags
+        traces.append(np.trace(e.covariance))
+    assert np.all(np.diff(traces) > 0)
+    moved = T @ se3.se3_exp(twist * 0.2)  # the commanded twist, integrated (eq. 9)
+    assert se3.pose_distance(e.T_base_platform, moved)[0] < 1e-12
+
+
+def _detection(T_base_platform, T_platform_cam, T_base_tag):
+    T_cam_tag = se3.inverse(T_base_platform @ T_platform_cam) @ T_base_tag
+    return TagDetection(0, np.zeros((4, 2)), T_cam_tag, 50.0, 0.1)
+
+
+def test_tag_anchors_then_corrects_and_an_outlier_detection_is_rejected(twin):
+    g = twin.nominal_geometry
+    T = paper_pose("p1")
+    T_base_tag = T @ g.T_platform_cam @ se3.pose_from_vector([0.0, 0.0, 0.09, 180, 0, 180])
+    est = make_estimator("fused", g, tag_latency=0.0)
+    est.reset(T)
+    slack, image = np.zeros(8), np.zeros((2, 2, 3), np.uint8)
+    cmd = Command(np.zeros(8), np.zeros(6))
+    est.update(Measurement(0.0, np.ones(8), slack, image=image,
+                           tag=_detection(T, g.T_platform_cam, T_base_tag)))  # fmt: skip
+    assert est.T_base_tag is not None
+    blind = make_estimator("fused", g, tag_latency=0.0)  # the same, but loses the tag
+    blind.reset(T)
+    blind.update(Measurement(0.0, np.ones(8), slack, image=image,
+                             tag=_detection(T, g.T_platform_cam, T_base_tag)))  # fmt: skip
+    # 1 s later, the platform moved by what the process noise allows (≈ 1 mm, 0.05° per √s)
+    T_moved = T @ se3.se3_exp([0.001, -0.0005, 0.0, 0.0, 0.0, 0.001])  # unknown to the filter
+    e = est.update(Measurement(1.0, np.ones(8), slack, command=cmd, image=image,
+                               tag=_detection(T_moved, g.T_platform_cam, T_base_tag)))  # fmt: skip
+    assert not e.flags & {TAG_OUTLIER, TAG_LOST}
+    before = se3.pose_distance(T, T_moved)[0]
+    after = se3.pose_distance(e.T_base_platform, T_moved)[0]
+    assert after < 0.2 * before
+    T_far = T_moved @ se3.se3_exp([0.05, 0.0, 0.0, 0.0, 0.3, 0.0])  # 5 cm, 17°: a false detection
+    e2 = est.update(Measurement(1.04, np.ones(8), slack, command=cmd, image=image,
+                                tag=_detection(T_far, g.T_platform_cam, T_base_tag)))  # fmt: skip
+    assert TAG_OUTLIER in e2.flags
+    assert se3.pose_distance(e2.T_base_platform, e.T_base_platform)[0] < 1e-5
+    predicted = blind.update(Measurement(1.0, np.ones(8), slack, command=cmd, image=image))
+    assert TAG_LOST in predicted.flags
+    assert np.all(np.diag(e.covariance) < np.diag(predicted.covariance))
+
+
+def test_covariance_columns_and_ellipsoid_are_recorded(tmp_path):
+    run(_open_loop(0.4, camera=False, nominal_geometry=False), tmp_path, record_rrd=True)
+    ts = load_timeseries(tmp_path / "timeseries.csv")
+    P = ts.covariance("fused")
+    assert "model_simple_cov_x_x" not in ts.columns and "fused_cov_rz_rz" in ts.columns
+    assert np.allclose(P, np.swapaxes(P, 1, 2)) and np.all(np.linalg.eigvalsh(P) > 0)
+    assert 1e-4 < np.sqrt(P[-1, 0, 0]) < 0.02  # millimetres: homing and calibration priors
+    assert (tmp_path / "recording.rrd").stat().st_size > 0
+
+
+@pytest.mark.parametrize("name", ["fused"])
+def test_fused_rejects_bad_options(twin, name):
+    with pytest.raises(ValueError, match="pixel_std"):
+        make_estimator(name, twin.nominal_geometry, pixel_std=-1.0)

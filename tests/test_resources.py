@@ -1,0 +1,148 @@
+"""Robots and scenarios by name, `cdpr-twin scenarios list|copy`, and `cdpr-twin view`."""
+
+import os
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from cdpr_twin import cli, cli_tools, resources
+from cdpr_twin.scenario import ScenarioError, load_scenario
+
+ROOT = Path(__file__).resolve().parent.parent
+SHIPPED = tuple(sorted(p.stem for p in (ROOT / "scenarios").glob("*.toml")))
+
+
+def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "cdpr_twin", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        env={**os.environ, "MUJOCO_GL": "egl"},
+        timeout=300,
+    )
+
+
+def test_shipped_robots_and_scenarios_are_found_by_name():
+    assert resources.robots() == ("acrobot",)
+    assert resources.robot_scene("acrobot").samefile(ROOT / "models" / "acrobot" / "scene.xml")
+    assert resources.scenarios() == SHIPPED
+    by_name = load_scenario("paper_pbvs")
+    assert by_name.source.samefile(ROOT / "scenarios" / "paper_pbvs.toml")
+    assert by_name.model.file.samefile(ROOT / "models" / "acrobot" / "scene.xml")
+    expected = "no scenario named 'paper'; choose one of " + ", ".join(SHIPPED)
+    with pytest.raises(ScenarioError, match=expected):
+        load_scenario("paper")
+    with pytest.raises(resources.ResourceError, match="no robot named 'cogiro'; choose one of"):
+        resources.robot_scene("cogiro")
+
+
+def test_a_twin_is_built_by_robot_name_or_path_not_both():
+    from cdpr_twin.sim import ModelError, Twin
+
+    with Twin(robot="acrobot", camera=False) as twin:
+        assert twin.model_path.samefile(ROOT / "models" / "acrobot" / "scene.xml")
+        assert twin.physics.n_cables == 8
+    with pytest.raises(ModelError, match="no robot named 'acrobat'; choose one of acrobot"):
+        Twin(robot="acrobat", camera=False)
+    with pytest.raises(ValueError, match="either model_path or robot"):
+        Twin(ROOT / "models" / "acrobot" / "scene.xml", robot="acrobot", camera=False)
+
+
+def test_a_scenario_names_its_robot_or_a_file_not_both(tmp_path):
+    text = (ROOT / "scenarios" / "paper_open_loop.toml").read_text()
+    assert 'robot = "acrobot"' in text
+    path = tmp_path / "s.toml"
+    path.write_text(text.replace('robot = "acrobot"', 'robot = "acrobat"', 1))
+    with pytest.raises(ScenarioError, match=r"model\.robot: no robot named 'acrobat'"):
+        load_scenario(path)
+    scene = ROOT / "models" / "acrobot" / "scene.xml"
+    path.write_text(text.replace('robot = "acrobot"', f'robot = "acrobot"\nfile = "{scene}"', 1))
+    with pytest.raises(ScenarioError, match=r"model\.robot: give either robot"):
+        load_scenario(path)
+    path.write_text(text.replace('robot = "acrobot"', f'file = "{scene}"', 1))
+    assert load_scenario(path).model.file == scene
+
+
+def test_scenarios_list_and_copy_start_ones_own(tmp_path):
+    listed = _cli("scenarios", "list", cwd=tmp_path)
+    assert listed.returncode == 0, listed.stderr
+    rows = {line.split()[0]: line for line in listed.stdout.splitlines()}
+    assert set(rows) == set(SHIPPED)
+    shipped = tomllib.loads((ROOT / "scenarios" / "paper_pbvs.toml").read_text())
+    assert shipped["description"] in rows["paper_pbvs"]
+    copied = _cli("scenarios", "copy", "paper_open_loop", "mine", cwd=tmp_path)
+    assert copied.returncode == 0, copied.stderr
+    target = tmp_path / "mine" / "paper_open_loop.toml"
+    assert target.read_bytes() == (ROOT / "scenarios" / "paper_open_loop.toml").read_bytes()
+    assert load_scenario(target).model.file.samefile(resources.robot_scene("acrobot"))
+    again = _cli("scenarios", "copy", "paper_open_loop", "mine", cwd=tmp_path)
+    assert again.returncode == 2 and "exists; remove it" in again.stderr
+    unknown = _cli("scenarios", "copy", "paper", "mine", cwd=tmp_path)
+    assert unknown.returncode == 2 and len(unknown.stderr.strip().splitlines()) == 1
+    assert "choose one of " + ", ".join(SHIPPED) in unknown.stderr
+
+
+def test_view_opens_the_run_recording_in_the_rerun_viewer(tmp_path, monkeypatch, capsys):
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    assert cli.main(["view", str(run_dir)]) == 2
+    assert "no recording; give a run directory" in capsys.readouterr().err
+    (run_dir / "recording.rrd").write_bytes(b"")
+    started = []
+
+    class FakeViewer:
+        def __init__(self, command):
+            started.append(command)
+
+        def wait(self):
+            return 0
+
+    monkeypatch.setattr(cli_tools.subprocess, "Popen", FakeViewer)
+    assert cli.main(["view", str(run_dir)]) == 0
+    assert started == [[sys.executable, "-m", "rerun", str(run_dir / "recording.rrd")]]
+    assert cli.main(["view", str(run_dir), "--print-command"]) == 0
+    assert capsys.readouterr().out.split() == started[0]
+    assert len(started) == 1
+    monkeypatch.undo()
+    # the printed command is the viewer of this environment's rerun-sdk
+    version = subprocess.run(
+        [*started[0][:3], "--version"], capture_output=True, text=True, timeout=60
+    )
+    import rerun
+
+    assert version.returncode == 0 and rerun.__version__ in version.stdout
+
+
+@pytest.mark.parametrize(
+    ("given", "url"),
+    [
+        ("9876", "rerun+http://127.0.0.1:9876/proxy"),
+        ("robot-pc:9000", "rerun+http://robot-pc:9000/proxy"),
+        ("rerun+http://10.0.0.2:9876/proxy", "rerun+http://10.0.0.2:9876/proxy"),
+    ],
+)
+def test_connect_addresses(given, url):
+    assert cli_tools.live_url(given) == url
+
+
+def test_a_bad_connect_address_is_a_one_line_error(tmp_path):
+    proc = _cli("run", "paper_open_loop", "--connect", "http://x/y", cwd=tmp_path)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == (
+        "cdpr-twin: error: --connect 'http://x/y': give a port, host:port or a URL "
+        "rerun+http://host:port/proxy"
+    )
+    assert not (tmp_path / "runs").exists()
+
+
+def test_spawn_and_connect_together_is_a_one_line_error(tmp_path):
+    proc = _cli("run", "paper_open_loop", "--spawn", "--connect", "9876", cwd=tmp_path)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == (
+        "cdpr-twin: error: give --spawn (a new viewer) or --connect ADDR, not both"
+    )
+    assert not (tmp_path / "runs").exists()
