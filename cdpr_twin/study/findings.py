@@ -1,8 +1,7 @@
 """The paper's findings, checked against the twin's numbers: one small rule per finding.
 
 Each rule reads the report numbers (:func:`cdpr_twin.study.analyse`) and returns a
-:class:`Finding`, or ``None`` when the numbers it needs are not there (a run failed, or the study
-was scaled down). :data:`FINDINGS` lists the rules in report order; :func:`evaluate` applies them.
+:class:`Finding`, or ``None`` without the numbers it needs; :func:`evaluate` applies them all.
 """
 
 from __future__ import annotations
@@ -393,8 +392,7 @@ FINDINGS: tuple[Rule, ...] = (
     partial(pbvs_more_accurate, key="translation_m", paper_ratio=5.0, unit="translation"),
     partial(pbvs_more_accurate, key="rotation_deg", paper_ratio=4.0, unit="rotation"),
     fused_beats_each,
-)
-"""Every finding's rule, in report order."""
+)  # every finding's rule, in report order
 
 
 def evaluate(rep: dict, rules: tuple[Rule, ...] = FINDINGS) -> list[dict]:
