@@ -219,7 +219,7 @@ def _monitor(s: Scenario, physics):
 
     if not s.monitor.enabled:
         return None
-    limits = robot_limits(physics.model, s.realism.tension.range_max, s.model.control_period)
+    limits = robot_limits(physics, s.realism.tension.range_max, s.model.control_period)
     monitor = Monitor(physics, limits)
     physics.add_hook(monitor)
     return monitor

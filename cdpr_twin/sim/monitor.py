@@ -26,6 +26,8 @@ from enum import StrEnum
 import mujoco
 import numpy as np
 
+from cdpr_twin.sim.model import numeric
+
 DIVERGENCE_WARNINGS = (
     mujoco.mjtWarning.mjWARN_BADQACC,
     mujoco.mjtWarning.mjWARN_BADQPOS,
@@ -104,24 +106,23 @@ class MonitorLimits:
 
 
 def _numeric_or(model: mujoco.MjModel, name: str, default: float) -> float:
-    nid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, name)
-    return float(model.numeric_data[model.numeric_adr[nid]]) if nid >= 0 else default
+    present = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, name) >= 0
+    return float(numeric(model, name)[0]) if present else default
 
 
-def robot_limits(model: mujoco.MjModel, sensor_max: float, slack_time: float) -> MonitorLimits:
+def robot_limits(physics, sensor_max: float, slack_time: float) -> MonitorLimits:
     """The limits a model declares in ``<numeric>`` elements.
 
     ``cable_breaking_load`` [N], ``platform_max_speed`` [m/s], ``platform_max_angular_speed``
     [rad/s], ``floor_height`` [m] (each check is off without its element), and the frame.
 
     Args:
-        model: the compiled robot model.
+        physics: the simulated robot (:class:`~cdpr_twin.sim.physics.Physics`): its model and
+            the geometry read from it.
         sensor_max: the tension sensors' range top [N].
         slack_time: how long fewer than six cables may be taut [s].
     """
-    from cdpr_twin.sim.model import read_geometry  # (no cycle at import time)
-
-    geom = read_geometry(model)
+    model, geom = physics.model, physics.geometry
     return MonitorLimits(
         breaking_load=_numeric_or(model, "cable_breaking_load", math.inf),
         sensor_max=float(sensor_max),
