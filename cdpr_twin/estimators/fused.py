@@ -31,7 +31,7 @@ from cdpr_twin.estimators.base import NO_INPUTS, NON_FINITE_INPUT, TAG_LOST, Est
 from cdpr_twin.estimators.solvers import _cable_tuples, _kernel, _pose
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.plugins import OptionError, option, register
-from cdpr_twin.se3 import adjoint, se3_exp
+from cdpr_twin.se3 import adjoint, inverse, se3_exp
 from cdpr_twin.types import Measurement, PoseEstimate
 
 SLACK_CABLES = "slack_cables"
@@ -181,9 +181,10 @@ class FusedEstimator(Estimator):
         o = self.options
         twist = np.asarray(twist, dtype=float)
         step = twist * dt
-        self._T = self._T @ se3_exp(step)
+        T_prev, E = self._T, se3_exp(step)
+        self._T = T_prev @ E
         F = np.zeros((6, self._n))  # the pose rows of the transition; the others are I's
-        F[:, fm.POSE] = adjoint(se3_exp(-step))
+        F[:, fm.POSE] = adjoint(inverse(E))
         if taut.sum() >= 6 and np.any(step):
             _, rows = _kernel(self._cables, True, _pose(self._T))
             rows = np.asarray(rows)
@@ -191,7 +192,6 @@ class FusedEstimator(Estimator):
             A_pinv = np.linalg.solve(A.T @ A, A.T)
             F[:, np.flatnonzero(taut) + self._drum.start] = A_pinv * (rates[taut] * dt)
             if self.layout.exit.stop > self.layout.exit.start:
-                T_prev = self._T @ se3_exp(-step)
                 _, rows_prev = _kernel(self._cables, True, _pose(T_prev))
                 G = fm.geometry_rows(self.layout, rows, self._T[:3, :3])
                 G -= fm.geometry_rows(self.layout, np.asarray(rows_prev), T_prev[:3, :3])
@@ -246,14 +246,14 @@ class FusedEstimator(Estimator):
             o.length_noise_std, o.tension_noise_std, o.taut_threshold,
         )  # fmt: skip
         r = y - h
-        s = np.einsum("ij,jk,ik->i", H, self.P, H) + var
+        s = np.sum((H @ self.P) * H, axis=1) + var  # diag(H P Hᵀ) + var
         gated = r**2 > self._gate1 * s
         if np.any(gated & taut):
             flags.add(CABLE_OUTLIER)
         use = taut & ~gated
         if use.sum() == 0:
             return flags | {PREDICTED}
-        c = self.layout.consider
+        c = self.layout.corrected
         dx, self.P, _ = fm.joseph_update(self.P, H[use], np.diag(var[use]), r[use], c)
         self._inject(dx)
         return flags
@@ -281,7 +281,7 @@ class FusedEstimator(Estimator):
         S = H @ self.P @ H.T + R
         if r @ np.linalg.solve(S, r) > self._gate6:
             return {TAG_OUTLIER}
-        dx, self.P, _ = fm.joseph_update(self.P, H, R, r, self.layout.consider)
+        dx, self.P, _ = fm.joseph_update(self.P, H, R, r, self.layout.corrected)
         self._inject(dx)
         return set()
 

@@ -6,8 +6,8 @@ The filter's error state (:mod:`cdpr_twin.estimators.fused`) is, in this order,
 |---|---|---|
 | ``POSE`` (6) | δ | the platform pose error, ``T_true = T · exp(δ)``, δ = [v, ω] in F_p |
 | ``START`` (6) | δ₀ | the error of the pose at the reference reading (homing repeatability) |
-| ``DRUM`` (m) | ρ | each drum's true/nominal radius ratio − 1 (the encoders' scale error) |
 | ``TAG`` (6) | δ_o | the tag pose's error in F_b, ``T_base_tag_true = T_base_tag · exp(δ_o)`` |
+| ``DRUM`` (m) | ρ | each drum's true/nominal radius ratio − 1 (the encoders' scale error) |
 
 Cable model. The encoders are homed at the start pose: each reading counts the paid-out length
 since then through the nominal drum radius. With c_i = l_i + l_i τ_i / E·S_i − η l̇_i the
@@ -63,19 +63,25 @@ class Layout:
 
     @classmethod
     def build(cls, m: int, geometry: bool, camera: bool, consider_drums: bool) -> Layout:
-        """The layout for m cables, with or without the geometry and camera-mount states."""
-        sizes = {"drum": m, "exit": 3 * m * geometry, "anchor": 3 * m * geometry,
-                 "cam": 6 * camera, "tag": 6}  # fmt: skip
+        """The layout for m cables, with or without the geometry and camera-mount states.
+
+        The corrected states come first (pose, start, tag, then the drums unless they are
+        considered) and the considered ones last, so that an update touches a leading block.
+        """
+        sizes = {"tag": 6, "drum": m, "exit": 3 * m * geometry, "anchor": 3 * m * geometry,
+                 "cam": 6 * camera}  # fmt: skip
         start, out = 12, {}
         for name, size in sizes.items():
             out[name] = slice(start, start + size)
             start += size
         consider = np.zeros(start, dtype=bool)
-        if consider_drums:
-            consider[out["drum"]] = True
-        for name in ("exit", "anchor", "cam"):
-            consider[out[name]] = True
+        consider[out["drum"].start if consider_drums else out["drum"].stop :] = True
         return cls(n=start, consider=consider, **out)
+
+    @property
+    def corrected(self) -> int:
+        """How many leading states an update corrects (the rest are considered)."""
+        return int(np.argmax(self.consider)) if self.consider.any() else self.n
 
 
 def corrected_readings(
@@ -204,42 +210,53 @@ def joseph_update(
     H: np.ndarray,
     R: np.ndarray,
     innovation: np.ndarray,
-    consider: np.ndarray | None = None,
+    corrected: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """One Kalman update in Joseph form, optionally with "consider" states (Schmidt).
 
     The Joseph form P⁺ = (I − KH) P (I − KH)ᵀ + K R Kᵀ is the covariance of the update for any
     gain K, so zeroing the gain of some states keeps P exact: those states are *considered*
     (their uncertainty and correlations shape every update) but never corrected, and what the
-    data seem to say about them is not believed.
+    data seem to say about them is not believed. It is evaluated as
+    P⁺ = P − K(HP) − (HP)ᵀKᵀ + K S Kᵀ (S = HPHᵀ + R), the same matrix in O(n²k) rather than
+    O(n³): with the considered states last, only the leading rows and columns change.
 
     Args:
         P: (n, n) prior covariance.
         H: (k, n) measurement Jacobian.
         R: (k, k) measurement noise covariance.
         innovation: (k,) measured − predicted.
-        consider: (n,) bool, the states to consider and not correct, or ``None``.
+        corrected: the number c of leading states corrected; the others are considered
+            (``None``: all corrected).
 
     Returns:
         ``(dx, P_post, nis)``: (n,) correction, (n, n) posterior covariance and the
         normalised innovation squared.
     """
+    c = len(P) if corrected is None else corrected
     PHt = P @ H.T
     S = H @ PHt + R
     S_inv = np.linalg.inv(S)
-    K = PHt @ S_inv
-    if consider is not None:
-        K[consider] = 0.0
-    IKH = np.eye(len(P)) - K @ H
-    P_post = IKH @ P @ IKH.T + K @ R @ K.T
-    return K @ innovation, 0.5 * (P_post + P_post.T), float(innovation @ S_inv @ innovation)
+    K = PHt[:c] @ S_inv  # (c, k): the considered states' gain is zero
+    KHP = K @ PHt.T  # (c, n)
+    P_post = P.copy()
+    P_post[:c] -= KHP
+    P_post[:, :c] -= KHP.T
+    P_post[:c, :c] += K @ S @ K.T
+    dx = np.zeros(len(P))
+    dx[:c] = K @ innovation
+    return dx, 0.5 * (P_post + P_post.T), float(innovation @ S_inv @ innovation)
 
 
 def chi2_gate(dof: int, probability: float) -> float:
-    """The χ²(dof) quantile at ``probability``, used as a Mahalanobis gate."""
-    from scipy.stats import chi2
+    """The χ²(dof) quantile at ``probability``, used as a Mahalanobis gate.
 
-    return float(chi2.ppf(probability, dof)) if dof > 0 else math.inf
+    ``2·P⁻¹(dof/2, p)``, P the regularised lower incomplete gamma function: what
+    ``scipy.stats.chi2.ppf`` computes, without importing scipy.stats (0.5 s per process).
+    """
+    from scipy.special import gammaincinv
+
+    return float(2.0 * gammaincinv(0.5 * dof, probability)) if dof > 0 else math.inf
 
 
 def geometry_rows(layout: Layout, rows: np.ndarray, R: np.ndarray) -> np.ndarray:
@@ -258,9 +275,8 @@ def geometry_rows(layout: Layout, rows: np.ndarray, R: np.ndarray) -> np.ndarray
     if layout.exit.stop == layout.exit.start:
         return G
     u_p = rows[:, :3]
-    u_b = u_p @ R.T
     idx = np.arange(m)
-    for k in range(3):
-        G[idx, layout.exit.start + 3 * idx + k] = -u_b[:, k]
-        G[idx, layout.anchor.start + 3 * idx + k] = u_p[:, k]
+    cols = 3 * idx[:, None] + np.arange(3)  # (m, 3): cable i's three columns
+    G[idx[:, None], layout.exit.start + cols] = -(u_p @ R.T)
+    G[idx[:, None], layout.anchor.start + cols] = u_p
     return G

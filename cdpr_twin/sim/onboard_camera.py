@@ -202,6 +202,7 @@ class OnboardCamera:
                 tag_size=tag_size,
                 distortion=self.calibrated_distortion,
                 quad_sigma=NOISY_QUAD_SIGMA if self._formed else 0.0,
+                roi=self._formed,  # ideal frames: the whole-frame search, bit for bit as ever
             )
         except BaseException:
             self.close()
@@ -249,13 +250,16 @@ class OnboardCamera:
         pipeline then holds d frames of that view (the one taken now, repeated), so the first
         d reads deliver it rather than nothing.
         """
+        reset = self.physics.time < self._last_read
+        if reset:  # a new run: the tag's last place means nothing
+            self._detector.forget()
         image = self.render()
         tag = self._detector.detect(image)
+        first, self._last_read = not self._fifo, self.physics.time
         d = self.realism.latency_ticks
         if d == 0:
             return image, tag
-        if not self._fifo or self.physics.time < self._last_read:  # first read, or a reset
+        if first or reset:
             self._fifo = deque([(image, tag)] * d)
-        self._last_read = self.physics.time
         self._fifo.append((image, tag))
         return self._fifo.popleft()
