@@ -1,9 +1,8 @@
 """SO(3)/SE(3) helpers: exp/log, adjoint, θu, quaternions, file poses, pose distance.
 
-Quaternion conversions and the pose distance take one pose or any stack (leading axes), with
-one implementation each (jaxlie's style). The scalar kernels of the model-based estimators'
-Newton solve (:mod:`cdpr_twin.estimators.model`) repeat exp and Rodrigues in plain floats for
-speed; a test holds them to these.
+Quaternion conversions and the pose distance take one pose or any stack (leading axes), one
+implementation each (jaxlie's style); one pose takes a bit-identical fast path in plain floats,
+as the Newton kernels of :mod:`cdpr_twin.estimators.model` do (a test holds them to these).
 
 Conventions (DESIGN §3): homogeneous transforms are 4×4 arrays named ``T_<to>_<from>``;
 twists are ``[v, ω]`` (linear first); quaternions are ``quat_wxyz`` (scalar first, the MuJoCo
@@ -170,17 +169,10 @@ def _shepperd(R: np.ndarray) -> np.ndarray:
 
 
 def _quat_of_one(R: np.ndarray) -> np.ndarray:
-    """:func:`quat_wxyz_from_matrix` of one (3, 3) rotation in Python floats, 10× faster.
-
-    The same operations in the same order as :func:`_shepperd` and the normalisation below
-    (IEEE arithmetic and correctly rounded square roots), so the result is bit-identical.
-    """
+    """One rotation's :func:`quat_wxyz_from_matrix`: _shepperd's operations, on floats."""
     (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
     tr = r00 + r11 + r22
-    case, best = 0, tr
-    for k, v in ((1, r00), (2, r11), (3, r22)):
-        if v > best:  # np.argmax: the first of equal maxima
-            case, best = k, v
+    case = (tr, r00, r11, r22).index(max(tr, r00, r11, r22))  # as np.argmax: the first maximum
     if case == 0:
         s = 2.0 * math.sqrt(1.0 + tr)
         q = (0.25 * s, (r21 - r12) / s, (r02 - r20) / s, (r10 - r01) / s)
