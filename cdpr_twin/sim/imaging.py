@@ -67,20 +67,25 @@ def average(frames: Sequence[np.ndarray]) -> np.ndarray:
     return out
 
 
-def encode(linear: np.ndarray, gamma: float) -> np.ndarray:
+def encode(linear: np.ndarray, gamma: float, in_place: bool = False) -> np.ndarray:
     """8-bit values of a noise-free linear image: ``round(255 · L^γ)``.
 
     Args:
         linear: (H, W) linear luminance (clipped to 0…1).
         gamma: the encoding gamma γ.
+        in_place: ``linear`` is float32 scratch the function may overwrite (no copies).
 
     Returns:
         (H, W) uint8.
     """
-    x = np.clip(linear, 0.0, 1.0, dtype=np.float32)
+    if in_place and linear.dtype == np.float32:
+        x = np.clip(linear, 0.0, 1.0, out=linear)
+    else:
+        x = np.clip(linear, 0.0, 1.0, dtype=np.float32)
     if gamma != 1.0:
         x = cv2.pow(x, gamma)
-    return np.rint(x * np.float32(255.0)).astype(np.uint8)
+    x *= np.float32(255.0)
+    return np.rint(x, out=x).astype(np.uint8)
 
 
 def expose(
@@ -110,17 +115,20 @@ def expose(
         (H, W) uint8.
     """
     fw = np.float32(full_well_e)
-    e = np.clip(linear, 0.0, 1.0, dtype=np.float32) * fw
+    e = np.clip(linear, 0.0, 1.0, dtype=np.float32)
+    e *= fw
     z = np.empty(e.shape, np.float32)
     cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))  # OpenCV's normal draws: 3× numpy's speed
     cv2.randn(z, 0.0, 1.0)
-    read2 = np.float32(read_noise_e**2)
-    out = e + np.sqrt(e + read2) * z
+    out = np.add(e, np.float32(read_noise_e**2))  # e + σ_r², then in place: e + √(e + σ_r²)·z
+    np.sqrt(out, out=out)
+    out *= z
+    out += e
     low = e < POISSON_EXACT_BELOW
     if low.any():  # exact Poisson draws; z, independent of them, is the read noise there
         out[low] = rng.poisson(e[low]).astype(np.float32) + np.float32(read_noise_e) * z[low]
     out *= np.float32(1.0) / fw
-    return encode(out, gamma)
+    return encode(out, gamma, in_place=True)
 
 
 def distort_normalized(xy: np.ndarray, coeffs: Sequence[float]) -> np.ndarray:

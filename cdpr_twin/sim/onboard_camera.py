@@ -235,7 +235,8 @@ class OnboardCamera:
         if self._maps is not None:
             linear = imaging.distort(linear, self._maps)
         if (r.black_level, r.white_level) != (0.0, 1.0):  # the scene's exposure levels
-            linear = np.float32(r.black_level) + np.float32(r.white_level - r.black_level) * linear
+            linear *= np.float32(r.white_level - r.black_level)  # in place: b + (w − b)·L
+            linear += np.float32(r.black_level)
         if r.noise:
             gray = imaging.expose(linear, r.full_well_e, r.read_noise_e, r.gamma, self.run_rng)
         else:

@@ -1,0 +1,97 @@
+"""One camera tick against one bare render (issue 12, item 5), in the ``ideal`` and ``acrobot`` profiles.
+
+Run: ``python benchmarks/bench_camera_tick.py [--ticks 40] [--pose p1]``.
+
+The paper's PBVS scenario (control-based estimate in the loop, the other estimators passive) is
+built with each realism profile, started at the pose (p1: the tag large and centred, as in the
+issue), and run ``--ticks`` control periods with a slow constant twist (so motion blur has
+something to smear). Each tick is timed in its parts: physics (``advance`` of one period,
+swivel refreshes and hooks included), sensor read (sub-frame renders, image formation and the
+tag search), and the estimators' updates. The baseline, measured in the same run on the same
+model: one bare render of the camera (``CameraRenderer.render``: scene update, draw, read-back).
+The ratio asked for is tick / (bare render × rendered sub-frames). Recording (CSV, Rerun) is
+not part of a tick here; ``bench_scenarios.py`` measures whole runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+import cdpr_twin.sim  # noqa: F401  (defaults MUJOCO_GL=egl before mujoco is imported)
+from cdpr_twin import se3
+from cdpr_twin.runner import prepare
+from cdpr_twin.scenario import load_scenario
+from cdpr_twin.types import Command
+
+ROOT = Path(__file__).resolve().parent.parent
+POSES = {"p0": [0.112, -0.032, 0.301, -12.0, -10.0, 0.0], "p1": [0.284, -0.197, 0.08, 0, 0, 0]}
+XI = np.array([0.004, -0.002, 0.003, 0.0, 0.0, 0.01])  # slow twist in F_p [m/s, rad/s]
+
+
+def measure(realism: str, pose: str, ticks: int) -> dict[str, float]:
+    """Median ms per part of a camera tick, and of one bare render."""
+    s = load_scenario(ROOT / "scenarios" / "paper_pbvs.toml").with_realism(realism)
+    setup = prepare(s)
+    try:
+        T0 = se3.pose_from_vector(np.array(POSES[pose], dtype=float))
+        setup.physics.reset(T0)
+        setup.sensors.home(T0)
+        for est in setup.estimators.values():
+            est.reset(T0, 0.0)
+        period, physics, sensors = s.model.control_period, setup.physics, setup.sensors
+        renderer = sensors.camera._renderer
+        parts: dict[str, list[float]] = {"physics": [], "read": [], "estimators": [], "render": []}
+        detected = 0
+        for k in range(ticks + 3):
+            from cdpr_twin.kinematics import jacobian
+
+            rates = jacobian(setup.nominal.geometry, physics.T_base_platform, "platform") @ XI
+            t0 = time.perf_counter()
+            physics.advance(period, rates)
+            t1 = time.perf_counter()
+            m = sensors.read(Command(rates, XI))
+            t2 = time.perf_counter()
+            setup.estimate(m)
+            t3 = time.perf_counter()
+            renderer.render(physics.data)
+            t4 = time.perf_counter()
+            if k >= 3:  # warm-up: GL context, first detection in the whole frame
+                detected += m.tag is not None
+                for name, dt in zip(parts, (t1 - t0, t2 - t1, t3 - t2, t4 - t3), strict=True):
+                    dt_ms = dt * 1e3
+                    parts[name].append(dt_ms)
+        out = {name: statistics.median(v) for name, v in parts.items()}
+        out["subframes"] = s.realism.camera.blur_subframes if s.realism.camera.exposure_s else 1
+        out["detected"] = detected / ticks
+        return out
+    finally:
+        setup.close()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--ticks", type=int, default=40)
+    parser.add_argument("--pose", choices=sorted(POSES), default="p1")
+    args = parser.parse_args()
+    print(f"camera tick vs bare render at {args.pose}, median of {args.ticks} ticks [ms]")
+    head = f"{'profile':10s} {'render':>7s} {'sub':>4s} {'physics':>8s} {'read':>7s} {'estim.':>7s}"
+    print(f"{head} {'tick':>7s} {'ratio':>6s} {'w/o est.':>8s} {'tag':>5s}")
+    for realism in ("ideal", "acrobot"):
+        r = measure(realism, args.pose, args.ticks)
+        tick = r["physics"] + r["read"] + r["estimators"]
+        base = r["render"] * r["subframes"]
+        print(
+            f"{realism:10s} {r['render']:7.2f} {r['subframes']:4d} {r['physics']:8.2f} "
+            f"{r['read']:7.2f} {r['estimators']:7.2f} {tick:7.2f} {tick / base:5.2f}× "
+            f"{(tick - r['estimators']) / base:7.2f}× {r['detected']:5.0%}"
+        )
+    print("ratio = tick / (bare render × sub-frames); bar (issue 12): ≤ 1.3×")
+
+
+if __name__ == "__main__":
+    main()
