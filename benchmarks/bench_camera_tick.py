@@ -1,4 +1,4 @@
-"""One camera tick against one bare render (issue 12, item 5), in the ``ideal`` and ``acrobot`` profiles.
+"""One camera tick against one bare render (issue 12, item 5), profiles ``ideal`` and ``acrobot``.
 
 Run: ``python benchmarks/bench_camera_tick.py [--ticks 40] [--pose p1]``.
 
