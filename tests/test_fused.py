@@ -153,3 +153,37 @@ def test_covariance_columns_and_ellipsoid_are_recorded(tmp_path):
 def test_fused_rejects_bad_options(twin, name):
     with pytest.raises(ValueError, match="pixel_std"):
         make_estimator(name, twin.nominal_geometry, pixel_std=-1.0)
+
+
+@pytest.mark.parametrize("view", ["tilted", "face_on"])
+def test_calibration_jacobian_matches_opencv_pnp_with_a_miscalibrated_camera(view):
+    """∂n/∂δk against OpenCV: corners projected by a true camera (K, Brown–Conrady), the pose
+    solved with each calibrated parameter off by a small step, n = log(T_true⁻¹ T̂)."""
+    import cv2
+
+    from cdpr_twin.estimators import fused_models as fm
+
+    f, size = 415.69, 0.04
+    K = np.array([[f, 0, 320.0], [0, f, 240.0], [0, 0, 1]])
+    dist = np.array([-0.2, 0.08, 0.002, -0.002])
+    rot = [0.35, -0.25, 0.1] if view == "tilted" else [0.0, 0.0, 0.05]
+    T = se3.transform(cv2.Rodrigues(np.array(rot))[0], np.array([0.04, -0.03, 0.3]))
+    h = size / 2
+    obj = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+    rvec = cv2.Rodrigues(T[:3, :3])[0]
+    pix = cv2.projectPoints(obj, rvec, T[:3, 3], K, dist)[0].reshape(4, 2)
+    steps = [0.5, 0.5, 0.5, 0.5, 1e-3, 1e-3, 1e-4, 1e-4]
+    M = fm.tag_calibration_jacobian(T, size, f, dist)
+    for j, step in enumerate(steps):
+        n_fd = []
+        for sign in (1.0, -1.0):
+            k = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *dist])
+            k[j] += sign * step
+            K_cal = np.array([[k[0], 0, k[2]], [0, k[1], k[3]], [0, 0, 1]])
+            crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15)
+            r, t = cv2.solvePnPRefineLM(obj, pix, K_cal, k[4:], rvec.copy(), T[:3, 3:].copy(), crit)
+            T_hat = se3.transform(cv2.Rodrigues(r)[0], t.ravel())
+            n_fd.append(se3.se3_log(se3.inverse(T) @ T_hat))
+        fd = (n_fd[0] - n_fd[1]) / (2 * step)
+        # measured: within 0.3 % of the largest component (the difference quotient's error)
+        assert np.allclose(M[:, j], fd, rtol=0.01, atol=0.01 * np.abs(fd).max()), (j, M[:, j], fd)

@@ -76,6 +76,12 @@ class FusedOptions:
         camera_position_std: per-axis std of the camera mount's position error [m]; with this
             or ``camera_rotation_std`` above 0 the mount is considered (6 states).
         camera_rotation_std: per-axis std of the camera mount's rotation error [rad].
+        focal_error_std: relative std of the calibrated fx, fy; with this, the centre's or a
+            distortion coefficient's std above 0 the calibration error is considered (8
+            states): a detection's error from it repeats at every frame of one view.
+        center_error_std_px: std of the calibrated cx, cy [px].
+        distortion_error_std: std of each calibrated (k1, k2, p1, p2).
+        lens: the calibrated lens (k1, k2, p1, p2), through which those errors act.
     """
 
     initial_position_std: float = option(0.001, minimum=0.0, unit="m")
@@ -101,12 +107,21 @@ class FusedOptions:
     anchor_point_std: float = option(0.0, minimum=0.0, unit="m")
     camera_position_std: float = option(0.0, minimum=0.0, unit="m")
     camera_rotation_std: float = option(0.0, minimum=0.0, unit="deg")
+    focal_error_std: float = option(0.003, minimum=0.0)
+    center_error_std_px: float = option(1.5, minimum=0.0, unit="px")
+    distortion_error_std: tuple[float, ...] = option((0.01, 0.02, 0.0005, 0.0005), minimum=0.0)
+    lens: tuple[float, ...] = option((-0.20, 0.08, 0.002, -0.002))
 
     def __post_init__(self) -> None:
-        flags = ("use_tag", "drum_consider")
+        flags = ("use_tag", "drum_consider", "distortion_error_std", "lens")
         for name, value in vars(self).items():
             if name not in flags and not (math.isfinite(value) and value >= 0):
                 raise OptionError(name, f"must be a finite number ≥ 0, got {value}")
+        d = self.distortion_error_std
+        if len(d) != 4 or not all(math.isfinite(v) and v >= 0 for v in d):
+            raise OptionError("distortion_error_std", f"must be 4 finite numbers ≥ 0, got {d}")
+        if len(self.lens) != 4 or not all(map(math.isfinite, self.lens)):
+            raise OptionError("lens", f"must be 4 finite (k1, k2, p1, p2), got {self.lens}")
         if not self.gate_probability < 1.0:
             raise OptionError("gate_probability", "must be below 1")
 
@@ -130,7 +145,12 @@ class FusedEstimator(Estimator):
         o = self.options
         geometry_errors = o.exit_point_std > 0 or o.anchor_point_std > 0
         camera_errors = o.camera_position_std > 0 or o.camera_rotation_std > 0
-        self.layout = fm.Layout.build(m, geometry_errors, camera_errors, o.drum_consider)
+        intrinsics = o.use_tag and (
+            o.focal_error_std > 0 or o.center_error_std_px > 0 or any(o.distortion_error_std)
+        )
+        self.layout = fm.Layout.build(
+            m, geometry_errors, camera_errors, o.drum_consider, intrinsics
+        )
         self._m, self._n = m, self.layout.n
         self._drum, self._tag_slice = self.layout.drum, self.layout.tag
         self._cables = _cable_tuples(geometry.a_base, geometry.b_platform, geometry.pulley_radius)
@@ -159,6 +179,9 @@ class FusedEstimator(Estimator):
         if L.cam.stop > L.cam.start:
             cam = [o.camera_position_std**2] * 3 + [o.camera_rotation_std**2] * 3
             P[L.cam, L.cam] = np.diag(cam)
+        if L.intr.stop > L.intr.start:
+            k = [o.focal_error_std * o.focal_px] * 2 + [o.center_error_std_px] * 2
+            P[L.intr, L.intr] = np.diag(np.square([*k, *o.distortion_error_std]))
 
     @property
     def T_base_tag(self) -> np.ndarray | None:
@@ -276,8 +299,11 @@ class FusedEstimator(Estimator):
         H = np.zeros((6, self._n))
         H[:, fm.POSE] = H_pose
         H[:, self._tag_slice] = np.eye(6)
-        if self.layout.cam.stop > self.layout.cam.start:
-            H[:, self.layout.cam] = -adjoint(np.linalg.inv(z_hat))
+        L = self.layout
+        if L.cam.stop > L.cam.start:
+            H[:, L.cam] = -adjoint(np.linalg.inv(z_hat))
+        if L.intr.stop > L.intr.start:
+            H[:, L.intr] = fm.tag_calibration_jacobian(z, o.tag_size, o.focal_px, o.lens)
         S = H @ self.P @ H.T + R
         if r @ np.linalg.solve(S, r) > self._gate6:
             return {TAG_OUTLIER}
@@ -291,8 +317,11 @@ class FusedEstimator(Estimator):
         self._T_tag = self._T @ se3_exp(-lag) @ M
         J = np.zeros((6, self._n))  # δ_o = J x − n
         J[:, fm.POSE] = adjoint(np.linalg.inv(M)) @ adjoint(se3_exp(lag))
-        if self.layout.cam.stop > self.layout.cam.start:
-            J[:, self.layout.cam] = adjoint(np.linalg.inv(z))
+        L, o = self.layout, self.options
+        if L.cam.stop > L.cam.start:
+            J[:, L.cam] = adjoint(np.linalg.inv(z))
+        if L.intr.stop > L.intr.start:  # the calibration's bias in this first view
+            J[:, L.intr] = -fm.tag_calibration_jacobian(z, o.tag_size, o.focal_px, o.lens)
         t, P = self._tag_slice, self.P
         P[t, :] = J @ P
         P[:, t] = P[t, :].T

@@ -49,6 +49,8 @@ class Layout:
         exit: (3m) exit-point errors δa_i in F_b, cable after cable (empty when not modelled).
         anchor: (3m) anchor-point errors δb_i in F_p (empty when not modelled).
         cam: (6) camera-mount error, ``T_pc_true = T_pc · exp(δc)`` (empty when not modelled).
+        intr: (8) the camera calibration's error δk = calibrated − true (fx, fy, cx, cy [px],
+            k1, k2, p1, p2), empty when not modelled.
         tag: (6) the tag pose's error δ_o.
         consider: the states the filter accounts for but never corrects (Schmidt), as a mask.
     """
@@ -58,18 +60,21 @@ class Layout:
     exit: slice
     anchor: slice
     cam: slice
+    intr: slice
     tag: slice
     consider: np.ndarray
 
     @classmethod
-    def build(cls, m: int, geometry: bool, camera: bool, consider_drums: bool) -> Layout:
+    def build(
+        cls, m: int, geometry: bool, camera: bool, consider_drums: bool, intrinsics: bool = False
+    ) -> Layout:
         """The layout for m cables, with or without the geometry and camera-mount states.
 
         The corrected states come first (pose, start, tag, then the drums unless they are
         considered) and the considered ones last, so that an update touches a leading block.
         """
         sizes = {"tag": 6, "drum": m, "exit": 3 * m * geometry, "anchor": 3 * m * geometry,
-                 "cam": 6 * camera}  # fmt: skip
+                 "cam": 6 * camera, "intr": 8 * intrinsics}  # fmt: skip
         start, out = 12, {}
         for name, size in sizes.items():
             out[name] = slice(start, start + size)
@@ -138,6 +143,62 @@ def cable_noise_var(
     return var * near_slack**4
 
 
+def _lens(xy: np.ndarray, coeffs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Brown–Conrady at normalised points: distorted points, ∂/∂point and ∂/∂coefficients.
+
+    Args:
+        xy: (n, 2) undistorted normalised coordinates.
+        coeffs: (k1, k2, p1, p2).
+
+    Returns:
+        (n, 2) distorted points, (n, 2, 2) their Jacobian, (n, 2, 4) ∂/∂(k1, k2, p1, p2).
+    """
+    k1, k2, p1, p2 = coeffs
+    x, y = xy[:, 0], xy[:, 1]
+    r2 = x * x + y * y
+    a, da = 1.0 + k1 * r2 + k2 * r2 * r2, 2.0 * k1 + 4.0 * k2 * r2  # radial factor, ∂a/∂r² × 2
+    xd = np.column_stack([x * a + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
+                          y * a + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y])  # fmt: skip
+    D = np.empty((len(xy), 2, 2))
+    D[:, 0, 0] = a + x * x * da + 2 * p1 * y + 6 * p2 * x
+    D[:, 0, 1] = D[:, 1, 0] = x * y * da + 2 * p1 * x + 2 * p2 * y
+    D[:, 1, 1] = a + y * y * da + 6 * p1 * y + 2 * p2 * x
+    dx = np.column_stack([x * r2, x * r2 * r2, 2 * x * y, r2 + 2 * x * x])
+    dy = np.column_stack([y * r2, y * r2 * r2, r2 + 2 * y * y, 2 * x * y])
+    dc = np.stack([dx, dy], axis=1)
+    return xd, D, dc
+
+
+def _corner_jacobian(
+    T_cam_tag: np.ndarray, tag_size: float, focal_px: float, lens=(0.0, 0.0, 0.0, 0.0)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The corners' pixel Jacobian through the lens, and what the calibration's needs.
+
+    Returns:
+        J (8, 6) ∂(u₀, v₀, u₁, …)/∂n (n the tag-frame twist), the (4, 2) distorted normalised
+        coordinates, and the lens's (4, 2, 4) ∂/∂coefficients.
+    """
+    h = 0.5 * tag_size
+    p = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+    R, t = T_cam_tag[:3, :3], T_cam_tag[:3, 3]
+    X = p @ R.T + t  # (4, 3) corners in the camera frame
+    inv_z = 1.0 / X[:, 2]
+    # d(x, y)/dX per corner: 1/Z [[1, 0, −X/Z], [0, 1, −Y/Z]], (4, 2, 3)
+    d_norm = np.zeros((4, 2, 3))
+    d_norm[:, 0, 0] = d_norm[:, 1, 1] = inv_z
+    d_norm[:, 0, 2] = -inv_z * X[:, 0] / X[:, 2]
+    d_norm[:, 1, 2] = -inv_z * X[:, 1] / X[:, 2]
+    # dX/d[v, ω] = R [I, −[p]×] (a tag-frame twist moves the corner by v + ω × p)
+    d_point = np.zeros((4, 3, 6))
+    d_point[:, :, :3] = R
+    cross = np.zeros((4, 3, 3))  # −[p]×
+    cross[:, 0, 1], cross[:, 0, 2], cross[:, 1, 2] = p[:, 2], -p[:, 1], p[:, 0]
+    cross[:, 1, 0], cross[:, 2, 0], cross[:, 2, 1] = -p[:, 2], p[:, 1], -p[:, 0]
+    d_point[:, :, 3:] = R @ cross
+    xd, D, dc = _lens(X[:, :2] * inv_z[:, None], lens)
+    return (focal_px * D @ d_norm @ d_point).reshape(8, 6), xd, dc
+
+
 def tag_covariance(
     T_cam_tag: np.ndarray, tag_size: float, focal_px: float, pixel_std: float
 ) -> np.ndarray:
@@ -155,25 +216,37 @@ def tag_covariance(
     Returns:
         (6, 6) covariance [m², m·rad, rad²].
     """
-    h = 0.5 * tag_size
-    p = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
-    R, t = T_cam_tag[:3, :3], T_cam_tag[:3, 3]
-    X = p @ R.T + t  # (4, 3) corners in the camera frame
-    inv_z = focal_px / X[:, 2]
-    # d(pixel)/dX per corner: f/Z [[1, 0, −X/Z], [0, 1, −Y/Z]], (4, 2, 3)
-    d_pix = np.zeros((4, 2, 3))
-    d_pix[:, 0, 0] = d_pix[:, 1, 1] = inv_z
-    d_pix[:, 0, 2] = -inv_z * X[:, 0] / X[:, 2]
-    d_pix[:, 1, 2] = -inv_z * X[:, 1] / X[:, 2]
-    # dX/d[v, ω] = R [I, −[p]×] (a tag-frame twist moves the corner by v + ω × p)
-    d_point = np.zeros((4, 3, 6))
-    d_point[:, :, :3] = R
-    cross = np.zeros((4, 3, 3))  # −[p]×
-    cross[:, 0, 1], cross[:, 0, 2], cross[:, 1, 2] = p[:, 2], -p[:, 1], p[:, 0]
-    cross[:, 1, 0], cross[:, 2, 0], cross[:, 2, 1] = -p[:, 2], p[:, 1], -p[:, 0]
-    d_point[:, :, 3:] = R @ cross
-    J = (d_pix @ d_point).reshape(8, 6)
+    J = _corner_jacobian(T_cam_tag, tag_size, focal_px)[0]
     return pixel_std**2 * np.linalg.inv(J.T @ J)
+
+
+def tag_calibration_jacobian(
+    T_cam_tag: np.ndarray, tag_size: float, focal_px: float, lens=(0.0, 0.0, 0.0, 0.0)
+) -> np.ndarray:
+    """∂n/∂δk: how a calibration error δk moves the detected pose, to first order.
+
+    The detector fits the pose whose projection through the *calibrated* camera (intrinsics
+    and Brown–Conrady lens, k̂ = k + δk) meets the corners the true camera saw, so
+    J n + Π δk = 0 and n = −(JᵀJ)⁻¹ Jᵀ Π δk, with u = fx x_d + cx (x_d the distorted
+    normalised coordinate), J = ∂u/∂n through the lens and Π = ∂u/∂k. Face-on, the tilt is
+    nearly unobservable, so the lens's own Jacobian decides how a principal-point error tilts
+    the pose: it must be in J. The error is the same at every detection from one view: a
+    bias the filter must consider, not noise that averages out.
+
+    Args:
+        T_cam_tag: (4, 4) detected tag pose in the camera frame.
+        tag_size: edge of the tag's black square [m].
+        focal_px: focal length [px].
+        lens: the calibrated (k1, k2, p1, p2).
+
+    Returns:
+        (6, 8) for δk = (δfx, δfy, δcx, δcy [px], δk1, δk2, δp1, δp2).
+    """
+    J, xd, dc = _corner_jacobian(T_cam_tag, tag_size, focal_px, lens)
+    Pi = np.zeros((4, 2, 8))
+    Pi[:, 0, 0], Pi[:, 1, 1], Pi[:, 0, 2], Pi[:, 1, 3] = xd[:, 0], xd[:, 1], 1.0, 1.0
+    Pi[:, :, 4:] = focal_px * dc
+    return -np.linalg.solve(J.T @ J, J.T @ Pi.reshape(8, 8))
 
 
 def tag_residual(
