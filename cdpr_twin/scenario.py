@@ -33,6 +33,7 @@ from cdpr_twin.scenario_tables import (
     MonitorConfig,
     read_events,
     read_monitor,
+    read_nominal,
     read_plugins,
     read_realism,
     read_truth,
@@ -56,12 +57,14 @@ class ModelConfig:
         timestep: physics step [s].
         control_rate: control (and sensing) rate [Hz].
         align_every: physics steps between swivel/stiffness refreshes.
+        nominal: a ``robot.toml`` (``cdpr-twin calibrate``'s output) the software believes.
     """
 
     file: Path
     timestep: float
     control_rate: float
     align_every: int
+    nominal: Path | None = None
 
     @property
     def control_period(self) -> float:
@@ -307,6 +310,7 @@ def _model(top: OptionReader, source: Path) -> ModelConfig:
         raise m.fail("timestep", f"must be ≤ {MAX_TIMESTEP} s for stiff cables, got {timestep}")
     control_rate = m.number("control_rate", 25.0, minimum=0, exclusive=True, unit="Hz")
     align_every = m.integer("align_every", 10, minimum=1)
+    nominal = read_nominal(m, source)
     m.done()
     steps = 1.0 / control_rate / timestep
     if abs(steps - round(steps)) > 1e-6 * steps or round(steps) < 1:
@@ -316,7 +320,7 @@ def _model(top: OptionReader, source: Path) -> ModelConfig:
             f"number of physics steps of {timestep:g} s ({steps:.4f});"
             " choose a rate or timestep that divide evenly",
         )
-    return ModelConfig(file, timestep, control_rate, align_every)
+    return ModelConfig(file, timestep, control_rate, align_every, nominal)
 
 
 def _model_file(m: OptionReader, source: Path) -> Path:

@@ -117,3 +117,18 @@ def read_truth(top: OptionReader, source: Path) -> DeviationSpec:
         raise ScenarioError(f"{source}: truth: {exc}") from None
     t.done()
     return truth
+
+
+def read_nominal(m: OptionReader, source: Path) -> Path | None:
+    """``[model] nominal``: the robot description the software believes, or ``None``.
+
+    A ``robot.toml`` (e.g. ``cdpr-twin calibrate``'s ``calibrated_robot.toml``) whose geometry,
+    camera mount and tag pose replace the model file's in what estimators and controllers see.
+    """
+    if not m.has("nominal"):
+        return None
+    path = Path(m.string("nominal"))
+    path = path if path.is_absolute() else (source.parent / path).resolve()
+    if not path.is_file():
+        raise m.fail("nominal", f"{path} not found; give a robot.toml (cdpr-twin calibrate)")
+    return path

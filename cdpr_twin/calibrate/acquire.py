@@ -73,15 +73,20 @@ class Recording:
     wall_time: float
 
 
-def _move(physics, geom, T_from: np.ndarray, T_to: np.ndarray, period: float) -> None:
-    """Drive open loop along a quintic line, rates from the nominal lengths' changes."""
+def _move(physics, sensors, geom, T_from: np.ndarray, T_to: np.ndarray, period: float) -> None:
+    """Drive open loop along a quintic line, rates from the nominal lengths' changes.
+
+    The lengths end at the nominal model's at ``T_to``: what tightening reeled in at the last
+    pose is paid back out along the way.
+    """
     dist = np.linalg.norm(T_to[:3, 3] - T_from[:3, 3])
     ang = np.linalg.norm(so3_log(T_from[:3, :3].T @ T_to[:3, :3]))
     n = max(int(np.ceil((dist + 0.2 * ang) / SPEED / period * 1.875)), 10)  # peak ṡ = 1.875
     seg = Segment(T_from, T_to, n * period)
-    lengths = cable_lengths(geom, T_from, "pulley")
+    lengths = sensors.read(None, render=False).cable_lengths
+    gap = cable_lengths(geom, T_from, "pulley") - lengths
     for k in range(1, n + 1):
-        nxt = cable_lengths(geom, seg.pose(k * period), "pulley")
+        nxt = cable_lengths(geom, seg.pose(k * period), "pulley") - gap * (1.0 - k / n)
         physics.advance(period, (nxt - lengths) / period)
         lengths = nxt
 
@@ -153,7 +158,12 @@ def record(s: Scenario, poses: list[np.ndarray], frames: int = 4) -> Recording:
         raise ScenarioError(f"{s.source}: sensors.camera: calibration needs the camera; set true")
     try:
         physics, nominal, _ = build_robot(
-            s.model.file, s.truth, s.model.timestep, s.model.align_every, s.realism.winch
+            s.model.file,
+            s.truth,
+            s.model.timestep,
+            s.model.align_every,
+            s.realism.winch,
+            nominal_path=s.model.nominal,
         )
     except (ModelError, ValueError) as exc:
         raise ScenarioError(f"{s.source}: model: {exc}") from None
@@ -171,7 +181,7 @@ def record(s: Scenario, poses: list[np.ndarray], frames: int = 4) -> Recording:
         sensors.home(s.start_pose)
         rows, truth, here = [], [], s.start_pose
         for T in poses:
-            _move(physics, nominal.geometry, here, T, period)
+            _move(physics, sensors, nominal.geometry, here, T, period)
             rows.append(_read(physics, sensors, period, frames, s.realism.camera.latency_ticks))
             truth.append(np.array(physics.T_base_platform))
             here = T

@@ -31,10 +31,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import lil_matrix
+from scipy.spatial.transform import Rotation
 
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import pulley_lengths
-from cdpr_twin.se3 import inverse, se3_exp, so3_log
+from cdpr_twin.se3 import inverse, se3_exp
 
 BLOCKS = ("exit", "anchor", "offset", "scale", "camera", "tag")
 """The shared parameter blocks, in the order they sit in the parameter vector."""
@@ -118,6 +119,35 @@ class Priors:
         unknown = sorted(set(self.estimate) - set(BLOCKS))
         if unknown:
             raise ValueError(f"unknown parameter block {unknown[0]!r}; choose from {BLOCKS}")
+
+
+def exp_stack(xi: np.ndarray) -> np.ndarray:
+    """SE(3) exponential of a stack of twists ``[v, ω]`` (K, 6). Returns (K, 4, 4)."""
+    v, w = xi[:, :3], xi[:, 3:]
+    th2 = np.einsum("ij,ij->i", w, w)
+    small = th2 < 1e-8
+    th = np.sqrt(np.where(small, 1.0, th2))
+    b = np.where(small, 0.5 - th2 / 24.0, (1.0 - np.cos(th)) / np.where(small, 1.0, th2))
+    c = np.where(small, 1.0 / 6.0 - th2 / 120.0, (th - np.sin(th)) / (th * th * th))
+    K = np.zeros((len(xi), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
+    K = K - K.transpose(0, 2, 1)
+    V = np.eye(3) + b[:, None, None] * K + c[:, None, None] * (K @ K)
+    T = np.zeros((len(xi), 4, 4))
+    T[:, :3, :3] = Rotation.from_rotvec(w).as_matrix()
+    T[:, :3, 3] = np.einsum("nij,nj->ni", V, v)
+    T[:, 3, 3] = 1.0
+    return T
+
+
+def inverse_stack(T: np.ndarray) -> np.ndarray:
+    """Inverse of a stack of rigid transforms (K, 4, 4)."""
+    out = np.zeros_like(T)
+    Rt = T[:, :3, :3].transpose(0, 2, 1)
+    out[:, :3, :3] = Rt
+    out[:, :3, 3] = -np.einsum("nij,nj->ni", Rt, T[:, :3, 3])
+    out[:, 3, 3] = 1.0
+    return out
 
 
 class Layout:
@@ -229,9 +259,7 @@ class Problem:
     def model(self, x: np.ndarray) -> Model:
         """The robot and poses parameters ``x`` describe."""
         L, g = self.layout, self.nominal
-        poses = np.array(
-            [self.obs.T_guess[k] @ se3_exp(x[L.pose(k)]) for k in range(self.obs.n_poses)]
-        )
+        poses = self.obs.T_guess @ exp_stack(x[L.n_shared :].reshape(-1, 6))
         return Model(
             a_base=g.a_base + L.get(x, "exit"),
             b_platform=g.b_platform + L.get(x, "anchor"),
@@ -264,17 +292,16 @@ class Problem:
     def _tags(self, mod: Model) -> np.ndarray:
         if not len(self.seen):
             return np.zeros(0)
-        n, out = self.noise, []
-        T_cam_base = inverse(mod.T_platform_cam)
-        for k in self.seen:
-            pred = T_cam_base @ inverse(mod.T_base_platform[k]) @ mod.T_base_tag
-            meas = self.obs.T_cam_tag[k]
-            d = float(np.linalg.norm(meas[:3, 3]))
-            lat, dep = n.tag_lateral_std + n.tag_std_per_m * d, n.tag_depth_std + n.tag_std_per_m * d
-            dt = (meas[:3, 3] - pred[:3, 3]) / np.array([lat, lat, dep])
-            dr = so3_log(pred[:3, :3].T @ meas[:3, :3]) / n.tag_rotation_std
-            out += [dt, dr]
-        return np.concatenate(out)
+        n = self.noise
+        pred = inverse(mod.T_platform_cam) @ inverse_stack(mod.T_base_platform[self.seen])
+        pred = pred @ mod.T_base_tag
+        meas = self.obs.T_cam_tag[self.seen]
+        d = np.linalg.norm(meas[:, :3, 3], axis=1)[:, None]
+        std = np.array([n.tag_lateral_std, n.tag_lateral_std, n.tag_depth_std])
+        dt = (meas[:, :3, 3] - pred[:, :3, 3]) / (std + n.tag_std_per_m * d)
+        R = pred[:, :3, :3].transpose(0, 2, 1) @ meas[:, :3, :3]
+        dr = Rotation.from_matrix(R).as_rotvec() / n.tag_rotation_std
+        return np.hstack([dt, dr]).ravel()
 
     def sparsity(self) -> lil_matrix:
         """Which residual depends on which parameter: (n_rows, n) pattern of ones."""

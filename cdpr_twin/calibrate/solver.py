@@ -129,8 +129,7 @@ def solve(problem: Problem, max_nfev: int = 100, rank_tol: float = 1e-6) -> Cali
     wall = time.perf_counter() - started
     if res.status <= 0:
         raise CalibrationError(
-            f"the solver did not converge ({res.message}); record more poses, or raise "
-            "max_nfev"
+            f"the solver did not converge ({res.message}); record more poses, or raise max_nfev"
         )
     return _result(problem, res, wall, rank_tol)
 
@@ -205,10 +204,7 @@ def _tag_rms(problem: Problem, model: Model) -> np.ndarray:
 
     T_cam_base = inverse(model.T_platform_cam)
     pred = np.array(
-        [
-            T_cam_base @ inverse(model.T_base_platform[k]) @ model.T_base_tag
-            for k in problem.seen
-        ]
+        [T_cam_base @ inverse(model.T_base_platform[k]) @ model.T_base_tag for k in problem.seen]
     )
     dt, dr = pose_distance(pred, problem.obs.T_cam_tag[problem.seen])
     return np.array([np.sqrt(np.mean(dt**2)), np.sqrt(np.mean(dr**2))])
