@@ -286,9 +286,11 @@ def _parser() -> argparse.ArgumentParser:
     _reproduce_parser(sub)
     model_cli.add_parser(sub)  # cdpr-twin model build|workspace
     add_campaign_parser(sub)
+    from cdpr_twin import cli_calibrate
     from cdpr_twin.cli_tools import add_parsers
 
     add_parsers(sub)
+    cli_calibrate.add_parser(sub)  # cdpr-twin calibrate
     return parser
 
 

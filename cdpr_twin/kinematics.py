@@ -90,6 +90,21 @@ def _pulley(a: np.ndarray, r: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ..
     return phi, n, tangent, free, wrap, u
 
 
+def pulley_lengths(a: np.ndarray, r: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Full cable lengths l_f = L + l_p (eq. 15-24) of any stack of cables, vectorised.
+
+    Args:
+        a: (k, 3) exit points in F_b [m].
+        r: (k,) sheave radii [m].
+        b: (k, 3) anchor points in F_b [m].
+
+    Returns:
+        (k,) lengths from A_i around the sheave to B_i [m].
+    """
+    _, _, _, free, wrap, _ = _pulley(a, r, b)
+    return free + wrap
+
+
 def pulley_state(geom: CdprGeometry, T_base_platform: np.ndarray) -> PulleyState:
     """Pulley kinematics (eq. 15-24) of every cable at a platform pose.
 

@@ -161,7 +161,7 @@ def prepare(scenario: Scenario) -> RunSetup:
         occluder = any(isinstance(e, TagOcclusion) for e in s.events)
         physics, nominal, _ = build_robot(
             s.model.file, s.truth, s.model.timestep, s.model.align_every, s.realism.winch,
-            occluder,
+            occluder, s.model.nominal,
         )  # fmt: skip
         sensors = Sensors(
             physics,

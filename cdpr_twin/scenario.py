@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from cdpr_twin import plugins, resources
+from cdpr_twin import plugins, resources, scenario_tables
 from cdpr_twin.deviations import DeviationSpec
 from cdpr_twin.events import Event
 from cdpr_twin.options import (
@@ -56,12 +56,14 @@ class ModelConfig:
         timestep: physics step [s].
         control_rate: control (and sensing) rate [Hz].
         align_every: physics steps between swivel/stiffness refreshes.
+        nominal: a ``robot.toml`` (``cdpr-twin calibrate``'s output) the software believes.
     """
 
     file: Path
     timestep: float
     control_rate: float
     align_every: int
+    nominal: Path | None = None
 
     @property
     def control_period(self) -> float:
@@ -301,12 +303,13 @@ def _estimators(r: OptionReader) -> EstimatorConfig:
 
 def _model(top: OptionReader, source: Path) -> ModelConfig:
     m = top.table_of("model", required=False)
-    file = _model_file(m, source)
+    file = scenario_tables.model_file(m, source)
     timestep = m.number("timestep", 0.0005, minimum=MIN_TIMESTEP, unit="s")
     if timestep > MAX_TIMESTEP:
         raise m.fail("timestep", f"must be ≤ {MAX_TIMESTEP} s for stiff cables, got {timestep}")
     control_rate = m.number("control_rate", 25.0, minimum=0, exclusive=True, unit="Hz")
     align_every = m.integer("align_every", 10, minimum=1)
+    nominal = scenario_tables.read_nominal(m, source)
     m.done()
     steps = 1.0 / control_rate / timestep
     if abs(steps - round(steps)) > 1e-6 * steps or round(steps) < 1:
@@ -316,21 +319,7 @@ def _model(top: OptionReader, source: Path) -> ModelConfig:
             f"number of physics steps of {timestep:g} s ({steps:.4f});"
             " choose a rate or timestep that divide evenly",
         )
-    return ModelConfig(file, timestep, control_rate, align_every)
-
-
-def _model_file(m: OptionReader, source: Path) -> Path:
-    """``robot = "<name>"`` (a shipped robot, the default ``acrobot``) or ``file = "<path>"``."""
-    if m.has("robot") and m.has("file"):
-        raise m.fail("robot", "give either robot (a shipped robot's name) or file, not both")
-    if m.has("file"):
-        file = Path(m.string("file"))
-        return file if file.is_absolute() else (source.parent / file).resolve()
-    name = m.string("robot", "acrobot")
-    try:
-        return resources.robot_scene(name)
-    except resources.ResourceError as exc:
-        raise m.fail("robot", str(exc)) from None
+    return ModelConfig(file, timestep, control_rate, align_every, nominal)
 
 
 def _read(source: Path) -> OptionReader:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from cdpr_twin import plugins
+from cdpr_twin import plugins, resources
 from cdpr_twin.deviations import DeviationSpec
 from cdpr_twin.events import EVENT_KINDS, Event
 from cdpr_twin.options import (
@@ -117,3 +117,32 @@ def read_truth(top: OptionReader, source: Path) -> DeviationSpec:
         raise ScenarioError(f"{source}: truth: {exc}") from None
     t.done()
     return truth
+
+
+def read_nominal(m: OptionReader, source: Path) -> Path | None:
+    """``[model] nominal``: the robot description the software believes, or ``None``.
+
+    A ``robot.toml`` (e.g. ``cdpr-twin calibrate``'s ``calibrated_robot.toml``) whose geometry,
+    camera mount and tag pose replace the model file's in what estimators and controllers see.
+    """
+    if not m.has("nominal"):
+        return None
+    path = Path(m.string("nominal"))
+    path = path if path.is_absolute() else (source.parent / path).resolve()
+    if not path.is_file():
+        raise m.fail("nominal", f"{path} not found; give a robot.toml (cdpr-twin calibrate)")
+    return path
+
+
+def model_file(m: OptionReader, source: Path) -> Path:
+    """``robot = "<name>"`` (a shipped robot, the default ``acrobot``) or ``file = "<path>"``."""
+    if m.has("robot") and m.has("file"):
+        raise m.fail("robot", "give either robot (a shipped robot's name) or file, not both")
+    if m.has("file"):
+        file = Path(m.string("file"))
+        return file if file.is_absolute() else (source.parent / file).resolve()
+    name = m.string("robot", "acrobot")
+    try:
+        return resources.robot_scene(name)
+    except resources.ResourceError as exc:
+        raise m.fail("robot", str(exc)) from None

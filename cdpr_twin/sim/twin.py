@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import mujoco
@@ -58,6 +59,37 @@ def _nominal_robot(model: mujoco.MjModel) -> NominalRobot:
     )
 
 
+def nominal_from_description(path: str | Path, model_nominal: NominalRobot) -> NominalRobot:
+    """What the software believes when told a robot description (e.g. a calibrated one).
+
+    Geometry, camera mount and tag pose come from the description; the camera intrinsics and
+    tag size stay the model's.
+
+    Raises:
+        ModelError: the description is invalid or has another cable count.
+    """
+    from cdpr_twin.robot import RobotError, load_robot
+    from cdpr_twin.workspace import geometry_of
+
+    try:
+        r = load_robot(path)
+    except RobotError as exc:
+        raise ModelError(str(exc)) from None
+    geom = geometry_of(r)
+    if geom.n_cables != model_nominal.geometry.n_cables:
+        raise ModelError(
+            f"{path}: {geom.n_cables} cables, but the model has "
+            f"{model_nominal.geometry.n_cables}; give the same robot's description"
+        )
+    if r.camera is not None:
+        R = matrix_from_quat_wxyz(r.camera.quat_wxyz) @ cam_mod.R_MJCAM_CV
+        geom = replace(geom, T_platform_cam=transform(R, r.camera.position))
+    T_base_tag = model_nominal.T_base_tag
+    if r.tag is not None:
+        T_base_tag = transform(matrix_from_quat_wxyz(r.tag.quat_wxyz), r.tag.position)
+    return replace(model_nominal, geometry=geom, T_base_tag=T_base_tag)
+
+
 def build_robot(
     model_path: str | Path | None = None,
     deviations: DeviationSpec | TruthDeviations | None = None,
@@ -65,6 +97,7 @@ def build_robot(
     align_every: int = 10,
     winch: WinchRealism | None = None,
     occluder: bool = False,
+    nominal_path: str | Path | None = None,
 ) -> tuple[Physics, NominalRobot, TruthDeviations]:
     """The simulated robot (with its calibration errors) and what its software believes.
 
@@ -77,6 +110,8 @@ def build_robot(
         winch: the winches' servo imperfections (default: none); per-robot draws use the
             deviations' seed.
         occluder: give the true scene the sheet of ``tag_occlusion`` events.
+        nominal_path: a robot description the software believes instead of the model file
+            (:func:`nominal_from_description`).
 
     Raises:
         ModelError: when the model file is missing, malformed or not a cable robot.
@@ -89,6 +124,8 @@ def build_robot(
     robot_seed = deviations.seed if isinstance(deviations, DeviationSpec) else 0
     nominal_model = build_model(path)
     nominal = _nominal_robot(nominal_model)
+    if nominal_path is not None:
+        nominal = nominal_from_description(nominal_path, nominal)
     n = cable_count(nominal_model)
     if isinstance(deviations, DeviationSpec):
         deviations = deviations.draw(n)

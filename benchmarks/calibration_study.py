@@ -1,0 +1,93 @@
+"""Calibration over robot seeds: exit point errors and the open-loop error at p1, nominal vs
+calibrated model, and the time per robot (issue 11 item 3).
+
+    python benchmarks/calibration_study.py --seeds 1-20 --workers 2 --out docs/calibration
+
+Each robot: `cdpr-twin calibrate paper_open_loop` (truth seed = the robot, acrobot profile),
+then `paper_open_loop` p0 -> p1 (10 s, camera off) with the nominal and with the calibrated
+model ([model] nominal). Writes results.json and prints a table.
+"""
+
+import argparse
+import json
+import statistics
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
+from pathlib import Path
+
+
+def one(seed: int, poses: int, out: str) -> dict:
+    from cdpr_twin.calibrate.output import write
+    from cdpr_twin.calibrate.session import calibrate, truth_check
+    from cdpr_twin.runner import run
+    from cdpr_twin.scenario import load_scenario
+    from cdpr_twin.sim import build_robot
+
+    s = load_scenario("paper_open_loop")
+    s = replace(s, truth=replace(s.truth, seed=seed))
+    t0 = time.perf_counter()
+    session = calibrate(s, poses)
+    wall = time.perf_counter() - t0
+    _, nominal, _ = build_robot(s.model.file)
+    check = truth_check(session, nominal.geometry, nominal.T_base_tag)
+    robot, _ = write(
+        Path(out) / f"robot_{seed}",
+        s.model.file.parent / "robot.toml",
+        session.calibration,
+        {"check_against_truth": check},
+    )
+    p1 = {}
+    for name, nom in (("nominal", None), ("calibrated", robot)):
+        sc = replace(s, model=replace(s.model, nominal=nom)).with_overrides(
+            duration=10.0, camera=False
+        )
+        summary = run(sc, None).summary
+        p1[name] = summary["segment_ends"][0]["truth_vs_waypoint"]["translation_m"] * 1e3
+    return {
+        "seed": seed,
+        "calibration_s": wall,
+        "exit_median_mm": {k: check[k]["exit_error_median_mm"] for k in ("nominal", "calibrated")},
+        "exit_shape_median_mm": check["calibrated"]["exit_shape_error_median_mm"],
+        "anchor_median_mm": check["calibrated"]["anchor_error_median_mm"],
+        "p1_error_mm": p1,
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seeds", default="1-20")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--poses", type=int, default=60)
+    ap.add_argument("--out", default=None)
+    a = ap.parse_args()
+    lo, hi = (int(x) for x in a.seeds.split("-"))
+    out = a.out or tempfile.mkdtemp()
+    with ProcessPoolExecutor(a.workers) as ex:
+        rows = list(
+            ex.map(one, range(lo, hi + 1), [a.poses] * (hi - lo + 1), [out] * (hi - lo + 1))
+        )
+    print("seed  exit nominal  exit calibrated (shape)  p1 nominal  p1 calibrated  time")
+    for r in rows:
+        print(
+            f"{r['seed']:4d}  {r['exit_median_mm']['nominal']:8.2f} mm  "
+            f"{r['exit_median_mm']['calibrated']:8.2f} ({r['exit_shape_median_mm']:.2f}) mm  "
+            f"{r['p1_error_mm']['nominal']:7.2f} mm  {r['p1_error_mm']['calibrated']:7.2f} mm  "
+            f"{r['calibration_s']:5.1f} s"
+        )
+    med = {
+        "exit_calibrated_mm": statistics.median(r["exit_median_mm"]["calibrated"] for r in rows),
+        "exit_shape_mm": statistics.median(r["exit_shape_median_mm"] for r in rows),
+        "exit_nominal_mm": statistics.median(r["exit_median_mm"]["nominal"] for r in rows),
+        "p1_nominal_mm": statistics.median(r["p1_error_mm"]["nominal"] for r in rows),
+        "p1_calibrated_mm": statistics.median(r["p1_error_mm"]["calibrated"] for r in rows),
+        "calibration_s": statistics.median(r["calibration_s"] for r in rows),
+    }
+    print("medians over robots:", json.dumps({k: round(v, 2) for k, v in med.items()}))
+    Path(out).mkdir(parents=True, exist_ok=True)
+    (Path(out) / "results.json").write_text(json.dumps({"rows": rows, "medians": med}, indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,213 @@
+"""Record the excitation in the twin: drive, settle, read encoders, tensions and the tag.
+
+The robot is homed at the scenario's start pose exactly as a run homes it (the true platform
+moved by the run's homing offset, the encoders zeroed as if it stood at the nominal start),
+then driven open loop through the excitation poses: straight quintic lines (eq. 26-29) whose
+cable rates are the *nominal* model's length changes from tick to tick, so the true robot goes
+wherever its true geometry and physics put it. At each pose it rests, waits out the camera's
+latency, and averages ``frames`` readings. What the solver gets is :class:`Observations` only;
+the truth (true poses and geometry) is kept apart in :class:`Truth`, for the report's check.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from cdpr_twin.calibrate.problem import Observations
+from cdpr_twin.controllers.open_loop import Segment
+from cdpr_twin.kinematics import cable_lengths
+from cdpr_twin.procedure import homing
+from cdpr_twin.scenario import Scenario, ScenarioError
+from cdpr_twin.se3 import so3_exp, so3_log, transform
+
+SPEED = 0.08
+"""Cruise speed of the moves between poses [m/s] (0.2 m/rad for rotations)."""
+
+SETTLE = 0.6
+"""Rest before reading at each pose [s] (the platform's swing decays in ≈ 0.3 s)."""
+
+
+TIGHTEN_TARGET = 3.0
+"""Every cable is tightened to at least this tension before the readings [N]."""
+
+TIGHTEN_SPEED = 0.002
+"""Speed at which a slack cable is reeled in [m/s]."""
+
+
+@dataclass(frozen=True, eq=False)
+class Truth:
+    """The twin's ground truth during the recording (never shown to the solver).
+
+    Attributes:
+        T_base_platform: (K, 4, 4) true poses at the readings.
+        geometry: the simulated robot's true :class:`~cdpr_twin.geometry.CdprGeometry`.
+        T_base_tag: (4, 4) the true tag pose.
+        drum_scale: (m,) true drum radius / nominal radius − 1.
+    """
+
+    T_base_platform: np.ndarray
+    geometry: object
+    T_base_tag: np.ndarray
+    drum_scale: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Recording:
+    """An excitation's readings, the nominal robot they refer to, and the truth beside them.
+
+    Attributes:
+        obs: what the solver sees.
+        nominal: the robot's software model (:class:`cdpr_twin.sim.NominalRobot`).
+        truth: ground truth, for the report only.
+        simulated_time: simulated seconds [s].
+        wall_time: wall-clock seconds of the recording [s].
+    """
+
+    obs: Observations
+    nominal: object
+    truth: Truth
+    simulated_time: float
+    wall_time: float
+
+
+def _move(physics, sensors, geom, T_from: np.ndarray, T_to: np.ndarray, period: float) -> None:
+    """Drive open loop along a quintic line, rates from the nominal lengths' changes.
+
+    The lengths end at the nominal model's at ``T_to``: what tightening reeled in at the last
+    pose is paid back out along the way.
+    """
+    dist = np.linalg.norm(T_to[:3, 3] - T_from[:3, 3])
+    ang = np.linalg.norm(so3_log(T_from[:3, :3].T @ T_to[:3, :3]))
+    n = max(int(np.ceil((dist + 0.2 * ang) / SPEED / period * 1.875)), 10)  # peak ṡ = 1.875
+    seg = Segment(T_from, T_to, n * period)
+    lengths = sensors.read(None, render=False).cable_lengths
+    gap = cable_lengths(geom, T_from, "pulley") - lengths
+    for k in range(1, n + 1):
+        nxt = cable_lengths(geom, seg.pose(k * period), "pulley") - gap * (1.0 - k / n)
+        physics.advance(period, (nxt - lengths) / period)
+        lengths = nxt
+
+
+def _tighten(physics, sensors, period: float, target: float, timeout: float = 4.0) -> None:
+    """Reel in every cable that reads below ``target`` [N] until all read above it.
+
+    The true robot differs from the model, so after an open-loop move some cables hang slack
+    (the platform rests on six, which carry no information on the geometry). Like a real
+    CDPR's tensioning step this uses the tension readings only: a slack cable is reeled in at
+    2 mm/s, a taut one below the target in proportion to the missing tension.
+    """
+    for _ in range(round(timeout / period)):
+        tau = sensors.read(None, render=False).tensions
+        low = tau < target
+        if not low.any():
+            return
+        k = physics.geometry.es / physics.rest_lengths  # the order of magnitude suffices
+        rate = np.where(tau < 0.5, -TIGHTEN_SPEED, -(target + 1.0 - tau) / (k * 0.05))
+        physics.advance(period, np.where(low, np.maximum(rate, -TIGHTEN_SPEED), 0.0))
+
+
+def _read(physics, sensors, period: float, frames: int, wait: int) -> tuple:
+    """Rest, tighten, then average ``frames`` readings. Returns (encoders, tensions, taut, tag)."""
+    rest = np.zeros(physics.n_cables)
+    physics.advance(round(SETTLE / period) * period, rest)
+    _tighten(physics, sensors, period, TIGHTEN_TARGET)
+    physics.advance(round(SETTLE / period) * period, rest)
+    for _ in range(wait):
+        sensors.read(None)
+        physics.advance(period, rest)
+    enc, ten, tags, ok = [], [], [], None
+    for _ in range(frames):
+        m = sensors.read(None)
+        enc.append(m.cable_lengths)
+        ten.append(m.tensions)
+        clipped = m.tensions_clipped if m.tensions_clipped is not None else False
+        good = (m.tensions > 1.0) & ~np.asarray(clipped, bool)
+        ok = good if ok is None else ok & good
+        if m.tag is not None:
+            tags.append(m.tag.T_cam_tag)
+        physics.advance(period, rest)
+    return np.mean(enc, axis=0), np.mean(ten, axis=0), ok, _mean_pose(tags)
+
+
+def _mean_pose(poses: list[np.ndarray]) -> np.ndarray | None:
+    """The mean of poses close together (rotation: mean twist about the first), or None."""
+    if not poses:
+        return None
+    R0 = poses[0][:3, :3]
+    w = np.mean([so3_log(R0.T @ T[:3, :3]) for T in poses], axis=0)
+    return transform(R0 @ so3_exp(w), np.mean([T[:3, 3] for T in poses], axis=0))
+
+
+def record(s: Scenario, poses: list[np.ndarray], frames: int = 4) -> Recording:
+    """Home the scenario's robot, drive it through ``poses`` and record each.
+
+    Args:
+        s: the scenario (robot, truth seed, realism, run seed, start pose, stepping).
+        poses: (4, 4) poses to visit, in order.
+        frames: readings averaged at each pose.
+
+    Raises:
+        ScenarioError: the scenario's robot cannot be built, or has no camera.
+    """
+    from cdpr_twin.sim import ModelError, Sensors, build_robot
+
+    if not s.sensors.camera:
+        raise ScenarioError(f"{s.source}: sensors.camera: calibration needs the camera; set true")
+    try:
+        physics, nominal, _ = build_robot(
+            s.model.file,
+            s.truth,
+            s.model.timestep,
+            s.model.align_every,
+            s.realism.winch,
+            nominal_path=s.model.nominal,
+        )
+    except (ModelError, ValueError) as exc:
+        raise ScenarioError(f"{s.source}: model: {exc}") from None
+    if nominal.T_base_tag is None or nominal.intrinsics is None:
+        raise ScenarioError(f"{s.source}: model: the robot needs a camera and a tag to calibrate")
+    period = s.model.control_period
+    sensors = Sensors(
+        physics, nominal, s.sensors.tension_noise_std, s.seed, camera=True,
+        realism=s.realism, robot_seed=s.truth.seed, period=period,
+    )  # fmt: skip
+    started = time.perf_counter()
+    try:
+        _, true_start = homing(s)
+        physics.reset(true_start)
+        sensors.home(s.start_pose)
+        rows, truth, here = [], [], s.start_pose
+        for T in poses:
+            _move(physics, sensors, nominal.geometry, here, T, period)
+            rows.append(_read(physics, sensors, period, frames, s.realism.camera.latency_ticks))
+            truth.append(np.array(physics.T_base_platform))
+            here = T
+    finally:
+        sensors.close()
+    return Recording(
+        obs=_observations(rows, poses),
+        nominal=nominal,
+        truth=Truth(
+            np.array(truth),
+            physics.geometry,
+            np.array(physics.T_base_tag),
+            physics.drum_radius_true / physics.winch.drum_radius - 1.0,
+        ),
+        simulated_time=float(physics.time),
+        wall_time=time.perf_counter() - started,
+    )
+
+
+def _observations(rows: list[tuple], poses: list[np.ndarray]) -> Observations:
+    seen = np.array([r[3] is not None for r in rows])
+    return Observations(
+        encoder=np.array([r[0] for r in rows]),
+        tensions=np.array([r[1] for r in rows]),
+        taut=np.array([r[2] for r in rows]),
+        T_cam_tag=np.array([np.eye(4) if r[3] is None else r[3] for r in rows]),
+        seen=seen,
+        T_guess=np.array(poses),
+    )

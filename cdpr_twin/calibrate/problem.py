@@ -1,0 +1,326 @@
+"""Self-calibration as one sparse nonlinear least-squares problem (numpy only).
+
+Unknowns (all corrections to the nominal model, zero at the start):
+
+- shared: exit points A_i (m × 3, F_b), anchor points B_i (m × 3, F_p), one length offset c_i
+  per cable, one drum scale error s_i per cable, the camera mount ᵖT_c (6, a twist applied on
+  the right of the nominal mount) and the tag pose ᵇT_o (6, likewise);
+- per recorded pose k: the platform pose ᵇT_p,k (6, a twist on the right of the pose the
+  robot was commanded to).
+
+Residuals, each divided by its noise so that they are unitless:
+
+- cable i at pose k (taut cables only): the rest length the elastic pulley model predicts,
+  l0 = E·S·l_f / (E·S + τ_ik) with l_f from eq. 15-24 and the measured tension τ_ik, minus
+  the rest length the encoder implies, e_ik + c_i + s_i·(e_ik − ē_i) (ē_i: the mean reading,
+  which decouples offset and scale; s_i = r'_i/r_i − 1 for a drum whose true radius r'_i
+  differs from the nominal r_i);
+- the tag at pose k (when detected): the measured ᶜT_o against
+  ᵖT_c⁻¹ · ᵇT_p,k⁻¹ · ᵇT_o, position in the camera frame and the rotation's axis-angle, their
+  noise growing with the distance to the tag;
+- priors: each shared correction over the builder's tolerance (:class:`Priors`). The data
+  cannot see the base and platform frames themselves (a rigid motion of exit points, tag and
+  poses together, or of anchors, camera and poses, leaves every measurement unchanged): the
+  priors fix those gauges, and :mod:`cdpr_twin.calibrate.solver` reports them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import lil_matrix
+from scipy.spatial.transform import Rotation
+
+from cdpr_twin.geometry import CdprGeometry
+from cdpr_twin.kinematics import pulley_lengths
+from cdpr_twin.se3 import inverse, se3_exp
+
+BLOCKS = ("exit", "anchor", "offset", "scale", "camera", "tag")
+"""The shared parameter blocks, in the order they sit in the parameter vector."""
+
+
+@dataclass(frozen=True, eq=False)
+class Observations:
+    """What the robot recorded at K static poses (no truth in it).
+
+    Attributes:
+        encoder: (K, m) encoder lengths [m].
+        tensions: (K, m) tension readings [N].
+        taut: (K, m) readings to use (cables taut, readings not clipped).
+        T_cam_tag: (K, 4, 4) detected tag poses (pupil frame; anything where not seen).
+        seen: (K,) whether the tag was detected at pose k.
+        T_guess: (K, 4, 4) the poses the robot was commanded to (the solver's start).
+    """
+
+    encoder: np.ndarray
+    tensions: np.ndarray
+    taut: np.ndarray
+    T_cam_tag: np.ndarray
+    seen: np.ndarray
+    T_guess: np.ndarray
+
+    @property
+    def n_poses(self) -> int:
+        """Number of poses K."""
+        return self.encoder.shape[0]
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """The measurements' noise (1σ), which weighs the residuals.
+
+    Attributes:
+        length_std: encoder length noise [m] (quantisation 2πr/N/√12 ≈ 9 µm, plus the E·S and
+            tension errors in the stretch correction, ≈ 6 µm).
+        tag_lateral_std: tag position noise across the optical axis at 0 m [m].
+        tag_depth_std: tag position noise along the optical axis at 0 m [m].
+        tag_std_per_m: growth of both with the tag's distance [m per m].
+        tag_rotation_std: tag orientation noise [rad].
+    """
+
+    length_std: float = 15e-6
+    tag_lateral_std: float = 0.3e-3
+    tag_depth_std: float = 0.5e-3
+    tag_std_per_m: float = 4e-3
+    tag_rotation_std: float = math.radians(0.3)
+
+
+@dataclass(frozen=True)
+class Priors:
+    """The builder's tolerances (1σ) on each correction, and which blocks are estimated.
+
+    Attributes:
+        exit: exit point position [m] per axis.
+        anchor: anchor point position [m] per axis.
+        offset: length offset [m] (encoders homed at a pose the model misplaces).
+        scale: relative drum radius error.
+        camera_position: camera mount position [m] per axis.
+        camera_rotation: camera mount orientation [rad] per axis.
+        tag_position: tag position [m] per axis.
+        tag_rotation: tag orientation [rad] per axis.
+        estimate: the blocks to estimate (others stay nominal), from :data:`BLOCKS`.
+        use_priors: add the prior residuals (without them the gauges are free).
+    """
+
+    exit: float = 0.012
+    anchor: float = 0.004
+    offset: float = 0.05
+    scale: float = 0.005
+    camera_position: float = 0.001
+    camera_rotation: float = math.radians(0.3)
+    tag_position: float = 0.001
+    tag_rotation: float = math.radians(0.3)
+    estimate: tuple[str, ...] = BLOCKS
+    use_priors: bool = True
+
+    def __post_init__(self) -> None:
+        unknown = sorted(set(self.estimate) - set(BLOCKS))
+        if unknown:
+            raise ValueError(f"unknown parameter block {unknown[0]!r}; choose from {BLOCKS}")
+
+
+def exp_stack(xi: np.ndarray) -> np.ndarray:
+    """SE(3) exponential of a stack of twists ``[v, ω]`` (K, 6). Returns (K, 4, 4)."""
+    v, w = xi[:, :3], xi[:, 3:]
+    th2 = np.einsum("ij,ij->i", w, w)
+    small = th2 < 1e-8
+    th = np.sqrt(np.where(small, 1.0, th2))
+    b = np.where(small, 0.5 - th2 / 24.0, (1.0 - np.cos(th)) / np.where(small, 1.0, th2))
+    c = np.where(small, 1.0 / 6.0 - th2 / 120.0, (th - np.sin(th)) / (th * th * th))
+    K = np.zeros((len(xi), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
+    K = K - K.transpose(0, 2, 1)
+    V = np.eye(3) + b[:, None, None] * K + c[:, None, None] * (K @ K)
+    T = np.zeros((len(xi), 4, 4))
+    T[:, :3, :3] = Rotation.from_rotvec(w).as_matrix()
+    T[:, :3, 3] = np.einsum("nij,nj->ni", V, v)
+    T[:, 3, 3] = 1.0
+    return T
+
+
+def inverse_stack(T: np.ndarray) -> np.ndarray:
+    """Inverse of a stack of rigid transforms (K, 4, 4)."""
+    out = np.zeros_like(T)
+    Rt = T[:, :3, :3].transpose(0, 2, 1)
+    out[:, :3, :3] = Rt
+    out[:, :3, 3] = -np.einsum("nij,nj->ni", Rt, T[:, :3, 3])
+    out[:, 3, 3] = 1.0
+    return out
+
+
+class Layout:
+    """Where each parameter sits in the vector: shared blocks, then 6 per pose.
+
+    Args:
+        m: cable count.
+        n_poses: K.
+        priors: which blocks are estimated, and their prior σ.
+    """
+
+    def __init__(self, m: int, n_poses: int, priors: Priors) -> None:
+        sizes = {"exit": 3 * m, "anchor": 3 * m, "offset": m, "scale": m, "camera": 6, "tag": 6}
+        self.m, self.n_poses, self.blocks = m, n_poses, {}
+        at = 0
+        for name in BLOCKS:
+            if name in priors.estimate:
+                self.blocks[name] = slice(at, at + sizes[name])
+                at += sizes[name]
+        self.n_shared = at
+        self.n = at + 6 * n_poses
+        self.sigma = np.concatenate([self._prior(n, priors) for n in self.blocks] or [[]])
+
+    def _prior(self, name: str, p: Priors) -> np.ndarray:
+        if name in ("camera", "tag"):
+            pos, rot = getattr(p, f"{name}_position"), getattr(p, f"{name}_rotation")
+            return np.array([pos] * 3 + [rot] * 3)
+        return np.full(self.m * (3 if name in ("exit", "anchor") else 1), getattr(p, name))
+
+    def pose(self, k: int) -> slice:
+        """The slice of pose k's six parameters."""
+        return slice(self.n_shared + 6 * k, self.n_shared + 6 * k + 6)
+
+    def names(self) -> list[str]:
+        """A name per shared parameter (``exit3.y``, ``offset5``, ``camera.rx``…; from 1)."""
+        out: list[str] = []
+        for name in self.blocks:
+            if name in ("exit", "anchor"):
+                out += [f"{name}{i + 1}.{ax}" for i in range(self.m) for ax in "xyz"]
+            elif name in ("camera", "tag"):
+                out += [f"{name}.{ax}" for ax in ("x", "y", "z", "rx", "ry", "rz")]
+            else:
+                out += [f"{name}{i + 1}" for i in range(self.m)]
+        return out
+
+    def get(self, x: np.ndarray, name: str) -> np.ndarray:
+        """A block's values (zeros when not estimated), shaped (m, 3), (m,) or (6,)."""
+        m = self.m
+        shape = {"exit": (m, 3), "anchor": (m, 3), "offset": (m,), "scale": (m,)}.get(name, (6,))
+        if name not in self.blocks:
+            return np.zeros(shape)
+        return x[self.blocks[name]].reshape(shape)
+
+
+@dataclass(frozen=True, eq=False)
+class Model:
+    """The robot the parameters describe (nominal + corrections), and the poses.
+
+    Attributes:
+        a_base: (m, 3) exit points [m].
+        b_platform: (m, 3) anchor points [m].
+        offset: (m,) length offsets c_i [m].
+        scale: (m,) drum scale errors s_i.
+        T_platform_cam: (4, 4) camera mount.
+        T_base_tag: (4, 4) tag pose.
+        T_base_platform: (K, 4, 4) platform poses.
+    """
+
+    a_base: np.ndarray
+    b_platform: np.ndarray
+    offset: np.ndarray
+    scale: np.ndarray
+    T_platform_cam: np.ndarray
+    T_base_tag: np.ndarray
+    T_base_platform: np.ndarray
+
+
+class Problem:
+    """The residuals of one calibration, their sparsity, and the model they describe.
+
+    Args:
+        nominal: the nominal geometry (its exit and anchor points, radii, E·S, camera mount).
+        T_base_tag: (4, 4) the tag pose the nominal model states (pupil frame).
+        obs: the recordings.
+        priors: tolerances and estimated blocks.
+        noise: measurement noise.
+    """
+
+    def __init__(
+        self,
+        nominal: CdprGeometry,
+        T_base_tag: np.ndarray,
+        obs: Observations,
+        priors: Priors = Priors(),
+        noise: NoiseModel = NoiseModel(),
+    ) -> None:
+        self.nominal, self.T_base_tag, self.obs = nominal, np.asarray(T_base_tag), obs
+        self.priors, self.noise = priors, noise
+        self.layout = Layout(nominal.n_cables, obs.n_poses, priors)
+        taut = np.asarray(obs.taut, bool)
+        counts = np.maximum(taut.sum(axis=0), 1)
+        self.e_ref = np.where(taut, obs.encoder, 0.0).sum(axis=0) / counts
+        self.rows_k, self.rows_i = np.nonzero(taut)
+        self.seen = np.flatnonzero(obs.seen)
+        self.n_cable_rows, self.n_tag_rows = len(self.rows_k), 6 * len(self.seen)
+        self.n_data = self.n_cable_rows + self.n_tag_rows
+        self.n_prior = self.layout.n_shared if priors.use_priors else 0
+
+    def model(self, x: np.ndarray) -> Model:
+        """The robot and poses parameters ``x`` describe."""
+        L, g = self.layout, self.nominal
+        poses = self.obs.T_guess @ exp_stack(x[L.n_shared :].reshape(-1, 6))
+        return Model(
+            a_base=g.a_base + L.get(x, "exit"),
+            b_platform=g.b_platform + L.get(x, "anchor"),
+            offset=L.get(x, "offset"),
+            scale=L.get(x, "scale"),
+            T_platform_cam=g.T_platform_cam @ se3_exp(L.get(x, "camera")),
+            T_base_tag=self.T_base_tag @ se3_exp(L.get(x, "tag")),
+            T_base_platform=poses,
+        )
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        """All residuals, unitless: cables, then tag poses, then priors. Returns (n_rows,)."""
+        mod = self.model(x)
+        parts = [self._cables(mod), self._tags(mod)]
+        if self.n_prior:
+            parts.append(x[: self.layout.n_shared] / self.layout.sigma)
+        return np.concatenate(parts)
+
+    def _cables(self, mod: Model) -> np.ndarray:
+        k, i, g, o = self.rows_k, self.rows_i, self.nominal, self.obs
+        T = mod.T_base_platform[k]
+        b = np.einsum("nij,nj->ni", T[:, :3, :3], mod.b_platform[i]) + T[:, :3, 3]
+        l_f = pulley_lengths(mod.a_base[i], g.pulley_radius[i], b)
+        tau = o.tensions[k, i]
+        l0_model = g.es[i] * l_f / (g.es[i] + tau)
+        e = o.encoder[k, i]
+        l0_enc = e + mod.offset[i] + mod.scale[i] * (e - self.e_ref[i])
+        return (l0_model - l0_enc) / self.noise.length_std
+
+    def _tags(self, mod: Model) -> np.ndarray:
+        if not len(self.seen):
+            return np.zeros(0)
+        n = self.noise
+        pred = inverse(mod.T_platform_cam) @ inverse_stack(mod.T_base_platform[self.seen])
+        pred = pred @ mod.T_base_tag
+        meas = self.obs.T_cam_tag[self.seen]
+        d = np.linalg.norm(meas[:, :3, 3], axis=1)[:, None]
+        std = np.array([n.tag_lateral_std, n.tag_lateral_std, n.tag_depth_std])
+        dt = (meas[:, :3, 3] - pred[:, :3, 3]) / (std + n.tag_std_per_m * d)
+        R = pred[:, :3, :3].transpose(0, 2, 1) @ meas[:, :3, :3]
+        dr = Rotation.from_matrix(R).as_rotvec() / n.tag_rotation_std
+        return np.hstack([dt, dr]).ravel()
+
+    def sparsity(self) -> lil_matrix:
+        """Which residual depends on which parameter: (n_rows, n) pattern of ones."""
+        L = self.layout
+        S = lil_matrix((self.n_data + self.n_prior, L.n), dtype=np.int8)
+        for row, (k, i) in enumerate(zip(self.rows_k, self.rows_i, strict=True)):
+            cols = list(range(L.pose(k).start, L.pose(k).stop))
+            for name, width in (("exit", 3), ("anchor", 3), ("offset", 1), ("scale", 1)):
+                if name in L.blocks:
+                    start = L.blocks[name].start + width * i
+                    cols += range(start, start + width)
+            S[row, cols] = 1
+        for j, k in enumerate(self.seen):
+            cols = list(range(L.pose(k).start, L.pose(k).stop))
+            for name in ("camera", "tag"):
+                if name in L.blocks:
+                    cols += range(L.blocks[name].start, L.blocks[name].stop)
+            for r in range(6):
+                S[self.n_cable_rows + 6 * j + r, cols] = 1
+        for j in range(self.n_prior):
+            S[self.n_data + j, j] = 1
+        return S

@@ -1,0 +1,94 @@
+"""``cdpr-twin calibrate SCENARIO``: self-calibrate the scenario's robot in the twin."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _calibrate(args: argparse.Namespace) -> int:
+    from cdpr_twin.calibrate.output import write
+    from cdpr_twin.calibrate.session import calibrate, truth_check
+    from cdpr_twin.calibrate.solver import CalibrationError
+    from cdpr_twin.scenario import ScenarioError, load_scenario
+    from cdpr_twin.sim import ModelError, build_robot
+
+    started = time.perf_counter()
+    try:
+        s = load_scenario(args.scenario).with_overrides(seed=args.seed)
+        if args.poses < 12:
+            raise ScenarioError(f"--poses must be ≥ 12 (the unknowns need them), got {args.poses}")
+        source = s.model.nominal or s.model.file.parent / "robot.toml"
+        if not source.is_file():
+            raise ScenarioError(
+                f"{s.source}: model: no robot description {source} beside the model file; "
+                'give one with [model] nominal = "robot.toml"'
+            )
+        session = calibrate(s, args.poses, args.frames)
+        _, nominal, _ = build_robot(s.model.file, nominal_path=s.model.nominal)
+    except (ScenarioError, ModelError, CalibrationError) as exc:
+        print(f"cdpr-twin calibrate: error: {exc}", file=sys.stderr)
+        return 2
+    cal, rec = session.calibration, session.recording
+    extra = {
+        "scenario": str(s.source),
+        "robot_seed": s.truth.seed,
+        "run_seed": s.seed,
+        "poses": rec.obs.n_poses,
+        "tag_seen": int(rec.obs.seen.sum()),
+        "timing_s": {
+            "excitation": session.excitation_s,
+            "recording": rec.wall_time,
+            "solve": cal.wall_time,
+            "total": time.perf_counter() - started,
+            "simulated": rec.simulated_time,
+        },
+        "check_against_truth": truth_check(session, nominal.geometry, nominal.T_base_tag),
+    }
+    out = Path(args.out or Path("runs") / f"{s.name}_calibration")
+    robot, report = write(out, source, cal, extra)
+    _print(cal, extra, robot, report)
+    return 0
+
+
+def _print(cal, extra: dict, robot: Path, report: Path) -> None:
+    idn, chk = cal.identifiability, extra["check_against_truth"]
+    t = extra["timing_s"]
+    print(
+        f"calibrated from {extra['poses']} poses (tag seen at {extra['tag_seen']}) in "
+        f"{t['total']:.1f} s (recording {t['recording']:.1f} s, solve {t['solve']:.1f} s)"
+    )
+    print(
+        f"fit: cable residual RMS {cal.rms_cable * 1e6:.1f} µm, tag "
+        f"{cal.rms_tag[0] * 1e3:.2f} mm / {np.degrees(cal.rms_tag[1]):.2f}°; "
+        f"rank {idn.rank} of {idn.n_params} (unseen: {len(idn.null_directions)} directions)"
+    )
+    sig = cal.sigma[[i for i, n in enumerate(cal.names) if n.startswith("exit")]]
+    print(f"exit points: median 1σ {np.median(sig) * 1e3:.2f} mm per axis")
+    if idn.prior_determined:
+        print(f"decided by the priors, not the data: {', '.join(idn.prior_determined)}")
+    for name in ("nominal", "calibrated"):
+        c = chk[name]
+        print(
+            f"check against the truth, {name}: exit points median {c['exit_error_median_mm']:.2f}"
+            f" mm (shape {c['exit_shape_error_median_mm']:.2f} mm), anchors "
+            f"{c['anchor_error_median_mm']:.2f} mm"
+        )
+    print(f"wrote {robot} and {report}")
+
+
+def add_parser(sub) -> None:
+    """Add ``calibrate`` to the command's subparsers."""
+    p = sub.add_parser(
+        "calibrate", help="self-calibrate a scenario's robot; write a calibrated robot.toml"
+    )
+    p.add_argument("scenario", help="a scenario file, or a shipped scenario's name")
+    p.add_argument("--out", help="output directory (default: runs/<name>_calibration)")
+    p.add_argument("--poses", type=int, default=60, help="excitation poses (default 60)")
+    p.add_argument("--frames", type=int, default=4, help="readings averaged per pose")
+    p.add_argument("--seed", type=int, help="run seed (sensor noise) instead of the file's")
+    p.set_defaults(func=_calibrate)
