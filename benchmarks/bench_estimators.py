@@ -44,6 +44,7 @@ import gc
 import math
 import statistics
 import time
+from pathlib import Path
 
 # isort: off
 import cdpr_twin.sim  # noqa: F401  (first: it defaults MUJOCO_GL=egl, read by mujoco)
@@ -74,6 +75,9 @@ KERNEL = "scipy+kernel"
 
 
 # ---------------------------------------------------------------------- scipy + scalar kernel
+ROOT = Path(__file__).resolve().parent.parent
+
+
 def solve_scipy_kernel(
     cables: list[tuple[float, ...]], pulley: bool, goal: list[float], T0: np.ndarray
 ) -> tuple[np.ndarray, float, int]:
@@ -180,6 +184,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeats", type=int, default=7, help="least timed replays (median)")
     parser.add_argument("--ticks", type=int, default=50, help="motion ticks of 40 ms recorded")
+    parser.add_argument(
+        "--calibration", action="store_true", help="also time one self-calibration (≈ 40 s)"
+    )
     args = parser.parse_args()
     t_start = time.perf_counter()
 
@@ -270,7 +277,38 @@ def main() -> None:
             print(f"{name:<22}{backend:<14}{dp:>19.2e}{dr:>21.2e}  {'yes' if same else 'NO'}")
     print("(same: identical valid flags and cable choices at every update)")
     print()
+    bench_issue_11(measurements, geometry, args.repeats, args.calibration)
     print(f"total benchmark time {time.perf_counter() - t_start:.1f} s")
+
+
+def bench_issue_11(measurements, geometry, repeats: int, calibration: bool) -> None:
+    """Issue 11's bars: ``fused`` as the paper scenarios configure it (≤ 200 µs per update),
+    against the cheapest model-based update of the same replay; one calibration (≤ 60 s)."""
+    from cdpr_twin.scenario import load_scenario
+
+    s = load_scenario(ROOT / "scenarios" / "paper_pbvs.toml")
+    fused = make_estimator("fused", geometry, **vars(s.estimators.options["fused"]))
+    us, _, _ = bench(fused, measurements, repeats)
+    base, _, _ = bench(make_estimator("model_simple", geometry), measurements, repeats)
+    print(
+        f"fused as in paper_pbvs.toml ({fused.layout.n} error states, "
+        f"{int(fused.layout.consider.sum())} considered): {us:.0f} µs per update "
+        f"({us / base:.1f}× model_simple's {base:.0f} µs); bar 200 µs: "
+        f"{'PASS' if us <= 200 else 'FAIL'}"
+    )
+    if calibration:
+        from cdpr_twin.calibrate.session import calibrate
+
+        t0 = time.perf_counter()
+        ol = load_scenario(ROOT / "scenarios" / "paper_open_loop.toml")
+        session = calibrate(ol)
+        wall, rec = time.perf_counter() - t0, session.recording
+        print(
+            f"self-calibration of paper_open_loop's robot {ol.truth.seed}: {wall:.1f} s (recording "
+            f"{rec.wall_time:.1f} s for {rec.simulated_time:.0f} simulated s, "
+            f"{rec.simulated_time / rec.wall_time:.1f}× real time); bar 60 s: "
+            f"{'PASS' if wall <= 60 else 'FAIL'}"
+        )
 
 
 if __name__ == "__main__":
