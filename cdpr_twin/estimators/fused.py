@@ -28,6 +28,7 @@ import numpy as np
 
 from cdpr_twin.estimators import fused_models as fm
 from cdpr_twin.estimators.base import NO_INPUTS, NON_FINITE_INPUT, TAG_LOST, Estimator
+from cdpr_twin.estimators.selection import condition_number
 from cdpr_twin.estimators.solvers import _cable_tuples, _kernel, _pose
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.plugins import OptionError, option, register
@@ -82,6 +83,10 @@ class FusedOptions:
         center_error_std_px: std of the calibrated cx, cy [px].
         distortion_error_std: std of each calibrated (k1, k2, p1, p2).
         lens: the calibrated lens (k1, k2, p1, p2), through which those errors act.
+        max_condition: the prediction maps the drums' errors into the pose through the taut
+            cables' Jacobian A (A⁺ ρ⊙l̇ dt) only while A's condition number is below this
+            (as the model-based estimators' ``max_condition``): a nearly singular taut set (at
+            a servo's start) would turn a drum's 0.5 % into metres of variance.
     """
 
     initial_position_std: float = option(0.001, minimum=0.0, unit="m")
@@ -111,6 +116,7 @@ class FusedOptions:
     center_error_std_px: float = option(1.5, minimum=0.0, unit="px")
     distortion_error_std: tuple[float, ...] = option((0.01, 0.02, 0.0005, 0.0005), minimum=0.0)
     lens: tuple[float, ...] = option((-0.20, 0.08, 0.002, -0.002))
+    max_condition: float = option(500.0, minimum=1.0)
 
     def __post_init__(self) -> None:
         flags = ("use_tag", "drum_consider", "distortion_error_std", "lens")
@@ -208,10 +214,14 @@ class FusedEstimator(Estimator):
         self._T = T_prev @ E
         F = np.zeros((6, self._n))  # the pose rows of the transition; the others are I's
         F[:, fm.POSE] = adjoint(inverse(E))
+        A = None
         if taut.sum() >= 6 and np.any(step):
             _, rows = _kernel(self._cables, True, _pose(self._T))
             rows = np.asarray(rows)
             A = rows[taut]
+            if condition_number(A) > o.max_condition:  # A⁺ would amplify the drum errors into
+                A = None  # motions the statics forbid: propagate the commanded twist alone
+        if A is not None:
             A_pinv = np.linalg.solve(A.T @ A, A.T)
             F[:, np.flatnonzero(taut) + self._drum.start] = A_pinv * (rates[taut] * dt)
             if self.layout.exit.stop > self.layout.exit.start:
