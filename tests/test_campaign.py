@@ -176,3 +176,44 @@ def test_a_bad_campaign_is_a_one_line_error_before_anything_runs(tmp_path, capsy
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and str(path) in err and message.split(":")[0] in err
     assert not (tmp_path / "out").exists()
+
+
+def _canonical(value):
+    """A scenario's content for comparison: arrays as lists, dataclasses as dicts, names out."""
+    import dataclasses
+
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        skip = {"name", "source", "description", "overrides"}
+        return {
+            f.name: _canonical(getattr(value, f.name))
+            for f in dataclasses.fields(value)
+            if f.name not in skip
+        }
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, dict | tuple | list) or hasattr(value, "items"):
+        if hasattr(value, "items"):
+            return {k: _canonical(v) for k, v in value.items()}
+        return [_canonical(v) for v in value]
+    return value
+
+
+def test_the_paper_study_campaign_is_what_reproduce_runs():
+    """campaigns/paper_study.toml and ``reproduce``'s plan: the same runs, scenario for scenario
+    (each campaign task's resolved scenario equals the plan's file with its run's overrides)."""
+    from cdpr_twin.scenario import load_scenario, scenario_from_data
+    from cdpr_twin.study.plan import plan
+
+    tasks = load_campaign(Path(__file__).parent.parent / "campaigns" / "paper_study.toml").tasks
+    specs = plan()
+    assert len(tasks) == len(specs) == 45
+    planned = {
+        (s.kind, s.in_loop, s.seed): _canonical(
+            load_scenario(s.scenario).with_overrides(seed=s.seed, in_loop=s.in_loop)
+        )
+        for s in specs
+    }
+    for t in tasks:
+        key = (t.block, t.params.get("estimators.in_loop"), t.params["seed"])
+        assert _canonical(scenario_from_data(t.data, t.source)) == planned.pop(key), key
+    assert not planned

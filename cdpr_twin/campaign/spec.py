@@ -212,6 +212,20 @@ def _block(source: Path, table: dict, index: int, where: str) -> _Block:
     )  # fmt: skip
 
 
+IN_LOOP = "estimators.in_loop"
+
+
+def _swap_in_loop(data: dict, base: dict) -> None:
+    """Vary the in-loop estimator as ``cdpr-twin run --in-loop`` does.
+
+    The file's in-loop estimator stays, passive, and the new one leaves the passive list, so
+    every run of an ``estimators.in_loop`` axis computes the same estimators.
+    """
+    est, old = data["estimators"], base.get("estimators", {})
+    names = [old.get("in_loop", "control"), *old.get("passive", [])]
+    est["passive"] = [n for n in names if n != est["in_loop"]]
+
+
 def _tasks(source: Path, block: _Block, seed: int, where: str) -> list[Task]:
     from cdpr_twin.scenario import ScenarioError, scenario_from_data
 
@@ -223,11 +237,14 @@ def _tasks(source: Path, block: _Block, seed: int, where: str) -> list[Task]:
             params = {a["key"]: v for a, v in zip(block.grid, point, strict=True)}
             params |= {a["key"]: _draw(a, rng) for a in block.random}
             data = copy.deepcopy(block.base)
-            for key, value in [*block.overrides.items(), *params.items()]:
+            changes = {**block.overrides, **params}
+            for key, value in changes.items():
                 try:
                     set_dotted(data, key, value)
                 except KeyError as exc:
                     raise _fail(source, f"{where}{key}", str(exc.args[0])) from None
+            if IN_LOOP in changes and "estimators.passive" not in changes:
+                _swap_in_loop(data, block.base)
             try:
                 scenario_from_data(data, block.scenario)
             except ScenarioError as exc:
