@@ -171,6 +171,7 @@ class FusedEstimator(Estimator):
         self._T0 = self._T.copy()
         self._rho = np.zeros(self._m)
         self._T_tag: np.ndarray | None = None
+        self._at_T: tuple | None = None  # (pose, its kernel output): reused, never recomputed
         self._ref: tuple[np.ndarray, np.ndarray] | None = None  # (lengths, corrected) at t₀
         self._last_twist = np.zeros(6)
         P0 = np.diag([o.initial_position_std**2] * 3 + [o.initial_rotation_std**2] * 3)
@@ -216,8 +217,8 @@ class FusedEstimator(Estimator):
         F[:, fm.POSE] = adjoint(inverse(E))
         A = None
         if taut.sum() >= 6 and np.any(step):
-            _, rows = _kernel(self._cables, True, _pose(self._T))
-            rows = np.asarray(rows)
+            self._at_T = (self._T, _kernel(self._cables, True, _pose(self._T)))
+            rows = np.asarray(self._at_T[1][1])
             A = rows[taut]
             if condition_number(A) > o.max_condition:  # A⁺ would amplify the drum errors into
                 A = None  # motions the statics forbid: propagate the commanded twist alone
@@ -263,7 +264,9 @@ class FusedEstimator(Estimator):
         taut = self._taut(m)
         if not taut.all():
             flags.add(SLACK_CABLES)
-        lengths_now, rows_now = _kernel(self._cables, True, _pose(self._T))
+        at_T = self._at_T  # the prediction's lengths and rows at this very pose, if it made them
+        same = at_T is not None and at_T[0] is self._T
+        lengths_now, rows_now = at_T[1] if same else _kernel(self._cables, True, _pose(self._T))
         lengths_0, rows_0 = _kernel(self._cables, True, _pose(self._T0))
         moved = np.asarray(m.cable_lengths) - self._ref[0]
         y = c - self._ref[1] + np.where(moved != 0.0, 0.5 * o.encoder_quantum, 0.0)
