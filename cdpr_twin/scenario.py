@@ -32,7 +32,9 @@ from cdpr_twin.realism import Realism, profile, without_source
 from cdpr_twin.scenario_tables import (
     MonitorConfig,
     read_events,
+    read_model_file,
     read_monitor,
+    read_payload_com,
     read_plugins,
     read_realism,
     read_truth,
@@ -56,12 +58,16 @@ class ModelConfig:
         timestep: physics step [s].
         control_rate: control (and sensing) rate [Hz].
         align_every: physics steps between swivel/stiffness refreshes.
+        payload: mass fixed to the platform [kg] (``payload_kg``; ≤ the robot's rated one).
+        payload_com: (3,) its centre of mass in F_p [m] (``payload_com_m``).
     """
 
     file: Path
     timestep: float
     control_rate: float
     align_every: int
+    payload: float = 0.0
+    payload_com: tuple[float, ...] = (0.0, 0.0, 0.0)
 
     @property
     def control_period(self) -> float:
@@ -301,12 +307,13 @@ def _estimators(r: OptionReader) -> EstimatorConfig:
 
 def _model(top: OptionReader, source: Path) -> ModelConfig:
     m = top.table_of("model", required=False)
-    file = _model_file(m, source)
+    file = read_model_file(m, source)
     timestep = m.number("timestep", 0.0005, minimum=MIN_TIMESTEP, unit="s")
     if timestep > MAX_TIMESTEP:
         raise m.fail("timestep", f"must be ≤ {MAX_TIMESTEP} s for stiff cables, got {timestep}")
     control_rate = m.number("control_rate", 25.0, minimum=0, exclusive=True, unit="Hz")
     align_every = m.integer("align_every", 10, minimum=1)
+    payload = m.number("payload_kg", 0.0, minimum=0, unit="kg"), read_payload_com(m)
     m.done()
     steps = 1.0 / control_rate / timestep
     if abs(steps - round(steps)) > 1e-6 * steps or round(steps) < 1:
@@ -316,21 +323,7 @@ def _model(top: OptionReader, source: Path) -> ModelConfig:
             f"number of physics steps of {timestep:g} s ({steps:.4f});"
             " choose a rate or timestep that divide evenly",
         )
-    return ModelConfig(file, timestep, control_rate, align_every)
-
-
-def _model_file(m: OptionReader, source: Path) -> Path:
-    """``robot = "<name>"`` (a shipped robot, the default ``acrobot``) or ``file = "<path>"``."""
-    if m.has("robot") and m.has("file"):
-        raise m.fail("robot", "give either robot (a shipped robot's name) or file, not both")
-    if m.has("file"):
-        file = Path(m.string("file"))
-        return file if file.is_absolute() else (source.parent / file).resolve()
-    name = m.string("robot", "acrobot")
-    try:
-        return resources.robot_scene(name)
-    except resources.ResourceError as exc:
-        raise m.fail("robot", str(exc)) from None
+    return ModelConfig(file, timestep, control_rate, align_every, *payload)
 
 
 def _read(source: Path) -> OptionReader:

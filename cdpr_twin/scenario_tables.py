@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from cdpr_twin import plugins
+from cdpr_twin import plugins, resources
 from cdpr_twin.deviations import DeviationSpec
 from cdpr_twin.events import EVENT_KINDS, Event
 from cdpr_twin.options import (
@@ -117,3 +117,29 @@ def read_truth(top: OptionReader, source: Path) -> DeviationSpec:
         raise ScenarioError(f"{source}: truth: {exc}") from None
     t.done()
     return truth
+
+
+def read_model_file(m: OptionReader, source: Path) -> Path:
+    """``robot = "<name>"`` (a shipped robot, the default ``acrobot``) or ``file = "<path>"``."""
+    if m.has("robot") and m.has("file"):
+        raise m.fail("robot", "give either robot (a shipped robot's name) or file, not both")
+    if m.has("file"):
+        file = Path(m.string("file"))
+        return file if file.is_absolute() else (source.parent / file).resolve()
+    name = m.string("robot", "acrobot")
+    try:
+        return resources.robot_scene(name)
+    except resources.ResourceError as exc:
+        raise m.fail("robot", str(exc)) from None
+
+
+def read_payload_com(m: OptionReader) -> tuple[float, ...]:
+    """``[model] payload_com_m``: the payload's centre of mass in F_p [m] (default the origin)."""
+    com = m.raw("payload_com_m", [0.0, 0.0, 0.0], "array of 3 numbers [m]")
+    ok = isinstance(com, list) and len(com) == 3
+    number = (int, float)
+    if not ok or not all(
+        isinstance(v, number) and not isinstance(v, bool) and math.isfinite(v) for v in com
+    ):
+        raise m.fail("payload_com_m", f"must be 3 numbers [x, y, z] in metres, got {com!r}")
+    return tuple(float(v) for v in com)

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.realism import Realism, robot_rng, run_rng
+from cdpr_twin.realism import Realism, for_robot, robot_rng, run_rng
 from cdpr_twin.sim.encoders import Encoders
-from cdpr_twin.sim.model import SimulationError
+from cdpr_twin.sim.model import ModelError, SimulationError, robot_sensing
 from cdpr_twin.sim.onboard_camera import OnboardCamera
 from cdpr_twin.sim.physics import Physics
 from cdpr_twin.sim.tension import TensionSensors
@@ -72,6 +72,10 @@ class Sensors:
         period: float | None = None,
     ) -> None:
         realism = Realism() if realism is None else realism
+        robot = robot_sensing(physics.model)  # robot data: drum radius, sensors' spec
+        realism = for_robot(realism, robot) if robot is not None else realism
+        if math.isnan(realism.tension.bias_std):
+            raise ModelError(f"{physics.source} has no tension-sensor data; set bias_std")
         self.physics, self.nominal, self.realism = physics, nominal, realism
         noise = realism.tension.noise_std
         self.tension = TensionSensors(
@@ -128,7 +132,9 @@ class Sensors:
             A frozen :class:`Measurement` (readings carry this run's seeded noise).
         """
         render = self.camera is not None if render is None else render
-        tensions, clipped = self.tension.read(self.physics.tensions)
+        p = self.physics  # heavy cables: the sensors' end of the catenary (sim/sag.py)
+        true = p.sensed_tensions if hasattr(type(p), "sensed_tensions") else p.tensions
+        tensions, clipped = self.tension.read(true)
         image = tag = None
         if render:
             if self.camera is None:

@@ -26,6 +26,7 @@ from cdpr_twin.sim.model import (
     TAG_BODY,
     ModelError,
     SimulationError,
+    add_payload,
     build_model,
     cable_count,
     numeric,
@@ -65,6 +66,7 @@ def build_robot(
     align_every: int = 10,
     winch: WinchRealism | None = None,
     occluder: bool = False,
+    payload: tuple[float, np.ndarray] = (0.0, np.zeros(3)),
 ) -> tuple[Physics, NominalRobot, TruthDeviations]:
     """The simulated robot (with its calibration errors) and what its software believes.
 
@@ -77,6 +79,8 @@ def build_robot(
         winch: the winches' servo imperfections (default: none); per-robot draws use the
             deviations' seed.
         occluder: give the true scene the sheet of ``tag_occlusion`` events.
+        payload: (mass [kg], (3,) centre of mass in F_p [m]) fixed to the platform, on the
+            robot and in what its software believes (the operator knows the load).
 
     Raises:
         ModelError: when the model file is missing, malformed or not a cable robot.
@@ -88,12 +92,14 @@ def build_robot(
         raise ModelError(str(exc)) from None
     robot_seed = deviations.seed if isinstance(deviations, DeviationSpec) else 0
     nominal_model = build_model(path)
+    add_payload(nominal_model, payload[0], np.asarray(payload[1], dtype=float), str(path))
     nominal = _nominal_robot(nominal_model)
     n = cable_count(nominal_model)
     if isinstance(deviations, DeviationSpec):
         deviations = deviations.draw(n)
     deviations = deviations if deviations is not None else TruthDeviations.zero(n)
     model = build_model(path, deviations, occluder)
+    add_payload(model, payload[0], np.asarray(payload[1], dtype=float), str(path))
     if timestep is not None:
         if not (np.isfinite(timestep) and 1e-5 <= timestep <= 0.002):
             raise ValueError(
