@@ -215,14 +215,14 @@ def add_payload(model: mujoco.MjModel, mass: float, com: np.ndarray, source: str
         source: the model's file, for the error message.
 
     Raises:
-        ModelError: the payload exceeds the robot's rated ``payload_max_mass``.
+        ValueError: the payload exceeds the robot's rated ``payload_max_mass``.
     """
     if mass == 0:
         return
     rated = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "payload_max_mass")
     if rated >= 0 and mass > model.numeric_data[model.numeric_adr[rated]]:
         limit = model.numeric_data[model.numeric_adr[rated]]
-        raise ModelError(f"{source}: a {mass:g} kg payload exceeds the rated {limit:g} kg")
+        raise ValueError(f"payload_kg = {mass:g} exceeds the rated {limit:g} kg of {source}")
     body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, PLATFORM_BODY)
     m0, c0, p = float(model.body_mass[body]), model.body_ipos[body].copy(), np.asarray(com)
     R = matrix_from_quat_wxyz(model.body_iquat[body])
