@@ -222,8 +222,13 @@ def _cable_effects(mv: dict | None, robot: dict) -> list[str]:
         f"stretch τ·l/(E·S) ≤ {mv['max_stretch_m']:.3g} m; pulley wrap l_pulley − l_straight "
         f"{mv['wrap_min_m']:.3g}–{mv['wrap_max_m']:.3g} m (changes by ≤ "
         f"{mv['wrap_change_max_m']:.3g} m); mid-span sag ({how}, Irvine's catenary at the "
-        f"measured tension) ≤ {sag:.3g} m.",
+        f"measured tension) ≤ {sag:.3g} m" + _excess(mv) + ".",
     ]
+
+
+def _excess(mv: dict) -> str:
+    excess = mv.get("max_sag_excess_m")
+    return "" if excess is None else f", its arc longer than the chord by ≤ {excess:.3g} m"
 
 
 def write_report(out: Path, rep: dict, figures: list[Path], wall_time_s: float) -> Path:

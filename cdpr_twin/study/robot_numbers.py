@@ -41,7 +41,22 @@ def model_physics(ts: Timeseries, scenario_file: Path) -> dict:
         "wrap_max_m": float(wrap.max()),
         "wrap_change_max_m": float((wrap.max(axis=0) - wrap.min(axis=0)).max()),
         "max_sag_m": max_sag(geom, rho, T[:: max(1, len(T) // 50)], tau[:: max(1, len(T) // 50)]),
+        "max_sag_excess_m": _max_excess(
+            geom, rho, T[:: max(1, len(T) // 200)], tau[:: max(1, len(T) // 200)]
+        ),
     }
+
+
+def _max_excess(geom, rho: float, poses: np.ndarray, tau: np.ndarray) -> float:
+    """Largest arc − chord of a sagging span along the run, w²h²c/(24τ²) (Irvine 2.18) [m]."""
+    import dataclasses
+
+    from cdpr_twin.estimators.catenary import sag_excess
+
+    if not rho > 0:
+        return float("nan")
+    heavy = dataclasses.replace(geom, linear_density=rho)
+    return float(max(np.nanmax(sag_excess(heavy, T, t)) for T, t in zip(poses, tau, strict=True)))
 
 
 def max_sag(geom, rho: float, poses: np.ndarray, tau: np.ndarray) -> float:
