@@ -113,7 +113,12 @@ class Sensors:
 
     def home(self, T_base_platform: np.ndarray) -> None:
         """Home the encoders at a known pose (the paper's "initial pose is known")."""
-        self.encoders.home(T_base_platform, self.physics.tensions)
+        self.encoders.home(T_base_platform, self._sensed())  # the tensions the sensors see
+
+    def _sensed(self) -> np.ndarray:
+        """True tensions where the sensors sit (heavy cables: that end of the catenary)."""
+        p = self.physics
+        return p.sensed_tensions if hasattr(type(p), "sensed_tensions") else p.tensions
 
     def render(self) -> np.ndarray:
         """The onboard camera's current frame, (H, W, 3) RGB uint8."""
@@ -132,9 +137,7 @@ class Sensors:
             A frozen :class:`Measurement` (readings carry this run's seeded noise).
         """
         render = self.camera is not None if render is None else render
-        p = self.physics  # heavy cables: the sensors' end of the catenary (sim/sag.py)
-        true = p.sensed_tensions if hasattr(type(p), "sensed_tensions") else p.tensions
-        tensions, clipped = self.tension.read(true)
+        tensions, clipped = self.tension.read(self._sensed())
         image = tag = None
         if render:
             if self.camera is None:
