@@ -10,6 +10,7 @@ model ([model] nominal). Writes results.json and prints a table.
 
 import argparse
 import json
+import math
 import statistics
 import tempfile
 import time
@@ -22,7 +23,7 @@ def one(seed: int, poses: int, out: str) -> dict:
     from cdpr_twin.calibrate.output import write
     from cdpr_twin.calibrate.session import calibrate, truth_check
     from cdpr_twin.runner import run
-    from cdpr_twin.scenario import load_scenario
+    from cdpr_twin.scenario import ScenarioError, load_scenario
     from cdpr_twin.sim import build_robot
 
     s = load_scenario("paper_open_loop")
@@ -38,12 +39,16 @@ def one(seed: int, poses: int, out: str) -> dict:
         session.calibration,
         {"check_against_truth": check},
     )
-    p1 = {}
+    p1, refused = {}, None
     for name, nom in (("nominal", None), ("calibrated", robot)):
         sc = replace(s, model=replace(s.model, nominal=nom)).with_overrides(
             duration=10.0, camera=False
         )
-        summary = run(sc, None).summary
+        try:
+            summary = run(sc, None).summary
+        except ScenarioError as exc:  # e.g. p1 outside the calibrated model's workspace
+            p1[name], refused = math.nan, str(exc)
+            continue
         p1[name] = summary["segment_ends"][0]["truth_vs_waypoint"]["translation_m"] * 1e3
     return {
         "seed": seed,
@@ -52,6 +57,7 @@ def one(seed: int, poses: int, out: str) -> dict:
         "exit_shape_median_mm": check["calibrated"]["exit_shape_error_median_mm"],
         "anchor_median_mm": check["calibrated"]["anchor_error_median_mm"],
         "p1_error_mm": p1,
+        "refused": refused,
     }
 
 
@@ -74,14 +80,16 @@ def main() -> None:
             f"{r['seed']:4d}  {r['exit_median_mm']['nominal']:8.2f} mm  "
             f"{r['exit_median_mm']['calibrated']:8.2f} ({r['exit_shape_median_mm']:.2f}) mm  "
             f"{r['p1_error_mm']['nominal']:7.2f} mm  {r['p1_error_mm']['calibrated']:7.2f} mm  "
-            f"{r['calibration_s']:5.1f} s"
+            f"{r['calibration_s']:5.1f} s" + (f"  refused: {r['refused']}" if r["refused"] else "")
         )
     med = {
         "exit_calibrated_mm": statistics.median(r["exit_median_mm"]["calibrated"] for r in rows),
         "exit_shape_mm": statistics.median(r["exit_shape_median_mm"] for r in rows),
         "exit_nominal_mm": statistics.median(r["exit_median_mm"]["nominal"] for r in rows),
         "p1_nominal_mm": statistics.median(r["p1_error_mm"]["nominal"] for r in rows),
-        "p1_calibrated_mm": statistics.median(r["p1_error_mm"]["calibrated"] for r in rows),
+        "p1_calibrated_mm": statistics.median(
+            r["p1_error_mm"]["calibrated"] for r in rows if not r["refused"]
+        ),
         "calibration_s": statistics.median(r["calibration_s"] for r in rows),
     }
     print("medians over robots:", json.dumps({k: round(v, 2) for k, v in med.items()}))

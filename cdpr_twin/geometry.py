@@ -45,6 +45,8 @@ class CdprGeometry:
         tension_min: lowest admissible cable tension [N] (wrench-feasible workspace).
         tension_max: highest admissible cable tension [N] (``inf``: unbounded).
         linear_density: the cables' mass per unstretched metre [kg/m] (0: massless).
+        sensors_at_pulleys: the tension sensors sit at the exit pulleys (the upper end of each
+            span), not at the anchor points B_i; with heavy cables they read more.
     """
 
     a_base: np.ndarray
@@ -60,6 +62,7 @@ class CdprGeometry:
     tension_min: float = 2.0
     tension_max: float = 75.0
     linear_density: float = 0.0
+    sensors_at_pulleys: bool = False
 
     def __post_init__(self) -> None:
         a = np.asarray(self.a_base)

@@ -2,7 +2,10 @@
 
 Each effect is *generated* by the simulation layer (rendered, integrated, quantised), with a
 magnitude from ``models/acrobot/README.md`` (its source named there), and each can be switched
-off: ``profile = "ideal"`` is the twin before realism, bit for bit. Magnitudes come in two
+off. What is robot data — the drum radius, the tension sensors' range, accuracy and
+repeatability — is not here: ``nan`` fields (and ``repeatability_noise``) take it from the
+robot description (``robot.toml`` → the model's ``<numeric>``; :func:`for_robot`).
+Profiles: ``profile = "ideal"`` is the twin before realism, bit for bit. Magnitudes come in two
 kinds, as physics dictates:
 
 - per robot (drawn from the truth seed, fixed across repetitions, like one physical robot):
@@ -81,14 +84,15 @@ class WinchRealism:
             follows the commanded rate instantly.
         max_accel: acceleration limit of the cable rate [m/s²] (``inf``: none).
         encoder_counts: encoder counts per drum revolution (0: exact encoders).
-        drum_radius: nominal drum radius [m] (the length the encoder reports uses it).
+        drum_radius: nominal drum radius [m] (the length the encoder reports uses it); ``nan``:
+            the robot's (``[winches] drum_radius_m``).
         drum_radius_error_std: per-robot relative std of the true drum radius.
     """
 
     bandwidth_hz: float = option(math.inf, minimum=0.0, exclusive=True, unit="Hz")
     max_accel: float = option(math.inf, minimum=0.0, exclusive=True, unit="m/s2")
     encoder_counts: int = option(0, minimum=0)
-    drum_radius: float = option(0.02, minimum=0.0, exclusive=True, unit="m")
+    drum_radius: float = option(math.nan, minimum=0.0, exclusive=True, unit="m")
     drum_radius_error_std: float = option(0.0, minimum=0.0)
 
 
@@ -113,27 +117,34 @@ class TensionRealism:
     conservative reading; as an ISO 5725 repeatability limit r = 2.8 σ it would be 0.004 N).
 
     Attributes:
-        bias_std: per-robot std of each sensor's offset b_i [N] (accuracy a → a/√3).
+        bias_std: per-robot std of each sensor's offset b_i [N] (accuracy a → a/√3); ``nan``:
+            the robot's sensor accuracy a/√3 (``[tension_sensors] accuracy_n``).
         gain_error_std: per-robot relative std of each sensor's gain error g_i.
         clip: clip readings to [``range_min``, ``range_max``], and say which did in
             ``Measurement.tensions_clipped`` (and per cable in ``summary.json``).
-        range_min: lowest reading [N].
-        range_max: highest reading [N].
+        range_min: lowest reading [N]; ``nan``: the robot's (``[tension_sensors] range_n``).
+        range_max: highest reading [N]; ``nan``: the robot's.
         noise_std: per-reading noise std [N]; ``nan`` keeps ``[sensors] tension_noise_std``
-            (the ideal profile: the scenario's value, as before realism).
+            (the ideal profile: the scenario's value, as before realism), or with
+            ``repeatability_noise`` the robot's sensor repeatability.
+        repeatability_noise: a ``nan`` noise_std is the robot's repeatability
+            (``[tension_sensors] repeatability_n``) instead of ``[sensors] tension_noise_std``.
     """
 
     bias_std: float = option(0.0, minimum=0.0, unit="N")
     gain_error_std: float = option(0.0, minimum=0.0)
     clip: bool = option(False)
-    range_min: float = option(-25.0, unit="N")
-    range_max: float = option(75.0, unit="N")
+    range_min: float = option(math.nan, unit="N")
+    range_max: float = option(math.nan, unit="N")
     noise_std: float = option(math.nan, unit="N")
+    repeatability_noise: bool = option(False)
 
     def __post_init__(self) -> None:
         if not (math.isnan(self.noise_std) or self.noise_std >= 0):
             raise OptionError("noise_std", f"must be ≥ 0 N, got {self.noise_std}")
-        if not self.range_min < self.range_max:
+        if not (math.isnan(self.range_min) or math.isnan(self.range_max)) and not (
+            self.range_min < self.range_max
+        ):
             raise OptionError("range_max", f"must exceed range_min = {self.range_min} N")
 
 
@@ -209,14 +220,13 @@ ACROBOT: dict[str, dict[str, Any]] = {
         "bandwidth_hz": 20.0,
         "max_accel": 2.0,
         "encoder_counts": 4096,
-        "drum_radius": 0.02,
         "drum_radius_error_std": 0.005,
     },
     "tension": {
-        "bias_std": 0.24 / math.sqrt(3.0),
+        "bias_std": math.nan,  # the robot's accuracy a/√3 (ACROBOT: 0.24 N, paper §IV-A)
         "gain_error_std": 0.001,
         "clip": True,
-        "noise_std": 0.01,
+        "repeatability_noise": True,  # the robot's repeatability (ACROBOT: 0.01 N)
     },
     "homing": {"position_std": 0.001, "rotation_std": math.radians(0.2)},
 }
@@ -245,6 +255,42 @@ def profile(name: str, **parts: dict[str, Any]) -> Realism:
             raise ValueError(f"realism.{part}: unknown field {unknown[0]!r}")
         out = replace(out, **{part: cls(**values)})
     return out
+
+
+@dataclass(frozen=True)
+class RobotSensing:
+    """What a robot description says of its winches and tension sensors (SI units).
+
+    Attributes:
+        drum_radius: the drums' radius [m].
+        tension_range: (min, max) the sensors' calibrated range [N].
+        accuracy: the sensors' accuracy, a bound ±a on the error [N].
+        repeatability: 1σ of their reading noise [N].
+    """
+
+    drum_radius: float
+    tension_range: tuple[float, float]
+    accuracy: float
+    repeatability: float
+
+
+def for_robot(realism: Realism, robot: RobotSensing) -> Realism:
+    """The profile with its robot-data fields (``nan``, ``repeatability_noise``) filled in.
+
+    The accuracy becomes a rectangular bias, std a/√3 (GUM 4.3.7; see :class:`TensionRealism`).
+    """
+    w, t = realism.winch, realism.tension
+    if math.isnan(w.drum_radius):
+        w = replace(w, drum_radius=robot.drum_radius)
+    lo, hi = robot.tension_range
+    filled = {
+        "range_min": lo if math.isnan(t.range_min) else t.range_min,
+        "range_max": hi if math.isnan(t.range_max) else t.range_max,
+        "bias_std": robot.accuracy / math.sqrt(3.0) if math.isnan(t.bias_std) else t.bias_std,
+    }
+    if t.repeatability_noise and math.isnan(t.noise_std):
+        filled["noise_std"] = robot.repeatability
+    return replace(realism, winch=w, tension=replace(t, **filled))
 
 
 _STREAMS = {"camera": 1, "winch": 2, "tension": 3, "homing": 4}

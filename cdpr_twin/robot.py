@@ -19,85 +19,21 @@ from typing import Any
 
 import numpy as np
 
-SECTIONS = ("frame", "cables", "pulleys", "platform", "winches", "camera", "tag", "monitor")
+from cdpr_twin.robot_schema import (
+    RobotError,
+    TensionSensorSpec,
+    _Table,
+    payload,
+    tension_sensors,
+)
+
+__all__ = ["Camera", "Robot", "RobotError", "Tag", "TensionSensorSpec", "load_robot"]
+
+SECTIONS = (
+    "frame", "cables", "pulleys", "platform", "winches", "tension_sensors", "payload", "camera",
+    "tag", "monitor",
+)  # fmt: skip
 OPTIONAL_SECTIONS = ("camera", "tag", "monitor", "scene")
-
-
-class RobotError(ValueError):
-    """A robot description file is missing, malformed, or has a bad field."""
-
-
-def _frozen(a: Any) -> np.ndarray:
-    out = np.array(a, dtype=float)
-    out.flags.writeable = False
-    return out
-
-
-class _Table:
-    """Typed access to one TOML table; errors name the file and ``table.key``."""
-
-    def __init__(self, source: Path, table: dict, where: str) -> None:
-        self.source, self.table, self.where, self.used = source, table, where, set()
-
-    def fail(self, key: str, problem: str) -> RobotError:
-        return RobotError(f"{self.source}: {self.where}.{key}: {problem}")
-
-    def get(self, key: str, default: Any = ...) -> Any:
-        self.used.add(key)
-        if key in self.table:
-            return self.table[key]
-        if default is ...:
-            raise self.fail(key, "missing (see models/acrobot/robot.toml for the schema)")
-        return default
-
-    def number(self, key: str, default: Any = ..., positive: bool = False) -> float:
-        v = self.get(key, default)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise self.fail(key, f"must be a finite number, got {v!r}")
-        if positive and not v > 0:
-            raise self.fail(key, f"must be > 0, got {v!r}")
-        return float(v)
-
-    def array(self, key: str, shape: tuple[int, ...], default: Any = ...) -> np.ndarray:
-        """A numeric array of ``shape`` (``-1``: any length ≥ 1 on that axis)."""
-        v = self.get(key, default)
-        try:
-            a = np.array(v, dtype=float)
-        except (TypeError, ValueError):
-            raise self.fail(key, f"must be an array of numbers of shape {shape}") from None
-        if a.ndim != len(shape) or any(
-            s not in (-1, n) for s, n in zip(shape, a.shape, strict=True)
-        ):
-            want = "×".join("m" if s == -1 else str(s) for s in shape)
-            raise self.fail(key, f"must have shape {want}, got {'×'.join(map(str, a.shape))}")
-        if not np.all(np.isfinite(a)) or any(isinstance(x, bool) for x in np.ravel(v)):
-            raise self.fail(key, "must hold finite numbers only")
-        return _frozen(a)
-
-    def per_cable(self, key: str, m: int, default: Any = ...) -> np.ndarray:
-        """One number for all cables, or a list of m numbers."""
-        v = self.get(key, default)
-        a = self.array(key, (m,)) if isinstance(v, list) else np.full(m, self.number(key))
-        if np.any(a <= 0):
-            raise self.fail(key, "must be > 0 for every cable")
-        return _frozen(a)
-
-    def string(self, key: str, default: Any = ...) -> str:
-        v = self.get(key, default)
-        if not isinstance(v, str) or not v:
-            raise self.fail(key, f"must be a non-empty string, got {v!r}")
-        return v
-
-    def integer(self, key: str, default: Any = ...) -> int:
-        v = self.get(key, default)
-        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-            raise self.fail(key, f"must be a whole number ≥ 0, got {v!r}")
-        return v
-
-    def done(self) -> None:
-        extra = sorted(set(self.table) - self.used)
-        if extra:
-            raise self.fail(extra[0], "unknown key (a typo? see models/acrobot/robot.toml)")
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,7 +84,10 @@ class Robot:
             or (6,) Ixx Iyy Izz Ixy Ixz Iyz [kg m²] at the centre of mass com (3,) [m] in F_p,
             or both None (a uniform box); home_pose: (6,) [x, y, z m, rx, ry, rz deg], the
             pose of the viewer's keyframe named home_key.
-        rate_limit [m/s], force_limit [N], length_range (2,) [m], tension_range (2,) [N].
+        rate_limit [m/s], force_limit [N], length_range (2,) [m], tension_range (2,) [N]:
+            the winches; drum_radius [m]: their drums' radius.
+        tension_sensors: the sensors' range, accuracy, repeatability and location.
+        max_payload: the rated payload [kg] (0: none rated).
         camera, tag: or None.
         max_speed [m/s], max_angular_speed [rad/s]: the monitor's limits (inf: unchecked).
         view_center (3,) [m], view_extent [m], floor_half_size [m]: the viewer's scene.
@@ -186,6 +125,9 @@ class Robot:
     force_limit: float
     length_range: np.ndarray
     tension_range: np.ndarray
+    drum_radius: float
+    tension_sensors: TensionSensorSpec
+    max_payload: float
     camera: Camera | None
     tag: Tag | None
     max_speed: float
@@ -288,6 +230,7 @@ def _winches(t: _Table) -> dict:
         "force_limit": t.number("force_limit_n", positive=True),
         "length_range": lengths,
         "tension_range": tensions,
+        "drum_radius": t.number("drum_radius_m", positive=True),
     }
 
 
@@ -314,6 +257,16 @@ def _tag(t: _Table) -> Tag:
         quat_wxyz=t.array("quat_wxyz", (4,)),
         texture=t.string("texture"),
     )
+
+
+def _scene(scene: _Table, outer_min: np.ndarray, outer_max: np.ndarray) -> dict:
+    """``[scene]`` (optional): the viewer's centre, extent and floor, from the frame by default."""
+    size = outer_max - outer_min
+    return {
+        "view_center": scene.array("view_center_m", (3,), (0.5 * (outer_min + outer_max)).tolist()),
+        "view_extent": scene.number("view_extent_m", float(np.linalg.norm(size)), positive=True),
+        "floor_half_size": scene.number("floor_half_size_m", float(size[:2].max()), positive=True),
+    }
 
 
 def _read(path: Path) -> dict:
@@ -362,8 +315,10 @@ def load_robot(path: str | Path) -> Robot:
     for key, reader in (("frame", _frame), ("platform", _platform), ("winches", _winches)):
         tables.append(table(key))
         fields.update(reader(tables[-1]))
-    tables += [table("cables"), table("pulleys")]
-    fields.update(_cables(tables[-2], tables[-1]))
+    tables += [table("cables"), table("pulleys"), table("tension_sensors"), table("payload")]
+    fields["tension_sensors"] = tension_sensors(tables[-2])
+    fields["max_payload"] = payload(tables[-1])
+    fields.update(_cables(tables[-4], tables[-3]))
     for key, reader in (("camera", _camera), ("tag", _tag)):
         t = table(key, required=False)
         fields[key] = None if t is None else reader(t)
@@ -374,15 +329,7 @@ def load_robot(path: str | Path) -> Robot:
         "platform_max_angular_speed_rad_s", math.inf, positive=True
     )
     scene = table("scene", required=False) or _Table(path, {}, "scene")
-    centre = 0.5 * (fields["frame_outer_min"] + fields["frame_outer_max"])
-    fields["view_center"] = scene.array("view_center_m", (3,), centre.tolist())
-    size = fields["frame_outer_max"] - fields["frame_outer_min"]
-    fields["view_extent"] = scene.number(
-        "view_extent_m", float(np.linalg.norm(size)), positive=True
-    )
-    fields["floor_half_size"] = scene.number(
-        "floor_half_size_m", float(size[:2].max()), positive=True
-    )
+    fields.update(_scene(scene, fields["frame_outer_min"], fields["frame_outer_max"]))
     for t in [*tables, mon, scene, top]:
         t.done()
     return Robot(**fields)

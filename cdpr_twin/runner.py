@@ -20,6 +20,7 @@ homed, and the estimators and controller reset, at the *nominal* start pose.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -161,7 +162,7 @@ def prepare(scenario: Scenario) -> RunSetup:
         occluder = any(isinstance(e, TagOcclusion) for e in s.events)
         physics, nominal, _ = build_robot(
             s.model.file, s.truth, s.model.timestep, s.model.align_every, s.realism.winch,
-            occluder, s.model.nominal,
+            occluder, s.model.nominal, (s.model.payload, s.model.payload_com),
         )  # fmt: skip
         sensors = Sensors(
             physics,
@@ -214,12 +215,19 @@ def _assemble(s: Scenario, physics, sensors, nominal) -> RunSetup:
 
 
 def _monitor(s: Scenario, physics):
-    """The robot's monitor, hooked into the physics (after the events), or ``None``."""
+    """The robot's monitor, hooked into the physics (after the events), or ``None``.
+
+    The tension sensors' range top is the robot's (robot.toml), unless the scenario sets one.
+    """
     from cdpr_twin.sim import Monitor, robot_limits
+    from cdpr_twin.sim.model import robot_sensing
 
     if not s.monitor.enabled:
         return None
-    limits = robot_limits(physics, s.realism.tension.range_max, s.model.control_period)
+    sensor_max, robot = s.realism.tension.range_max, robot_sensing(physics.model)
+    if math.isnan(sensor_max):
+        sensor_max = math.inf if robot is None else robot.tension_range[1]
+    limits = robot_limits(physics, sensor_max, s.model.control_period)
     monitor = Monitor(physics, limits)
     physics.add_hook(monitor)
     return monitor

@@ -32,7 +32,9 @@ from cdpr_twin.realism import Realism, profile, without_source
 from cdpr_twin.scenario_tables import (
     MonitorConfig,
     read_events,
+    read_model_file,
     read_monitor,
+    read_payload_com,
     read_plugins,
     read_realism,
     read_truth,
@@ -57,12 +59,16 @@ class ModelConfig:
         control_rate: control (and sensing) rate [Hz].
         align_every: physics steps between swivel/stiffness refreshes.
         nominal: a ``robot.toml`` (``cdpr-twin calibrate``'s output) the software believes.
+        payload: mass fixed to the platform [kg] (``payload_kg``; ≤ the robot's rated one).
+        payload_com: (3,) its centre of mass in F_p [m] (``payload_com_m``).
     """
 
     file: Path
     timestep: float
     control_rate: float
     align_every: int
+    payload: float = 0.0
+    payload_com: tuple[float, ...] = (0.0, 0.0, 0.0)
     nominal: Path | None = None
 
     @property
@@ -303,13 +309,14 @@ def _estimators(r: OptionReader) -> EstimatorConfig:
 
 def _model(top: OptionReader, source: Path) -> ModelConfig:
     m = top.table_of("model", required=False)
-    file = scenario_tables.model_file(m, source)
+    file = read_model_file(m, source)
     timestep = m.number("timestep", 0.0005, minimum=MIN_TIMESTEP, unit="s")
     if timestep > MAX_TIMESTEP:
         raise m.fail("timestep", f"must be ≤ {MAX_TIMESTEP} s for stiff cables, got {timestep}")
     control_rate = m.number("control_rate", 25.0, minimum=0, exclusive=True, unit="Hz")
     align_every = m.integer("align_every", 10, minimum=1)
     nominal = scenario_tables.read_nominal(m, source)
+    payload = m.number("payload_kg", 0.0, minimum=0, unit="kg"), read_payload_com(m)
     m.done()
     steps = 1.0 / control_rate / timestep
     if abs(steps - round(steps)) > 1e-6 * steps or round(steps) < 1:
@@ -319,7 +326,7 @@ def _model(top: OptionReader, source: Path) -> ModelConfig:
             f"number of physics steps of {timestep:g} s ({steps:.4f});"
             " choose a rate or timestep that divide evenly",
         )
-    return ModelConfig(file, timestep, control_rate, align_every, nominal)
+    return ModelConfig(file, timestep, control_rate, align_every, *payload, nominal)
 
 
 def _read(source: Path) -> OptionReader:

@@ -134,7 +134,7 @@ def read_nominal(m: OptionReader, source: Path) -> Path | None:
     return path
 
 
-def model_file(m: OptionReader, source: Path) -> Path:
+def read_model_file(m: OptionReader, source: Path) -> Path:
     """``robot = "<name>"`` (a shipped robot, the default ``acrobot``) or ``file = "<path>"``."""
     if m.has("robot") and m.has("file"):
         raise m.fail("robot", "give either robot (a shipped robot's name) or file, not both")
@@ -146,3 +146,15 @@ def model_file(m: OptionReader, source: Path) -> Path:
         return resources.robot_scene(name)
     except resources.ResourceError as exc:
         raise m.fail("robot", str(exc)) from None
+
+
+def read_payload_com(m: OptionReader) -> tuple[float, ...]:
+    """``[model] payload_com_m``: the payload's centre of mass in F_p [m] (default the origin)."""
+    com = m.raw("payload_com_m", [0.0, 0.0, 0.0], "array of 3 numbers [m]")
+    ok = isinstance(com, list) and len(com) == 3
+    number = (int, float)
+    if not ok or not all(
+        isinstance(v, number) and not isinstance(v, bool) and math.isfinite(v) for v in com
+    ):
+        raise m.fail("payload_com_m", f"must be 3 numbers [x, y, z] in metres, got {com!r}")
+    return tuple(float(v) for v in com)

@@ -15,11 +15,12 @@ from cdpr_twin.sim import Twin
 from cdpr_twin.sim.generate import build_files
 
 
-@pytest.fixture(scope="module")
-def heavy_cogiro(tmp_path_factory):
+@pytest.fixture(scope="module", params=["pulley", "anchor"])
+def heavy_cogiro(request, tmp_path_factory):
+    """CoGiRo (sag on), its tension sensors at the pulleys (as described) or at the anchors."""
     out = tmp_path_factory.mktemp("heavy_cogiro")
     text = (MODELS_DIR / "cogiro" / "robot.toml").read_text()
-    text = text.replace("linear_density_kg_m = 0.064", "linear_density_kg_m = 0.064\nsag = true")
+    text = text.replace('location = "pulley"', f'location = "{request.param}"')
     texture = MODELS_DIR / "acrobot" / "assets" / "tag36h11_00000.png"
     (out / "robot.toml").write_text(
         text.replace('"../acrobot/assets/tag36h11_00000.png"', f'"{texture}"')

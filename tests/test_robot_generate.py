@@ -103,6 +103,17 @@ def test_the_description_carries_acrobots_numbers():
     np.testing.assert_allclose(r.es, 111e9 * np.pi * 0.001**2, rtol=1e-6)
     assert r.mass == 3.5 and r.camera.resolution == (640, 480) and r.tag.size == 0.04
     np.testing.assert_array_equal(2 * r.box_half_size, [0.18, 0.17, 0.07])
+    # the paper §IV-A: sensors near B_i, −25…75 N, accuracy 0.24 N, repeatability 0.01 N
+    t = r.tension_sensors
+    assert (t.range, t.accuracy, t.repeatability, t.location) == (
+        (-25.0, 75.0),
+        0.24,
+        0.01,
+        "anchor",
+    )
+    cogiro = load_robot(MODELS_DIR / "cogiro" / "robot.toml")  # issue 10's numbers
+    assert (cogiro.drum_radius, cogiro.max_payload, cogiro.sag) == (0.0675, 500.0, True)
+    assert tuple(cogiro.tension_range) == (100.0, 5000.0)
 
 
 def test_model_build_command_writes_both_files(tmp_path, capsys):
@@ -143,6 +154,11 @@ def _edited(tmp_path: Path, old: str, new: str) -> Path:
             "winches.tension_range_n",
         ),
         ("[simulation]", "[simulation]\nsubsteps = 2", "simulation.substeps"),
+        ("drum_radius_m = 0.02", "drum_radius_m = 0.0", "winches.drum_radius_m"),
+        ('location = "anchor"', 'location = "winch"', "tension_sensors.location"),
+        ("accuracy_n = 0.24\n", "", "tension_sensors.accuracy_n"),  # missing
+        ("range_n = [-25.0, 75.0]", "range_n = [75.0, -25.0]", "tension_sensors.range_n"),
+        ("max_mass_kg = 0.0", "max_mass_kg = -1.0", "payload.max_mass_kg"),
     ],
 )
 def test_a_bad_description_is_a_one_line_error_naming_file_and_field(

@@ -6,6 +6,7 @@ and measurably more on CoGiRo (0.064 kg/m steel over ≈ 10 m). The catenary ele
 checked against a discretised MuJoCo cable in tests/test_catenary.py.
 """
 
+import mujoco
 import numpy as np
 import pytest
 from conftest import PAPER_POSES
@@ -13,6 +14,7 @@ from conftest import PAPER_POSES
 from cdpr_twin import DEFAULT_SCENE, MODELS_DIR, se3
 from cdpr_twin.sim import Physics, build_model, build_robot
 from cdpr_twin.sim.generate import build_files
+from cdpr_twin.sim.model import swivel_body
 from cdpr_twin.sim.sag import SaggingPhysics
 
 
@@ -43,13 +45,88 @@ def test_sag_on_cogiro_moves_the_settled_pose_by_a_fraction_of_a_millimetre():
 
 def test_a_description_with_sag_builds_sagging_physics(tmp_path):
     text = (MODELS_DIR / "cogiro" / "robot.toml").read_text()
-    assert "linear_density_kg_m = 0.064" in text
+    assert "\nsag = true" in text  # CoGiRo's heavy steel cables sag in the physics
+    physics, _, _ = build_robot(MODELS_DIR / "cogiro" / "scene.xml")
+    assert isinstance(physics, SaggingPhysics) and physics.linear_density == 0.064
     path = tmp_path / "robot.toml"
-    text = text.replace("linear_density_kg_m = 0.064", "linear_density_kg_m = 0.064\nsag = true")
     texture = MODELS_DIR / "acrobot" / "assets" / "tag36h11_00000.png"  # from anywhere
+    text = text.replace("\nsag = true", "\nsag = false")
     path.write_text(text.replace('"../acrobot/assets/tag36h11_00000.png"', f'"{texture}"'))
     _, scene = build_files(path, tmp_path)
-    physics, _, _ = build_robot(scene)
-    assert isinstance(physics, SaggingPhysics) and physics.linear_density == 0.064
-    physics_plain, _, _ = build_robot(MODELS_DIR / "cogiro" / "scene.xml")
+    physics_plain, _, _ = build_robot(scene)
     assert type(physics_plain) is Physics
+
+
+@pytest.fixture(scope="module")
+def cogiro_at_rest():
+    """CoGiRo (heavy cables, sensors at the pulleys) settled at p1 and held still."""
+    from cdpr_twin.sim import Twin
+
+    twin = Twin(robot="cogiro", camera=False, tension_noise_std=0.0, home_encoders=False)
+    twin.reset(se3.pose_from_vector([2.0, -1.5, 1.0, 0, 0, 0]), settle_time=1.0)
+    twin.advance(4.0, np.zeros(8))
+    physics = twin.physics
+    physics.refresh()  # the spans' forces at this very state
+    assert np.abs(physics.data.qvel).max() < 1e-3  # at rest
+    yield twin
+    twin.close()
+
+
+def _spans(physics):
+    """Each span's upper end (the sheave's tangent point), its lower end B_i, its unit B → top."""
+    d = physics.data
+    points = d.wrap_xpos.reshape(-1, 3)
+    tendons = physics._tendons
+    top = np.array([points[d.ten_wrapadr[t] + d.ten_wrapnum[t] - 2] for t in tendons])
+    bottom = d.site_xpos[physics._anchors]
+    return top, bottom
+
+
+def test_the_pulley_side_tension_exceeds_the_anchors_by_the_weight_of_the_rise(cogiro_at_rest):
+    # along a hanging cable dT/dz = w / (1 + T/EA) (Irvine 1981, the elastic catenary's
+    # tension–height relation): T_top − T_B = w·Δz to the relative order T/EA (< 1e-2 here)
+    p = cogiro_at_rest.physics
+    top, bottom = _spans(p)
+    rise = top[:, 2] - bottom[:, 2]
+    w = 0.064 * 9.81
+    gap = p.pulley_tensions - p.tensions
+    np.testing.assert_allclose(gap, w * rise, rtol=2e-2)
+    assert np.all(gap > 1.0)  # measured 2.1–2.7 N (rises 3.4–4.4 m): half the 5 N noise
+
+
+def test_the_pulleys_carry_the_platform_and_the_cables_weight(cogiro_at_rest):
+    # vertical force balance of platform + cables: what the pulleys hold up is the platform's
+    # weight and inertia (MuJoCo's mass and acceleration) plus every span's weight w·l_s
+    p = cogiro_at_rest.physics
+    top, bottom = _spans(p)
+    unit = (top - bottom) / np.linalg.norm(top - bottom, axis=1)[:, None]
+    straight = 0.0 - p.data.actuator_force[p._actuators]
+    on_pulleys = -straight[:, None] * unit + p.pulley_force  # the cables pull the sheaves down
+    chord = np.linalg.norm(top - bottom, axis=1)
+    spans = p.rest_lengths * chord / (p.data.ten_length[p._tendons] - p._entry)
+    mujoco.mj_forward(p.model, p.data)  # MuJoCo's acceleration of the (almost still) platform
+    lift = float(p.model.body_subtreemass[p._platform]) * (9.81 + p.data.qacc[p._dof + 2])
+    held = -on_pulleys[:, 2].sum()  # measured 941.7 N
+    np.testing.assert_allclose(held, lift + 0.064 * 9.81 * spans.sum(), rtol=1e-4)
+
+
+def test_the_pulley_force_lies_in_its_swivels_plane(cogiro_at_rest):
+    # the swivels turn about a vertical axis; a catenary hangs in the vertical plane of its
+    # chord, so the force on the sheave is in the sheave's plane: the swivel needs no other turn
+    p = cogiro_at_rest.physics
+    top, bottom = _spans(p)
+    unit = (top - bottom) / np.linalg.norm(top - bottom, axis=1)[:, None]
+    straight = 0.0 - p.data.actuator_force[p._actuators]
+    force = -straight[:, None] * unit + p.pulley_force
+    bodies = [
+        mujoco.mj_name2id(p.model, mujoco.mjtObj.mjOBJ_BODY, swivel_body(i)) for i in range(8)
+    ]
+    normals = p.data.xmat[bodies].reshape(-1, 3, 3)[:, :, 1]  # the sheave's axis (its y)
+    off_plane = np.abs(np.einsum("ij,ij->i", force, normals)) / np.linalg.norm(force, axis=1)
+    assert off_plane.max() < 1e-3  # the swivel's refresh lags the pose by < one refresh
+
+
+def test_the_tension_sensors_read_the_pulley_side_on_cogiro(cogiro_at_rest):
+    twin = cogiro_at_rest
+    np.testing.assert_array_equal(twin.sense().tensions, twin.physics.pulley_tensions)
+    assert twin.nominal.geometry.sensors_at_pulleys

@@ -37,7 +37,9 @@ from cdpr_twin.types import Measurement, TagDetection
 ROOT = Path(__file__).resolve().parent.parent
 M = 8
 ACCURACY = 0.24  # [N] the paper's sensor accuracy: a bound a, bias_std = a/√3 (GUM 4.3.7)
-SPEC = TensionRealism(bias_std=ACCURACY / math.sqrt(3), gain_error_std=0.001)
+SPEC = TensionRealism(
+    bias_std=ACCURACY / math.sqrt(3), gain_error_std=0.001, range_min=-25.0, range_max=75.0
+)  # the paper's sensors (§IV-A)
 
 
 def _sensors(realism=SPEC, noise_std=0.01, run_seed=1, robot_seed=19):

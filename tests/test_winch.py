@@ -13,11 +13,15 @@ import numpy as np
 import pytest
 from conftest import paper_pose
 
+from cdpr_twin import MODELS_DIR
 from cdpr_twin import kinematics as kin
 from cdpr_twin.deviations import DeviationSpec
-from cdpr_twin.realism import Realism, WinchRealism, robot_rng
+from cdpr_twin.realism import Realism, WinchRealism, profile, robot_rng
+from cdpr_twin.robot import load_robot
 from cdpr_twin.sim import Sensors, build_robot
 from cdpr_twin.sim.winch import draw_drum_radii
+
+ACROBOT_TOML = MODELS_DIR / "acrobot" / "robot.toml"
 
 CHUNK = 0.005  # align_every (10) × timestep (0.5 ms): one physics chunk [s]
 F_HZ, ACCEL = 10.0, 0.2  # bandwidth [Hz], acceleration limit [m/s²]
@@ -283,5 +287,17 @@ def test_drum_radii_are_drawn_per_robot():
     )
     assert abs(rel.mean()) < 4 * 0.005 / math.sqrt(rel.size)
     assert rel.std() == pytest.approx(0.005, rel=0.05)
-    ideal, _, _ = _robot(WinchRealism(), 3)
-    assert np.all(ideal.drum_radius_true == WinchRealism().drum_radius)
+    ideal, _, _ = _robot(WinchRealism(), 3)  # the radius is the robot's (robot.toml: 20 mm)
+    assert np.all(ideal.drum_radius_true == load_robot(ACROBOT_TOML).drum_radius)
+
+
+def test_the_drum_radius_and_the_sensors_spec_are_the_robots():
+    # the robot description's numbers (models/acrobot/robot.toml, from the paper §IV-A)
+    physics, nominal, _ = _robot(WinchRealism(encoder_counts=4096), 3)
+    assert physics.winch.drum_radius == 0.02
+    sensors = Sensors(physics, nominal, realism=profile("acrobot"), period=0.04)
+    t = sensors.tension.realism
+    assert (t.range_min, t.range_max, t.noise_std) == (-25.0, 75.0, 0.01)
+    assert t.bias_std == 0.24 / math.sqrt(3.0)  # a ±0.24 N bound, rectangular (GUM 4.3.7)
+    cogiro, _, _ = build_robot("cogiro")
+    assert cogiro.winch.drum_radius == 0.0675  # issue 10

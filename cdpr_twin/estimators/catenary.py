@@ -8,9 +8,10 @@ model measures. For a taut span the elastic catenary's arc exceeds its chord c b
     δ = w² h² c / (24 τ²)     (Irvine, *Cable Structures*, 1981, eq. 2.18, shallow span),
 
 h the horizontal span and τ the measured tension; the target lengths are the lengths stretched
-by the span's mean tension τ + w·v/2 (the sensor at B_i reads the lowest; v the span's rise)
-less δ, with h, v and c from the last estimate (they change by micrometres between ticks). The
-cables' mass per metre comes from the nominal geometry (``cable_linear_density`` in the model);
+by the span's mean tension τ + w·v/2 (a sensor at B_i reads the lowest; v the span's rise;
+a sensor at the exit pulley reads the highest, τ − w·v/2 then) less δ at the lower end's τ,
+with h, v and c from the last estimate (they change by micrometres between ticks). The cables'
+mass per metre comes from the nominal geometry (``cable_linear_density`` in the model);
 without it (0 kg/m) the estimator is ``model_elastic_pulley`` exactly.
 """
 
@@ -57,12 +58,17 @@ class CatenaryModelEstimator(ElasticPulleyModelEstimator):
     def corrected_lengths(self, lengths: np.ndarray, tensions: np.ndarray) -> np.ndarray:
         """Encoder lengths stretched by the span's mean tension, less its sag excess (m,) [m].
 
-        The tension sensor at B_i reads the span's lowest tension; the cable above carries its
-        weight too, so the mean tension that stretches it is τ + w·v/2 (v the span's rise).
+        A tension sensor at B_i reads the span's lowest tension; the cable above carries its
+        weight too, so the mean tension that stretches it is τ + w·v/2 (v the span's rise). A
+        sensor at the exit pulley reads the highest, τ_top = τ_B + w·v (dT/dz = w along a
+        hanging cable), so the mean is τ_top − w·v/2.
         """
         if not np.all(np.isfinite(self._T)):
             return super().corrected_lengths(lengths, tensions)
         taut = tensions > 0
-        mean = np.where(taut, tensions + weight_above(self.geometry, self._T), tensions)
+        half = weight_above(self.geometry, self._T)
+        if self.geometry.sensors_at_pulleys:
+            tensions = np.where(taut, tensions - 2.0 * half, tensions)  # the tension at B_i
+        mean = np.where(taut, tensions + half, tensions)
         stretched = super().corrected_lengths(lengths, mean)
         return stretched - sag_excess(self.geometry, self._T, tensions)

@@ -58,7 +58,14 @@ def _numerics(spec: mujoco.MjSpec, r: Robot) -> None:
         "platform_max_angular_speed": [r.max_angular_speed],
         "cable_tension_range": r.tension_range,
         "cable_linear_density": [r.linear_density],
+        "winch_drum_radius": [r.drum_radius],
+        "tension_sensor_range": list(r.tension_sensors.range),
+        "tension_sensor_accuracy": [r.tension_sensors.accuracy],
+        "tension_sensor_repeatability": [r.tension_sensors.repeatability],
+        "payload_max_mass": [r.max_payload],
     }
+    if r.tension_sensors.location == "pulley":  # the sensors read the winch side's tension
+        values["tension_sensor_at_pulley"] = [1.0]
     if r.sag:  # heavy cables: the twin builds SaggingPhysics (cdpr_twin/sim/sag.py)
         values["cable_sag"] = [1.0]
     for name, data in values.items():

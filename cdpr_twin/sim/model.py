@@ -16,6 +16,7 @@ import numpy as np
 
 from cdpr_twin.deviations import TruthDeviations
 from cdpr_twin.geometry import CdprGeometry
+from cdpr_twin.realism import RobotSensing
 from cdpr_twin.se3 import matrix_from_quat_wxyz, quat_wxyz_from_matrix, so3_exp, transform
 from cdpr_twin.sim import camera
 from cdpr_twin.sim.occluder import add_occluder
@@ -201,6 +202,63 @@ def _apply(spec: mujoco.MjSpec, dev: TruthDeviations, path: Path) -> None:
         tag.quat = quat_wxyz_from_matrix(so3_exp(dev.tag_offset[3:]) @ R)
 
 
+def add_payload(model: mujoco.MjModel, mass: float, com: np.ndarray, source: str = "model") -> None:
+    """Fix a payload to the platform of a compiled model: a point mass at ``com`` in F_p.
+
+    The platform's mass, centre of mass and inertia become the rigid sum's (parallel-axis
+    theorem; the payload's own inertia about its centre is neglected [eng]: a compact load).
+
+    Args:
+        model: the compiled model, changed in place (``mj_setConst`` refreshes what depends).
+        mass: the payload's mass [kg] (0: nothing changes).
+        com: (3,) its centre of mass in F_p [m].
+        source: the model's file, for the error message.
+
+    Raises:
+        ValueError: the payload exceeds the robot's rated ``payload_max_mass``.
+    """
+    if mass == 0:
+        return
+    rated = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "payload_max_mass")
+    if rated >= 0 and mass > model.numeric_data[model.numeric_adr[rated]]:
+        limit = model.numeric_data[model.numeric_adr[rated]]
+        raise ValueError(f"payload_kg = {mass:g} exceeds the rated {limit:g} kg of {source}")
+    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, PLATFORM_BODY)
+    m0, c0, p = float(model.body_mass[body]), model.body_ipos[body].copy(), np.asarray(com)
+    R = matrix_from_quat_wxyz(model.body_iquat[body])
+    total = m0 + mass
+    c = (m0 * c0 + mass * p) / total
+
+    def shift(m: float, d: np.ndarray) -> np.ndarray:  # a point mass m at d from c
+        return m * (float(d @ d) * np.eye(3) - np.outer(d, d))
+
+    inertia = R @ np.diag(model.body_inertia[body]) @ R.T + shift(m0, c0 - c) + shift(mass, p - c)
+    moments, axes = np.linalg.eigh(inertia)
+    axes[:, 2] *= np.sign(np.linalg.det(axes))  # a rotation
+    model.body_mass[body], model.body_ipos[body] = total, c
+    model.body_inertia[body], model.body_iquat[body] = moments, quat_wxyz_from_matrix(axes)
+    mujoco.mj_setConst(model, mujoco.MjData(model))
+
+
+def has_numeric(model: mujoco.MjModel, name: str) -> bool:
+    """Whether the model has a ``<custom><numeric>`` element of that name."""
+    return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, name) >= 0
+
+
+def robot_sensing(model: mujoco.MjModel) -> RobotSensing | None:
+    """The winch and tension-sensor data of a model's description, or ``None`` without them."""
+    names = ("winch_drum_radius", "tension_sensor_range", "tension_sensor_accuracy")
+    if not all(has_numeric(model, n) for n in (*names, "tension_sensor_repeatability")):
+        return None
+    lo, hi = numeric(model, "tension_sensor_range")
+    return RobotSensing(
+        drum_radius=float(numeric(model, "winch_drum_radius")[0]),
+        tension_range=(float(lo), float(hi)),
+        accuracy=float(numeric(model, "tension_sensor_accuracy")[0]),
+        repeatability=float(numeric(model, "tension_sensor_repeatability")[0]),
+    )
+
+
 def numeric(model: mujoco.MjModel, name: str) -> np.ndarray:
     """Data of a ``<custom><numeric>`` element, with an error naming a missing one."""
     nid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, name)
@@ -257,6 +315,8 @@ def read_geometry(model: mujoco.MjModel) -> CdprGeometry:
         limits = {"tension_min": float(lo), "tension_max": float(hi)}
     if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "cable_linear_density") >= 0:
         limits["linear_density"] = float(numeric(model, "cable_linear_density")[0])
+    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "tension_sensor_at_pulley") >= 0:
+        limits["sensors_at_pulleys"] = True
     return CdprGeometry(
         a_base=model.body_pos[bodies],
         b_platform=model.site_pos[sites],

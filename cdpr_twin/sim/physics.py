@@ -33,6 +33,7 @@ from cdpr_twin.se3 import (
     transform,
 )
 from cdpr_twin.sim import camera as cam_mod
+from cdpr_twin.sim import winch as winch_mod
 from cdpr_twin.sim.model import (
     PLATFORM_BODY,
     ModelError,
@@ -48,13 +49,7 @@ from cdpr_twin.sim.model import (
 )
 from cdpr_twin.sim.monitor import divergence
 from cdpr_twin.sim.occluder import occluder_of
-from cdpr_twin.sim.winch import (
-    WinchServos,
-    check_lengths,
-    checked_rates,
-    draw_drum_radii,
-    whole_steps,
-)
+from cdpr_twin.sim.winch import WinchServos, check_lengths, checked_rates, whole_steps
 from cdpr_twin.statics import tension_distribution
 
 TAG_SITE = "tag_center"
@@ -90,10 +85,10 @@ class Physics:
         self.cable_names = tuple(f"cable{i + 1}" for i in range(self.n_cables))
         self.geometry: CdprGeometry = read_geometry(model)
         self.align_every = int(align_every)
-        self.winch = WinchRealism() if winch is None else winch
+        self.winch = winch_mod.robot_winch(model, winch)  # the drum radius: robot data
         self._servos = WinchServos(self.winch, self.n_cables)
         rng = robot_rng(robot_seed, "winch")  # per robot; the encoders read the same radii
-        self.drum_radius_true = draw_drum_radii(self.winch, rng, self.n_cables)
+        self.drum_radius_true = winch_mod.draw_drum_radii(self.winch, rng, self.n_cables)
         self._drum_ratio = self.drum_radius_true / self.winch.drum_radius  # cable per command
         self._hooks: list[StepHook] = []
         self.cable_enabled = np.ones(self.n_cables, dtype=bool)

@@ -7,8 +7,17 @@ straight cable's force on the platform as an applied force at each anchor point 
 is MuJoCo's last tendon segment, from the sheave's tangent point to B_i, and its unstretched
 length the cable's l0 in proportion of that segment in the tendon path (stretch uniform along
 the cable). The catenary (:mod:`cdpr_twin.catenary`) is solved for that unstretched length and
-span; the platform then also carries its share of the cable's weight, and the tension sensors
-at B_i read the catenary's tension there.
+span; the platform then also carries its share of the cable's weight. The span's upper end pulls
+on the sheave with the catenary's upper-end force (:attr:`SaggingPhysics.pulley_force`): its
+tension exceeds the one at B_i by about the weight of the cable's rise, w·Δz. The tension
+sensors read B_i's tension, or the pulley's on a robot whose sensors sit at the exit pulleys
+(``<numeric name="tension_sensor_at_pulley">``, robot.toml ``[tension_sensors] location``).
+
+The swivels need no change: their axes are vertical, and a catenary hangs in the vertical plane
+through its chord, so the upper-end tangent has the chord's azimuth, which the swivels already
+follow (:meth:`Physics.refresh`). What sag does change at the sheave is the wrap angle (the
+tangent dips below the chord by ≈ w·h/(2H) rad); the tendon's wrap keeps the chord's, a length
+error of r·Δθ (≈ 3 mm on CoGiRo at 100 N, 0.3 mm at 1 kN), left in the MuJoCo path.
 """
 
 from __future__ import annotations
@@ -37,6 +46,10 @@ class SaggingPhysics(Physics):
             raise ValueError(f"linear_density must be > 0 kg/m, got {linear_density}")
         self.linear_density = float(linear_density)
         self.sag_force = np.zeros((self.n_cables, 3))  # the catenary − straight force on B_i [N]
+        self.pulley_force = np.zeros((self.n_cables, 3))  # catenary − straight force on the sheave
+        self.sensor_at_pulley = (
+            mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "tension_sensor_at_pulley") >= 0
+        )
         self._unit = np.zeros((self.n_cables, 3))  # B_i → tangent point, at the last refresh
 
     @property
@@ -50,6 +63,22 @@ class SaggingPhysics(Physics):
         pulled = straight[:, None] * self._unit + self.sag_force
         return np.where(straight > 0, np.linalg.norm(pulled, axis=1), straight)
 
+    @property
+    def pulley_tensions(self) -> np.ndarray:
+        """True tensions where the cables leave their sheaves (m,) [N]: |−τ_straight û + Δ_top|.
+
+        The catenary's upper-end tension (the winch side), the current straight tension
+        corrected by the upper-end force difference of the last refresh.
+        """
+        straight = super().tensions
+        pulled = -straight[:, None] * self._unit + self.pulley_force
+        return np.where(straight > 0, np.linalg.norm(pulled, axis=1), straight)
+
+    @property
+    def sensed_tensions(self) -> np.ndarray:
+        """What the tension sensors measure (m,) [N]: at the pulleys or at B_i (robot data)."""
+        return self.pulley_tensions if self.sensor_at_pulley else self.tensions
+
     def refresh(self) -> None:
         """Swivels and stiffnesses (:meth:`Physics.refresh`), then the sagging spans' forces."""
         super().refresh()
@@ -62,6 +91,7 @@ class SaggingPhysics(Physics):
         torque = np.zeros(3)
         com = d.xipos[self._platform]
         l0 = d.act[self._actuators]
+        self.pulley_force[:] = 0.0
         for i in range(self.n_cables):
             force = self._span_force(i, b[i], l0[i]) if self.cable_enabled[i] else np.zeros(3)
             self.sag_force[i] = force
@@ -70,7 +100,10 @@ class SaggingPhysics(Physics):
         d.xfrc_applied[self._platform] = np.concatenate([total, torque])
 
     def _span_force(self, i: int, b: np.ndarray, l0: float) -> np.ndarray:
-        """Catenary − straight elastic force of cable i's free span on B_i [N] (3,)."""
+        """Catenary − straight elastic force of cable i's free span on B_i [N] (3,).
+
+        Also sets ``pulley_force[i]``, the same difference on the sheave's tangent point.
+        """
         d = self.data
         tendon = self._tendons[i]
         points = d.wrap_xpos.reshape(-1, 3)  # the tendon paths' points, B_i last
@@ -90,5 +123,6 @@ class SaggingPhysics(Physics):
             cat = solve_catenary(ls, es, self.linear_density * G, np.hypot(*span[:2]), span[2])
         except CatenaryError:
             return np.zeros(3)
-        on_b, _ = end_forces(cat, start, b)
+        on_b, on_a = end_forces(cat, start, b)
+        self.pulley_force[i] = on_a + straight
         return on_b - straight

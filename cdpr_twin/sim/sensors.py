@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.realism import Realism, robot_rng, run_rng
+from cdpr_twin.realism import Realism, for_robot, robot_rng, run_rng
 from cdpr_twin.sim.encoders import Encoders
-from cdpr_twin.sim.model import SimulationError
+from cdpr_twin.sim.model import ModelError, SimulationError, robot_sensing
 from cdpr_twin.sim.onboard_camera import OnboardCamera
 from cdpr_twin.sim.physics import Physics
 from cdpr_twin.sim.tension import TensionSensors
@@ -72,6 +72,10 @@ class Sensors:
         period: float | None = None,
     ) -> None:
         realism = Realism() if realism is None else realism
+        robot = robot_sensing(physics.model)  # robot data: drum radius, sensors' spec
+        realism = for_robot(realism, robot) if robot is not None else realism
+        if math.isnan(realism.tension.bias_std):
+            raise ModelError(f"{physics.source} has no tension-sensor data; set bias_std")
         self.physics, self.nominal, self.realism = physics, nominal, realism
         noise = realism.tension.noise_std
         self.tension = TensionSensors(
@@ -109,7 +113,12 @@ class Sensors:
 
     def home(self, T_base_platform: np.ndarray) -> None:
         """Home the encoders at a known pose (the paper's "initial pose is known")."""
-        self.encoders.home(T_base_platform, self.physics.tensions)
+        self.encoders.home(T_base_platform, self._sensed())  # the tensions the sensors see
+
+    def _sensed(self) -> np.ndarray:
+        """True tensions where the sensors sit (heavy cables: that end of the catenary)."""
+        p = self.physics
+        return p.sensed_tensions if hasattr(type(p), "sensed_tensions") else p.tensions
 
     def render(self) -> np.ndarray:
         """The onboard camera's current frame, (H, W, 3) RGB uint8."""
@@ -128,7 +137,7 @@ class Sensors:
             A frozen :class:`Measurement` (readings carry this run's seeded noise).
         """
         render = self.camera is not None if render is None else render
-        tensions, clipped = self.tension.read(self.physics.tensions)
+        tensions, clipped = self.tension.read(self._sensed())
         image = tag = None
         if render:
             if self.camera is None:

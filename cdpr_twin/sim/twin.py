@@ -27,6 +27,7 @@ from cdpr_twin.sim.model import (
     TAG_BODY,
     ModelError,
     SimulationError,
+    add_payload,
     build_model,
     cable_count,
     numeric,
@@ -62,8 +63,8 @@ def _nominal_robot(model: mujoco.MjModel) -> NominalRobot:
 def nominal_from_description(path: str | Path, model_nominal: NominalRobot) -> NominalRobot:
     """What the software believes when told a robot description (e.g. a calibrated one).
 
-    Geometry, camera mount and tag pose come from the description; the camera intrinsics and
-    tag size stay the model's.
+    Geometry, camera mount and tag pose come from the description; the camera intrinsics, tag
+    size and the carried mass (platform and payload) stay the model's.
 
     Raises:
         ModelError: the description is invalid or has another cable count.
@@ -75,12 +76,14 @@ def nominal_from_description(path: str | Path, model_nominal: NominalRobot) -> N
         r = load_robot(path)
     except RobotError as exc:
         raise ModelError(str(exc)) from None
-    geom = geometry_of(r)
-    if geom.n_cables != model_nominal.geometry.n_cables:
+    geom, known = geometry_of(r), model_nominal.geometry
+    if geom.n_cables != known.n_cables:
         raise ModelError(
             f"{path}: {geom.n_cables} cables, but the model has "
-            f"{model_nominal.geometry.n_cables}; give the same robot's description"
+            f"{known.n_cables}; give the same robot's description"
         )
+    # what is carried (platform and payload) is known, not calibrated
+    geom = replace(geom, mass=known.mass, com_platform=known.com_platform)
     if r.camera is not None:
         R = matrix_from_quat_wxyz(r.camera.quat_wxyz) @ cam_mod.R_MJCAM_CV
         geom = replace(geom, T_platform_cam=transform(R, r.camera.position))
@@ -88,6 +91,18 @@ def nominal_from_description(path: str | Path, model_nominal: NominalRobot) -> N
     if r.tag is not None:
         T_base_tag = transform(matrix_from_quat_wxyz(r.tag.quat_wxyz), r.tag.position)
     return replace(model_nominal, geometry=geom, T_base_tag=T_base_tag)
+
+
+def _set_timestep(model: mujoco.MjModel, timestep: float | None) -> None:
+    """Set the physics step [s] (``None``: keep the model file's), within stiff cables' range."""
+    if timestep is None:
+        return
+    if not (np.isfinite(timestep) and 1e-5 <= timestep <= 0.002):
+        raise ValueError(
+            f"timestep must be in [1e-5, 0.002] s (stiff cables; a smaller one takes hours "
+            f"per simulated second), got {timestep}"
+        )
+    model.opt.timestep = float(timestep)
 
 
 def build_robot(
@@ -98,6 +113,7 @@ def build_robot(
     winch: WinchRealism | None = None,
     occluder: bool = False,
     nominal_path: str | Path | None = None,
+    payload: tuple[float, np.ndarray] = (0.0, np.zeros(3)),
 ) -> tuple[Physics, NominalRobot, TruthDeviations]:
     """The simulated robot (with its calibration errors) and what its software believes.
 
@@ -112,6 +128,8 @@ def build_robot(
         occluder: give the true scene the sheet of ``tag_occlusion`` events.
         nominal_path: a robot description the software believes instead of the model file
             (:func:`nominal_from_description`).
+        payload: (mass [kg], (3,) centre of mass in F_p [m]) fixed to the platform, on the
+            robot and in what its software believes (the operator knows the load).
 
     Raises:
         ModelError: when the model file is missing, malformed or not a cable robot.
@@ -123,6 +141,7 @@ def build_robot(
         raise ModelError(str(exc)) from None
     robot_seed = deviations.seed if isinstance(deviations, DeviationSpec) else 0
     nominal_model = build_model(path)
+    add_payload(nominal_model, payload[0], np.asarray(payload[1], dtype=float), str(path))
     nominal = _nominal_robot(nominal_model)
     if nominal_path is not None:
         nominal = nominal_from_description(nominal_path, nominal)
@@ -131,13 +150,8 @@ def build_robot(
         deviations = deviations.draw(n)
     deviations = deviations if deviations is not None else TruthDeviations.zero(n)
     model = build_model(path, deviations, occluder)
-    if timestep is not None:
-        if not (np.isfinite(timestep) and 1e-5 <= timestep <= 0.002):
-            raise ValueError(
-                f"timestep must be in [1e-5, 0.002] s (stiff cables; a smaller one takes hours "
-                f"per simulated second), got {timestep}"
-            )
-        model.opt.timestep = float(timestep)
+    add_payload(model, payload[0], np.asarray(payload[1], dtype=float), str(path))
+    _set_timestep(model, timestep)
     args = (model, align_every, str(path))
     if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "cable_sag") >= 0:
         from cdpr_twin.sim.sag import SaggingPhysics  # heavy cables (robot.toml: sag = true)

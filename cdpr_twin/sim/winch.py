@@ -22,10 +22,34 @@ once, by :func:`draw_drum_radii`.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from cdpr_twin.realism import WinchRealism
+
+
+def robot_winch(model, winch: WinchRealism | None) -> WinchRealism:
+    """The winches' realism with a ``nan`` drum radius taken from the robot (its ``<numeric>``).
+
+    A model without ``winch_drum_radius`` (a hand-written one) keeps an ideal winch at radius
+    1 m: an ideal winch pays out exactly its command whatever the radius.
+
+    Raises:
+        ModelError: the model has no drum radius and the winch needs one (encoder counts or a
+            drum radius error).
+    """
+    from cdpr_twin.sim.model import ModelError, robot_sensing
+
+    winch = WinchRealism() if winch is None else winch
+    if not math.isnan(winch.drum_radius):
+        return winch
+    robot = robot_sensing(model)
+    if robot is not None:
+        return replace(winch, drum_radius=robot.drum_radius)
+    if winch.encoder_counts == 0 and winch.drum_radius_error_std == 0.0:
+        return replace(winch, drum_radius=1.0)
+    raise ModelError("the model has no <numeric name='winch_drum_radius'>; set drum_radius_m")
 
 
 def draw_drum_radii(winch: WinchRealism, rng: np.random.Generator, n: int) -> np.ndarray:

@@ -25,6 +25,7 @@ from cdpr_twin.results import (
 from cdpr_twin.se3 import pose_distance, pose_from_vector
 from cdpr_twin.study.findings import evaluate
 from cdpr_twin.study.plan import PBVS_SCENARIO
+from cdpr_twin.study.robot_numbers import model_physics, payloads, robot_errors
 from cdpr_twin.study.spread import PBVS_CONVERGED, is_main, spread
 from cdpr_twin.timeseries import Timeseries
 
@@ -105,77 +106,6 @@ def accuracy_at_p1(run_dir: Path, kind: str, p1: np.ndarray | None = None) -> di
     }
 
 
-def _model_physics(ts: Timeseries, scenario_file: Path) -> dict:
-    """Why the model-based variants agree on ACROBOT: stretch and wrap along the run."""
-    from cdpr_twin import kinematics as kin
-    from cdpr_twin.scenario import load_scenario
-    from cdpr_twin.sim import build_model, read_geometry
-    from cdpr_twin.sim.model import numeric
-
-    model = build_model(load_scenario(scenario_file).model.file)
-    geom = read_geometry(model)
-    try:
-        rho = float(numeric(model, "cable_linear_density")[0])
-    except ValueError:  # a model without it: massless cables, no sag to estimate
-        rho = float("nan")
-    tau, l0 = ts.matrix("tension"), ts.matrix("length")
-    stretch = np.abs(tau) * l0 / geom.es  # eq. 14 with τ(0) = 0
-    T = ts.poses("true")
-    wrap = np.array(
-        [
-            kin.cable_lengths(geom, Ti, "pulley") - kin.cable_lengths(geom, Ti)
-            for Ti in T[:: max(1, len(T) // 200)]
-        ]
-    )
-    return {
-        "max_stretch_m": float(np.nanmax(stretch)),
-        "wrap_min_m": float(wrap.min()),
-        "wrap_max_m": float(wrap.max()),
-        "wrap_change_max_m": float((wrap.max(axis=0) - wrap.min(axis=0)).max()),
-        "max_sag_m": _max_sag(geom, rho, T[:: max(1, len(T) // 50)], tau[:: max(1, len(T) // 50)]),
-    }
-
-
-def _max_sag(geom, rho: float, poses: np.ndarray, tau: np.ndarray) -> float:
-    """Largest mid-span sag of the cables along the run if they had their mass [m].
-
-    Irvine's catenary (:mod:`cdpr_twin.catenary`) for each span A_i → B_i, its unstretched
-    length the straight one at the measured tension; NaN without a density (rho [kg/m]).
-    """
-    from cdpr_twin.catenary import CatenaryError, solve_catenary
-
-    if not rho > 0:
-        return float("nan")
-    worst = 0.0
-    for T, t in zip(poses, tau, strict=True):
-        span = geom.a_base - (geom.b_platform @ T[:3, :3].T + T[:3, 3])
-        for i, (d, ti) in enumerate(zip(span, t, strict=True)):
-            h = float(np.hypot(d[0], d[1]))
-            if not (ti > 1.0 and h > 0):
-                continue
-            l0 = float(np.linalg.norm(d)) / (1.0 + ti / geom.es[i])
-            try:
-                worst = max(worst, solve_catenary(l0, geom.es[i], rho * 9.81, h, d[2]).sag)
-            except CatenaryError:
-                continue
-    return worst
-
-
-def _camera_tag_errors(scenario_file: str | Path) -> dict:
-    """Magnitude of the drawn robot's camera-mount and tag-placement rotation errors."""
-    from cdpr_twin.scenario import load_scenario
-    from cdpr_twin.sim import build_model, cable_count
-
-    scenario = load_scenario(scenario_file)
-    dev = scenario.truth.draw(cable_count(build_model(scenario.model.file)))  # as the twin does
-    return {
-        "camera_rotation_deg": float(np.degrees(np.linalg.norm(dev.camera_offset[3:]))),
-        "camera_position_m": float(np.linalg.norm(dev.camera_offset[:3])),
-        "tag_rotation_deg": float(np.degrees(np.linalg.norm(dev.tag_offset[3:]))),
-        "tag_position_m": float(np.linalg.norm(dev.tag_offset[:3])),
-    }
-
-
 def _estimator_deviations(ts: Timeseries, names: tuple[str, ...]) -> dict:
     """Each estimator's max and final deviation from ground truth, and its roughness."""
     out = {}
@@ -228,9 +158,10 @@ def _model_variants(ts: Timeseries, models: tuple[str, ...], ol: dict, source: P
         for j in range(i + 1, len(models))
     )
     return {
+        "n_variants": len(models),
         "max_pairwise_difference_m": pairwise,
         "max_deviation_m": max(ol["estimators"][n]["max_translation_m"] for n in models),
-        **_model_physics(ts, source),
+        **model_physics(ts, source),
     }
 
 
@@ -368,7 +299,7 @@ def analyse(out: Path, records: list[dict]) -> dict:
             for k in ("translation_m", "rotation_deg")
         }
     rep["spread"] = spread(ok, accuracy_at_p1, None if p1 is None else p1.T_waypoint)
-    rep["robot"] = _camera_tag_errors(_robot_scenario(records))
+    rep["robot"] = {**robot_errors(_robot_scenario(records)), "payload_kg": payloads(records)}
     rep["realism"], rep["pbvs_goal"] = _realism(_robot_scenario(records))
     rep["findings"] = evaluate(rep)
     (out / "report.json").write_text(json.dumps(rep, indent=2) + "\n", encoding="utf-8")

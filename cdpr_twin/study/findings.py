@@ -6,46 +6,32 @@ Each rule reads the report numbers (:func:`cdpr_twin.study.analyse`) and returns
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from functools import partial
 
-import numpy as np
-
 from cdpr_twin.estimators import PAPER_ESTIMATORS
+from cdpr_twin.study.findings_pbvs import (
+    MIN_ACCURACY_RATIO,
+    control_best_with_pbvs,
+    fused_beats_each,
+    pbvs_goal,
+    pbvs_more_accurate,
+    repeatability,
+)
+from cdpr_twin.study.verdicts import (
+    AGREES,
+    DISAGREES,
+    NOT_APPLICABLE,
+    Finding,
+    Rule,
+    length,
+    verdict,
+)
 
-AGREES, DISAGREES, NOT_APPLICABLE = "agrees", "disagrees", "n/a"
-"""The verdicts."""
-
-
-@dataclass(frozen=True)
-class Finding:
-    """One of the paper's claims beside the twin's numbers.
-
-    Attributes:
-        finding: the claim.
-        paper: what the paper reports.
-        twin: what the twin gives.
-        threshold: the criterion the verdict applies to the twin's numbers.
-        verdict: ``"agrees"``, ``"disagrees"`` or ``"n/a"`` (no criterion, or no data).
-        why: the mechanism behind the twin's number.
-    """
-
-    finding: str
-    paper: str
-    twin: str
-    threshold: str
-    verdict: str
-    why: str
-
-
-Rule = Callable[[dict], Finding | None]
-"""A finding's rule: report numbers → the finding, or ``None`` (numbers missing)."""
-
-
-def verdict(ok: bool | None) -> str:
-    """``agrees`` / ``disagrees`` for a checked criterion, ``n/a`` for none."""
-    return NOT_APPLICABLE if ok is None else (AGREES if ok else DISAGREES)
+__all__ = [
+    "AGREES", "DISAGREES", "FINDINGS", "MIN_ACCURACY_RATIO", "NOT_APPLICABLE", "Finding", "Rule",
+    "evaluate", "verdict",
+]  # fmt: skip
 
 
 def open_loop_miss(rep: dict) -> Finding | None:
@@ -61,7 +47,8 @@ def open_loop_miss(rep: dict) -> Finding | None:
         threshold="0.5 cm ≤ translational error at p1 ≤ 2 cm",
         verdict=verdict(0.005 <= m <= 0.02),
         why="Â uses the nominal geometry; the robot's exit and anchor points differ "
-        "by ~1 cm, so integrating l̇ = Â ᵇv_p lands elsewhere.",
+        + _geometry_error(rep.get("robot", {}))
+        + ", so integrating l̇ = Â ᵇv_p lands elsewhere.",
     )
 
 
@@ -82,7 +69,20 @@ def estimates_follow_plan(rep: dict) -> Finding | None:
         verdict=verdict(worst < 0.25 * miss["translation_m"]),
         why="the control estimate integrates the commanded (planned) twist; the "
         "model-based ones invert the same nominal model the plan was made "
-        "with, from encoder lengths that follow the plan exactly.",
+        "with, from encoder lengths that follow the plan exactly"
+        + _off_plan(fp, names, miss["translation_m"]),
+    )
+
+
+def _off_plan(fp: dict, names: list[str], miss: float) -> str:
+    """Which estimates leave the plan by more than the criterion, and by how much."""
+    off = {n: fp[n]["vs_plan_m"] for n in names if fp[n]["vs_plan_m"] >= 0.25 * miss}
+    if not off:
+        return "."
+    parts = ", ".join(f"{n} {length(v)}" for n, v in off.items())
+    return (
+        f"; here the tensions' corrections move these off the plan ({parts} at p1): "
+        "the cable effects they model are as large as the robot's miss."
     )
 
 
@@ -104,8 +104,12 @@ def image_noisiest(rep: dict) -> Finding | None:
     r_img, r_oth = est["image"]["roughness_m"], max(others)
     pb_ok = _image_noisiest_in_pbvs(rep)
     why = (
-        "it rests on 4 tag corners; a 4 cm tag at 0.1–0.35 m gives tilt errors of tenths of "
-        "a degree, i.e. millimetres at the platform."
+        "it rests on 4 tag corners"
+        + _tag_view(rep)
+        + (
+            ": their pixel errors give tilt errors that the camera–tag lever arm turns into "
+            "platform position errors."
+        )
     )
     if pb_ok is False:
         pb = rep["pbvs"]["control"]
@@ -166,217 +170,65 @@ def model_variants_agree(rep: dict) -> Finding | None:
     if not mv:
         return None
     return Finding(
-        finding="the four model-based variants are nearly identical",
+        finding=f"the {_count(mv.get('n_variants', 4))} model-based variants are nearly identical",
         paper="almost the same output (on ACROBOT)",
         twin="max difference between variants "
         f"{mv['max_pairwise_difference_m'] * 1e3:.2f} mm vs their deviation from truth "
         f"up to {mv['max_deviation_m'] * 1e3:.1f} mm",
         threshold="largest difference between variants < 10 % of their largest deviation",
         verdict=verdict(mv["max_pairwise_difference_m"] < 0.1 * mv["max_deviation_m"]),
-        why=f"stretch τ·l/(E·S) is at most {mv['max_stretch_m'] * 1e6:.0f} µm and "
+        why=f"stretch τ·l/(E·S) is at most {length(mv['max_stretch_m'])} and "
         f"the pulley wrap (l_pulley − l_straight, "
         f"{mv['wrap_min_m'] * 1e3:.2f}–{mv['wrap_max_m'] * 1e3:.2f} mm) changes "
         f"by at most {mv['wrap_change_max_m'] * 1e3:.2f} mm along the run"
-        + _sag_words(mv)
-        + ", against centimetre geometry errors.",
+        + _sag_words(mv, rep.get("robot", {}))
+        + _against(rep.get("robot", {}), mv),
     )
 
 
-def _sag_words(mv: dict) -> str:
+def _count(n: int) -> str:
+    return {2: "two", 3: "three", 4: "four", 5: "five", 6: "six"}.get(n, str(n))
+
+
+def _sag_words(mv: dict, robot: dict) -> str:
     sag = mv.get("max_sag_m", float("nan"))
-    return "" if sag != sag else f"; the cables, massless here, would sag ≤ {sag * 1e3:.1f} mm"
+    if sag != sag:
+        return ""
+    if robot.get("sag_simulated"):
+        return f"; the cables, heavy in the physics here, sag by up to {length(sag)}"
+    return f"; the cables, massless here, would sag ≤ {sag * 1e3:.1f} mm"
 
 
-def control_best_with_pbvs(rep: dict) -> Finding | None:
-    """With PBVS, the in-loop control-based estimate deviates least from the truth."""
-    pbvs = rep.get("pbvs", {})
-    if not pbvs:
-        return None
-    maxes = {n: v["max_translation_m"] for n, v in pbvs.items()}
-    best = min(maxes, key=maxes.get)
-    why = (
-        "in closed loop the servo corrects the robot's pose, and the control estimate "
-        "drifts only with the mismatch between commanded and achieved twists (as "
-        "model-based ones drift with model error)."
-    )
-    others = [n for n in maxes if n != "image"]
-    ideal_camera = not rep.get("realism", {}).get("camera", {}).get("noise", False)
-    if best == "image" and others and ideal_camera:
-        why += (
-            " Here the image-based estimate is best instead: the twin's camera is ideal"
-            " (no pixel noise, blur, distortion or intrinsics error) and PBVS brings it "
-            "within 9 cm of the tag, where 4 sub-pixel corners give sub-millimetre "
-            "poses; the real camera's noise, which made Est. 2 the noisiest on ACROBOT,"
-            " is not modelled. Among the others, "
-            f"{min(others, key=maxes.get)} is best."
-        )
-    elif best == "image" and others:
-        why += (
-            " Here the image-based estimate is best instead, though its frames carry the "
-            "acrobot profile's noise, blur, distortion and calibration error: PBVS brings the "
-            "camera within 9 cm of the tag, and the rendered tag is sharp-edged ink on white "
-            "paper (no lens blur, no pixel-area integration), so its corners stay sub-pixel "
-            "accurate, while the control estimate accumulates the commanded-vs-achieved mismatch "
-            f"over the whole servo. Among the others, "
-            f"{min(others, key=maxes.get)} is best."
-        )
-    return Finding(
-        finding="control-based estimate is the best with PBVS",
-        paper="control ≤ 0.9 cm / 2°, best of all",
-        twin=", ".join(f"{n} {v * 1e3:.1f} mm" for n, v in maxes.items()),
-        threshold="control in the loop has the smallest max translational deviation",
-        verdict=verdict(best == "control" if "control" in maxes else None),
-        why=why,
+def _against(robot: dict, mv: dict) -> str:
+    """What the cable effects compare with: the geometry errors, if the report has them."""
+    if "exit_point_error_max_m" not in robot:
+        return ", against the robot's geometry errors."
+    effects = max(mv["max_stretch_m"], mv["wrap_change_max_m"], mv.get("max_sag_m", 0.0) or 0.0)
+    geometry = max(robot["exit_point_error_max_m"], robot["anchor_point_error_max_m"])
+    if effects < 0.1 * geometry:
+        return f", against geometry errors up to {length(geometry)}."
+    return (
+        f", as large as the robot's geometry errors (up to {length(geometry)}): the variants "
+        "that model them and those that do not land apart."
     )
 
 
-def _shares(g: dict) -> str:
-    """Each source's variance share, e.g. "pixel_noise 62 %, homing 30 %"."""
-    parts = []
-    for name, st in g.items():
-        share = st.get("variance_share_translation_m")
-        if name.startswith("without ") and share is not None:
-            parts.append(f"{name[len('without ') :]} {share * 100:.0f} %")
-    return ", ".join(parts)
+def _geometry_error(robot: dict) -> str:
+    if "exit_point_error_max_m" not in robot:
+        return "from it (calibration errors)"
+    top = max(robot["exit_point_error_max_m"], robot["anchor_point_error_max_m"])
+    return f"by up to {length(top)}"
 
 
-def repeatability(rep: dict) -> Finding | None:
-    """The spread of the final pose at p1 over repetitions (the paper gives no number)."""
-    acc = rep.get("accuracy", {})
-    if not ("open loop" in acc and "PBVS (all)" in acc):
-        return None
-    spreads = {k: float(np.std(acc[k]["translation_m"])) for k in ("open loop", "PBVS (all)")}
-    counts = {k: len(acc[k]["translation_m"]) for k in spreads}
-    decomposition = {k: _shares(g) for k, g in rep.get("spread", {}).items() if _shares(g)}
-    if decomposition:
-        why = (
-            "what changes between repetitions on one robot is the per-run noise. Share of the "
-            "variance that disappears with each source switched off: "
-            + "; ".join(f"{k}: {v}" for k, v in decomposition.items())
-            + ". Per-robot errors (geometry, calibration, drum radii, sensor bias) move every "
-            "repetition alike: they set the mean, not the spread."
-        )
-    else:
-        why = (
-            "with the ideal profile the only thing that changes between repetitions is the "
-            "tension-sensor noise, which the open-loop robot never reads and PBVS never sees, "
-            "so runs repeat to micrometres; the acrobot profile adds pixel noise and homing."
-        )
-    nonzero = spreads["open loop"] > 1e-6 and spreads["PBVS (all)"] > 1e-6
-    return Finding(
-        finding="repeatability: spread of the final pose at p1 over repetitions",
-        paper="10 open-loop and 30 PBVS runs with a visible spread (Fig. 8)",
-        twin=f"std {spreads['open loop'] * 1e6:.1f} µm over {counts['open loop']} "
-        f"open-loop runs, {spreads['PBVS (all)'] * 1e6:.1f} µm over "
-        f"{counts['PBVS (all)']} PBVS runs",
-        threshold="a spread above 1 µm with both controllers (the paper gives no number)",
-        verdict=verdict(nonzero),
-        why=why,
-    )
-
-
-def pbvs_goal(rep: dict) -> Finding | None:
-    """Which PBVS goal the paper's accuracy points to: the nominal model's or a taught one."""
-    sp = rep.get("spread", {}).get("PBVS control", {})
-    ol = rep.get("spread", {}).get("open loop", {}).get("all")
-    goals = {k[len("goal ") :]: v for k, v in sp.items() if k.startswith("goal ")}
-    if ol is None or "all" not in sp or not goals:
-        return None
-    main_goal = rep.get("pbvs_goal", "file")
-    rows = {main_goal: sp["all"], **goals}
-    ratios = {
-        g: (ol["mean_translation_m"] / v["mean_translation_m"],
-            ol["mean_rotation_deg"] / v["mean_rotation_deg"])
-        for g, v in rows.items()
-    }  # fmt: skip
-    best = max(ratios, key=lambda g: min(ratios[g]))
-    return Finding(
-        finding="the PBVS goal the paper's procedure implies (nominal model vs taught at p1)",
-        paper="PBVS 5× / 4× more accurate than open loop (translation / rotation)",
-        twin="; ".join(
-            f"goal {g}: {rt:.1f}× / {rr:.1f}× (PBVS control, {rows[g]['n']} runs)"
-            for g, (rt, rr) in ratios.items()
-        ),
-        threshold=f"both ratios ≥ {MIN_ACCURACY_RATIO:g}× with one of the goals",
-        verdict=verdict(min(ratios[best]) >= MIN_ACCURACY_RATIO),
-        why=f"goal {best} gives the larger of the smaller ratios; the paper's 5× and 4× both "
-        f"exceed {MIN_ACCURACY_RATIO:g}×, which a goal must reach in both to match them. A "
-        "nominal goal carries the camera-mount and tag-placement errors into the final pose; a "
-        "goal taught at the true p1 (teach-by-showing, the usual practice) cancels them.",
-    )
-
-
-def _rms_table(rep: dict) -> dict[str, dict[str, dict]]:
-    """Each experiment's RMS deviations by estimator (open loop; PBVS with control in the loop)."""
-    out = {}
-    est = rep.get("open_loop", {}).get("estimators", {})
-    if est and all("rms_translation_m" in v for v in est.values()):
-        out["open loop"] = est
-    pb = rep.get("pbvs", {}).get("control")
-    if pb and "others_rms" in pb:
-        out["PBVS (control in the loop)"] = {"control": pb, **pb["others_rms"]}
-    return out
-
-
-def fused_beats_each(rep: dict, name: str = "fused") -> Finding | None:
-    """Beyond the paper (issue 11): the fused filter deviates less than every single estimator."""
-    table = _rms_table(rep)
-    if not table or not all(name in t and len(t) > 1 for t in table.values()):
-        return None
-    parts, ok = [], True
-    for experiment, t in table.items():
-        for key, unit, scale in (("rms_translation_m", "mm", 1e3), ("rms_rotation_deg", "°", 1)):
-            others = {n: v[key] for n, v in t.items() if n != name}
-            best = min(others, key=others.get)
-            ratio = others[best] / t[name][key]
-            ok = ok and ratio > 1.0
-            parts.append(f"{experiment}: {t[name][key] * scale:.3g} {unit} vs {best} "
-                         f"{others[best] * scale:.3g} {unit} ({ratio:.2f}×)")  # fmt: skip
-    return Finding(
-        finding="fused (Est. 7, beyond the paper) beats every single estimator",
-        paper="— (issue 11's goal: ≥ 2× better than the best single one)",
-        twin="; ".join(parts),
-        threshold="RMS translational and rotational deviation over the run below every other "
-        "estimator's, in open loop and in PBVS with control in the loop",
-        verdict=verdict(ok),
-        why="cables give the motion precisely but carry the geometry error, the tag is noisy "
-        "(and biased near it): the filter weighs both by their modelled uncertainty. In PBVS "
-        "it stands still by the tag, whose steady rotation error repeated updates pull toward.",
-    )
-
-
-MIN_ACCURACY_RATIO = 3.0
-"""PBVS must be at least this many times more accurate than open loop at p1 to agree."""
-
-
-def pbvs_more_accurate(rep: dict, key: str, paper_ratio: float, unit: str) -> Finding | None:
-    """PBVS ends nearer p1 than open loop, by about the paper's ratio (``key``: the error)."""
-    ratios = rep.get("ratios")
-    if not ratios:
-        return None
-    ok = ratios[key] >= MIN_ACCURACY_RATIO
-    why = (
-        "PBVS servoes the camera onto the tag, so at convergence only camera-mount, "
-        "tag-placement and detection errors remain; open loop carries the full "
-        "geometry error."
-    )
-    robot = rep.get("robot", {})
-    if not ok and key == "rotation_deg" and robot:
-        pb_rot = float(np.mean(rep["accuracy"]["PBVS (all)"]["rotation_deg"]))
-        why += (
-            f" Here this robot's camera mount is off by "
-            f"{robot['camera_rotation_deg']:.2f}° and its tag by "
-            f"{robot['tag_rotation_deg']:.2f}°: PBVS ends {pb_rot:.2f}° from p1 "
-            "however well it converges, while its open-loop rotation error is small;"
-            " the paper's robot had a better-calibrated camera and tag relative to p1."
-        )
-    return Finding(
-        finding=f"PBVS more accurate than open loop at p1 ({unit})",
-        paper=f"{paper_ratio:.0f}×",
-        twin=f"{ratios[key]:.1f}×",
-        threshold=f"mean open-loop / mean PBVS {unit} error ≥ {MIN_ACCURACY_RATIO:g}×",
-        verdict=verdict(ok),
-        why=why,
+def _tag_view(rep: dict) -> str:
+    """The tag's size and the open-loop run's camera–tag distances, as words ("" if unknown)."""
+    robot, imd = rep.get("robot", {}), rep.get("open_loop", {}).get("image_distance")
+    size = robot.get("tag_size_m", float("nan"))
+    if imd is None or size != size:
+        return ""
+    return (
+        f"; a {length(size)} tag seen from "
+        f"{imd['near_distance_m']:.2f}–{imd['far_distance_m']:.2f} m"
     )
 
 
