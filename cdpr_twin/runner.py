@@ -173,6 +173,7 @@ def prepare(scenario: Scenario) -> RunSetup:
             realism=s.realism,
             robot_seed=s.truth.seed,
             period=s.model.control_period,
+            tag_window=s.sensors.tag_window,
         )
     except ModelError as exc:
         raise ScenarioError(f"{src}: model.file: {exc}") from None

@@ -157,6 +157,8 @@ class OnboardCamera:
         period: the time between reads [s] (the control period); needed for motion blur
             (``exposure_s > 0``), whose sub-frames are recorded while the physics steps towards
             the reads at k · period.
+        tag_window: search the tag near its last detection first (``TagDetector``'s ``roi``;
+            off by default: it moves corners by ~1e-5 px, which closed loops carry on).
 
     Raises:
         SimulationError: without a camera in the model.
@@ -172,6 +174,7 @@ class OnboardCamera:
         robot_rng: np.random.Generator,
         run_rng: np.random.Generator,
         period: float | None = None,
+        tag_window: bool = False,
     ) -> None:
         if not physics.has_camera:
             raise SimulationError(
@@ -202,7 +205,7 @@ class OnboardCamera:
                 tag_size=tag_size,
                 distortion=self.calibrated_distortion,
                 quad_sigma=NOISY_QUAD_SIGMA if self._formed else 0.0,
-                roi=self._formed,  # ideal frames: the whole-frame search, bit for bit as ever
+                roi=tag_window,
             )
         except BaseException:
             self.close()

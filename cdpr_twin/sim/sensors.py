@@ -57,6 +57,7 @@ class Sensors:
         robot_seed: the truth seed (each robot's calibration errors).
         period: the interval between reads [s] (the control period): frames are exposed over
             the ``exposure_s`` before each read; needed for motion blur.
+        tag_window: search the tag near its last detection first (``[sensors] tag_window``).
     """
 
     def __init__(
@@ -70,6 +71,7 @@ class Sensors:
         realism: Realism | None = None,
         robot_seed: int = 0,
         period: float | None = None,
+        tag_window: bool = False,
     ) -> None:
         realism = Realism() if realism is None else realism
         robot = robot_sensing(physics.model)  # robot data: drum radius, sensors' spec
@@ -98,6 +100,7 @@ class Sensors:
                 robot_rng(robot_seed, "camera"),
                 run_rng(noise_seed, "camera"),
                 period=period,
+                tag_window=tag_window,
             )
 
     def close(self) -> None:

@@ -48,7 +48,11 @@ def model_physics(ts: Timeseries, scenario_file: Path) -> dict:
 
 
 def _max_excess(geom, rho: float, poses: np.ndarray, tau: np.ndarray) -> float:
-    """Largest arc − chord of a sagging span along the run, w²h²c/(24τ²) (Irvine 2.18) [m]."""
+    """Largest arc − chord of a sagging span along the run, w²h²c/(24τ²) (Irvine 2.18) [m].
+
+    Spans reading 1 N or less are left out (as in :func:`max_sag`): the law is for small sag,
+    and a nearly slack cable's τ → 0 would make it metres.
+    """
     import dataclasses
 
     from cdpr_twin.estimators.catenary import sag_excess
@@ -56,7 +60,8 @@ def _max_excess(geom, rho: float, poses: np.ndarray, tau: np.ndarray) -> float:
     if not rho > 0:
         return float("nan")
     heavy = dataclasses.replace(geom, linear_density=rho)
-    return float(max(np.nanmax(sag_excess(heavy, T, t)) for T, t in zip(poses, tau, strict=True)))
+    taut = np.where(tau > 1.0, tau, 0.0)  # as max_sag: the small-sag law needs a taut span
+    return float(max(np.nanmax(sag_excess(heavy, T, t)) for T, t in zip(poses, taut, strict=True)))
 
 
 def max_sag(geom, rho: float, poses: np.ndarray, tau: np.ndarray) -> float:
