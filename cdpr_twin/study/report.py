@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -244,12 +245,15 @@ def write_report(out: Path, rep: dict, figures: list[Path], wall_time_s: float) 
 def rerender(out: Path, rep: dict, wall_time_s: float) -> Path:
     """Re-evaluate the findings of stored report numbers and rewrite ``report.md`` beside them.
 
-    For an explanation changed after the runs: the numbers (``report.json``) stay; the figures
-    already in ``out`` are listed again.
+    For an explanation changed after the runs: the numbers stay, the findings in
+    ``report.json`` are rewritten with their new texts; the figures already in ``out`` are
+    listed again.
     """
     from cdpr_twin.study.findings import evaluate
 
     rep = {**rep, "findings": evaluate({k: v for k, v in rep.items() if k != "findings"})}
+    text = json.dumps(rep, indent=2) + "\n"  # the findings' texts, as report.md now says them
+    (out / "report.json").write_text(text, encoding="utf-8")
     names = ("fig5a", "fig5b", "fig7a", "fig7b", "fig8")
     figures = [out / f"{n}.png" for n in names if (out / f"{n}.png").is_file()]
     return write_report(out, rep, figures, wall_time_s)
