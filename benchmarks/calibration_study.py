@@ -49,7 +49,11 @@ def one(seed: int, poses: int, out: str) -> dict:
         except ScenarioError as exc:  # e.g. p1 outside the calibrated model's workspace
             p1[name], refused = math.nan, str(exc)
             continue
-        p1[name] = summary["segment_ends"][0]["truth_vs_waypoint"]["translation_m"] * 1e3
+        ends = summary["segment_ends"]
+        if not ends:  # stopped before p1 (a fault: e.g. too few taut cables)
+            p1[name], refused = math.nan, f"{name} model: {summary['status']}"
+            continue
+        p1[name] = ends[0]["truth_vs_waypoint"]["translation_m"] * 1e3
     return {
         "seed": seed,
         "calibration_s": wall,
@@ -91,6 +95,7 @@ def main() -> None:
             r["p1_error_mm"]["calibrated"] for r in rows if not r["refused"]
         ),
         "calibration_s": statistics.median(r["calibration_s"] for r in rows),
+        "p1_not_reached_with_calibrated_model": sum(bool(r["refused"]) for r in rows),
     }
     print("medians over robots:", json.dumps({k: round(v, 2) for k, v in med.items()}))
     Path(out).mkdir(parents=True, exist_ok=True)
