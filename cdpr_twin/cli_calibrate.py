@@ -11,11 +11,10 @@ import numpy as np
 
 
 def _calibrate(args: argparse.Namespace) -> int:
-    from cdpr_twin.calibrate.output import write
-    from cdpr_twin.calibrate.session import calibrate, truth_check
     from cdpr_twin.calibrate.solver import CalibrationError
+    from cdpr_twin.outputs import OutputDir, OutputDirError, OutputError, Terminated, sigterm_raises
     from cdpr_twin.scenario import ScenarioError, load_scenario
-    from cdpr_twin.sim import ModelError, build_robot
+    from cdpr_twin.sim import ModelError
 
     started = time.perf_counter()
     try:
@@ -28,11 +27,38 @@ def _calibrate(args: argparse.Namespace) -> int:
                 f"{s.source}: model: no robot description {source} beside the model file; "
                 'give one with [model] nominal = "robot.toml"'
             )
-        session = calibrate(s, args.poses, args.frames)
-        _, nominal, _ = build_robot(s.model.file, nominal_path=s.model.nominal)
+        out = Path(args.out or Path("runs") / f"{s.name}_calibration")
+        owner = OutputDir(out)
+        owner.claim()  # refuses a directory another calibration or run is writing
+    except (ScenarioError, OutputDirError, OutputError) as exc:
+        print(f"cdpr-twin calibrate: error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        with sigterm_raises():
+            return _solve_and_write(args, s, source, out, started)
     except (ScenarioError, ModelError, CalibrationError) as exc:
         print(f"cdpr-twin calibrate: error: {exc}", file=sys.stderr)
         return 2
+    except OutputError as exc:
+        print(f"cdpr-twin calibrate: error: cannot write {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (Terminated): nothing half-written
+        term = isinstance(exc, Terminated)
+        print(f"cdpr-twin calibrate: {'terminated' if term else 'interrupted'}", file=sys.stderr)
+        return 143 if term else 130
+    finally:
+        owner.release()
+
+
+def _solve_and_write(args, s, source: Path, out: Path, started: float) -> int:
+    """Excite, record, solve; write the description and the report (the long part)."""
+    from cdpr_twin.calibrate.output import clear, write
+    from cdpr_twin.calibrate.session import calibrate, truth_check
+    from cdpr_twin.sim import build_robot
+
+    clear(out)  # an earlier calibration's files go first: none survives a failed one
+    session = calibrate(s, args.poses, args.frames)
+    _, nominal, _ = build_robot(s.model.file, nominal_path=s.model.nominal)
     cal, rec = session.calibration, session.recording
     extra = {
         "scenario": str(s.source),
@@ -49,7 +75,6 @@ def _calibrate(args: argparse.Namespace) -> int:
         },
         "check_against_truth": truth_check(session, nominal.geometry, nominal.T_base_tag),
     }
-    out = Path(args.out or Path("runs") / f"{s.name}_calibration")
     robot, report = write(out, source, cal, extra)
     _print(cal, extra, robot, report)
     return 0

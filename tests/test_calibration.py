@@ -142,3 +142,40 @@ def test_calibrates_robot_19_and_its_open_loop_run_improves(tmp_path):
         f"exit points {exit_cal:.2f} mm median (goal 1 mm); open-loop error at p1 "
         f"{p1['calibrated'] * 1e3:.2f} mm (goal 1 mm; nominal model {p1['nominal'] * 1e3:.2f} mm)"
     )
+
+
+def _calibrate_cmd(out, *extra):
+    import sys
+
+    return [sys.executable, "-m", "cdpr_twin", "calibrate", "paper_open_loop", "--out", str(out),
+            "--poses", "12", *extra]  # fmt: skip
+
+
+def test_a_directory_in_use_is_refused_in_one_line(tmp_path):
+    import os
+    import subprocess
+
+    (tmp_path / ".lock").write_text(f"{os.getpid()} {os.uname().nodename}\n")  # a live owner
+    (tmp_path / "calibration.json").write_text("{}")  # someone else's, to be left alone
+    p = subprocess.run(_calibrate_cmd(tmp_path), capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2
+    assert p.stderr.count("\n") == 1 and "in use by another run" in p.stderr
+    assert (tmp_path / "calibration.json").read_text() == "{}"
+
+
+def test_sigterm_leaves_no_calibration_file_under_a_final_name(tmp_path):
+    import signal
+    import subprocess
+    import time
+
+    (tmp_path / "calibration.json").write_text("{}")  # an earlier calibration's, now stale
+    proc = subprocess.Popen(_calibrate_cmd(tmp_path), stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while (tmp_path / "calibration.json").exists() and time.monotonic() < deadline:
+        time.sleep(0.1)  # the stale report goes as the long part starts
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+    assert err.strip().endswith("terminated") and "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # no report, no partial, no lock

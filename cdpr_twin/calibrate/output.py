@@ -10,6 +10,7 @@ apart, under ``"check_against_truth"`` — the twin's truth errors, which the so
 from __future__ import annotations
 
 import json
+import os
 import tomllib
 from pathlib import Path
 
@@ -101,10 +102,40 @@ def report(cal: Calibration, extra: dict) -> dict:
     }
 
 
+NAMES = ("calibrated_robot.toml", "calibration.json")
+"""What a calibration writes into its output directory (the report last: it marks completion)."""
+
+
+def clear(out: Path) -> None:
+    """Remove an earlier calibration's files (and half-written ones) from ``out``."""
+    from cdpr_twin.outputs import partial_of, writing
+
+    for path in [out / n for n in NAMES] + [partial_of(out / n) for n in NAMES]:
+        with writing(path):
+            path.unlink(missing_ok=True)
+
+
 def write(out: Path, source: Path, cal: Calibration, extra: dict) -> tuple[Path, Path]:
-    """Write ``calibrated_robot.toml`` and ``calibration.json`` into ``out``."""
-    out.mkdir(parents=True, exist_ok=True)
-    robot, rep = out / "calibrated_robot.toml", out / "calibration.json"
-    robot.write_text(calibrated_description(source, cal), encoding="utf-8")
-    rep.write_text(json.dumps(report(cal, extra), indent=1) + "\n", encoding="utf-8")
+    """Write ``calibrated_robot.toml`` then ``calibration.json`` into ``out``.
+
+    Each is written as ``*.partial``, ``fsync``'ed and renamed: a final name always holds a
+    whole file, and the report exists only if the description does.
+
+    Raises:
+        cdpr_twin.outputs.OutputError: a file cannot be written (naming it).
+    """
+    from cdpr_twin.outputs import fsync_dir, partial_of, write_json_atomic, writing
+
+    with writing(out):
+        out.mkdir(parents=True, exist_ok=True)
+    robot, rep = (out / n for n in NAMES)
+    tmp = partial_of(robot)
+    with writing(tmp), tmp.open("w", encoding="utf-8") as f:
+        f.write(calibrated_description(source, cal))
+        f.flush()
+        os.fsync(f.fileno())
+    with writing(robot):
+        os.replace(tmp, robot)
+    write_json_atomic(rep, report(cal, extra))
+    fsync_dir(out)
     return robot, rep
