@@ -178,8 +178,9 @@ class TagDetector:
             images are found faster and more reliably with about 0.8.
         roi: search first around the last detection (a window :data:`ROI_MARGIN` wider than
             the tag each side), the whole frame when the tag is not found well inside it.
-            Cheaper, and equal to a whole-frame search to ~1e-5 px, not bit for bit: AprilTag's
-            quad fit sums coordinates that the window shifts (``tests/test_camera.py``).
+            Cheaper, and equal to a whole-frame search to ≤ 3e-4 px (typically 1e-5), not bit
+            for bit: AprilTag's quad fit sums coordinates the window shifts
+            (``tests/test_tag_search.py``).
     """
 
     def __init__(

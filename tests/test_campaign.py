@@ -201,18 +201,13 @@ def _canonical(value):
 def test_the_paper_study_campaign_is_what_reproduce_runs():
     """campaigns/paper_study.toml and ``reproduce``'s plan: the same runs, scenario for scenario
     (each campaign task's resolved scenario equals the plan's file with its run's overrides)."""
-    from cdpr_twin.scenario import load_scenario, scenario_from_data
-    from cdpr_twin.study.plan import plan
+    from cdpr_twin.scenario import scenario_from_data
+    from cdpr_twin.study.plan import plan, spec_scenario
 
     tasks = load_campaign(Path(__file__).parent.parent / "campaigns" / "paper_study.toml").tasks
     specs = plan()
     assert len(tasks) == len(specs) == 45
-    planned = {
-        (s.kind, s.in_loop, s.seed): _canonical(
-            load_scenario(s.scenario).with_overrides(seed=s.seed, in_loop=s.in_loop)
-        )
-        for s in specs
-    }
+    planned = {(s.kind, s.in_loop, s.seed): _canonical(spec_scenario(s)) for s in specs}
     for t in tasks:
         key = (t.block, t.params.get("estimators.in_loop"), t.params["seed"])
         assert _canonical(scenario_from_data(t.data, t.source)) == planned.pop(key), key

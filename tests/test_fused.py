@@ -191,9 +191,9 @@ def test_calibration_jacobian_matches_opencv_pnp_with_a_miscalibrated_camera(vie
 
 def test_a_nearly_singular_taut_set_does_not_blow_up_the_prediction(twin):
     """At p0, cables 2, 3, 4, 6, 7, 8 taut (the PBVS start: 1 and 5 slack) form a Jacobian of
-    condition number ≈ 3·10⁴: A⁺ would map a drum's 0.5 % of a 1.6 mm step into metres of
-    variance (a 92 mm jump of the estimate was seen). The guard propagates the twist alone
-    there; with the well-conditioned set 2-7 the drums' share is kept (it is small and real)."""
+    condition number ≈ 3·10⁴: A⁺ maps a drum's 0.5 % of a 1.6 mm step into a 13 mm std growth
+    in one step (a 92 mm jump of the estimate was seen in a run). The guard propagates the twist
+    alone there (0.3 mm); with the well-conditioned set 2-7 the drums' share is kept."""
     from cdpr_twin.estimators.solvers import _cable_tuples, _kernel, _pose
 
     g = twin.nominal.geometry
@@ -211,5 +211,42 @@ def test_a_nearly_singular_taut_set_does_not_blow_up_the_prediction(twin):
         r = np.zeros(8) if label == "still" else rates
         est.predict(xi, 0.04, r, taut)
         growth[label] = float(np.sqrt(np.linalg.eigvalsh(est.P[:3, :3] - before).max()))
-    assert growth["singular"] < 1e-3  # metres without the guard
+    assert growth["singular"] < 1e-3  # 13 mm without the guard
     assert growth["sound"] > growth["still"] * (1 + 1e-6)  # the drums' share is there
+
+
+def test_the_fast_joseph_update_is_the_product_form_with_zero_considered_gains():
+    """P⁺ = (I − KH) P (I − KH)ᵀ + K R Kᵀ with K's considered rows zero (the dense, O(n³) form),
+    against the O(n²k) update: the same matrix, and the considered block untouched."""
+    from cdpr_twin.estimators import fused_models as fm
+
+    rng = np.random.default_rng(7)
+    for n, k, c in ((26, 8, 18), (88, 6, 18), (40, 3, 40), (12, 1, 5)):
+        A = rng.normal(size=(n, n))
+        P = A @ A.T + 1e-6 * np.eye(n)
+        H, r = rng.normal(size=(k, n)), rng.normal(size=k)
+        B = rng.normal(size=(k, k))
+        R = B @ B.T + 0.1 * np.eye(k)
+        dx, P_fast, nis = fm.joseph_update(P, H, R, r, c)
+        S = H @ P @ H.T + R
+        K = P @ H.T @ np.linalg.inv(S)
+        K[c:] = 0.0
+        IKH = np.eye(n) - K @ H
+        P_dense = IKH @ P @ IKH.T + K @ R @ K.T
+        scale = np.abs(P).max()
+        assert np.abs(P_fast - P_dense).max() < 1e-12 * scale
+        np.testing.assert_allclose(dx, K @ r, rtol=1e-12, atol=1e-14)
+        assert np.array_equal(P_fast[c:, c:], 0.5 * (P[c:, c:] + P[c:, c:].T))
+        assert np.array_equal(P_fast, P_fast.T)
+        assert nis == pytest.approx(r @ np.linalg.solve(S, r), rel=1e-12)
+
+
+def test_a_layout_with_a_corrected_state_after_a_considered_one_is_refused():
+    from cdpr_twin.estimators import fused_models as fm
+
+    good = fm.Layout.build(8, True, True, True, True)
+    assert good.consider[good.corrected :].all() and not good.consider[: good.corrected].any()
+    bad = good.consider.copy()
+    bad[-1] = False
+    with pytest.raises(ValueError, match="last"):
+        fm.Layout(**{**{f: getattr(good, f) for f in vars(good)}, "consider": bad})

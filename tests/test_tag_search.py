@@ -45,10 +45,20 @@ def test_the_window_finds_what_the_whole_frame_finds(frames):
     images, K, dist, size = frames
     windowed = vision.TagDetector(K, size, distortion=dist, quad_sigma=0.8, roi=True)
     whole = vision.TagDetector(K, size, distortion=dist, quad_sigma=0.8, roi=False)
-    windows = 0
+    searches: list[tuple] = []  # the boxes each detect() searched
+    find = windowed._find
+
+    def spy(gray, box):
+        searches.append(box)
+        return find(gray, box)
+
+    windowed._find = spy
+    found_in_window = 0
     for image in images:
-        windows += windowed._box is not None
+        searches.clear()
         a, b = windowed.detect(image), whole.detect(image)
+        h, w = image.shape[:2]
+        found_in_window += len(searches) == 1 and searches[0] != (0, 0, w, h)
         assert (a is None) == (b is None)
         if a is None:
             continue
@@ -57,7 +67,7 @@ def test_the_window_finds_what_the_whole_frame_finds(frames):
         assert np.abs(a.corners - b.corners).max() < 1e-3
         dt, dr = se3.pose_distance(a.T_cam_tag, b.T_cam_tag)
         assert dt < 1e-6 and np.degrees(dr) < 1e-3
-    assert windows >= len(images) - 2  # searched in a window after the first detection
+    assert found_in_window >= len(images) - 3  # found in the window, no whole-frame search
 
 
 def test_a_tag_outside_the_window_is_found_in_the_whole_frame(frames):
@@ -72,3 +82,22 @@ def test_a_tag_outside_the_window_is_found_in_the_whole_frame(frames):
     found = det.detect(near)
     assert found is not None and np.abs(found.corners - truth.corners).max() < 1e-3
     assert det._box[2] > x1  # the window followed the tag
+
+
+def test_the_refinement_on_a_window_is_bit_identical_to_the_whole_frame(frames, monkeypatch):
+    """refine_quad samples a float32 copy of a window around the corners only; its profiles
+    (bilinear, border replication at the image's own edges) must be those of the whole frame."""
+    from cdpr_twin import quad
+
+    images, K, dist, size = frames
+    det = vision.TagDetector(K, size, distortion=dist, quad_sigma=0.8)
+    cases = []
+    for image in images:
+        gray = image[..., 0]
+        c = det.detect(image).corners
+        cases += [(gray, c), (gray, np.add(c, [-c[:, 0].min() + 0.3, 0.0]))]  # one at the edge
+    windowed = [quad.refine_quad(g, c) for g, c in cases]
+    monkeypatch.setattr(quad, "_window", lambda gray, c, hw: (gray.astype(np.float32), (0, 0)))
+    whole = [quad.refine_quad(g, c) for g, c in cases]
+    for a, b in zip(windowed, whole, strict=True):
+        np.testing.assert_array_equal(a, b)

@@ -222,7 +222,7 @@ def _swap_in_loop(data: dict, base: dict) -> None:
     every run of an ``estimators.in_loop`` axis computes the same estimators.
     """
     est, old = data["estimators"], base.get("estimators", {})
-    names = [old.get("in_loop", "control"), *old.get("passive", [])]
+    names = [*([old["in_loop"]] if "in_loop" in old else []), *old.get("passive", [])]
     est["passive"] = [n for n in names if n != est["in_loop"]]
 
 

@@ -86,7 +86,8 @@ class FusedOptions:
         max_condition: the prediction maps the drums' errors into the pose through the taut
             cables' Jacobian A (A⁺ ρ⊙l̇ dt) only while A's condition number is below this
             (as the model-based estimators' ``max_condition``): a nearly singular taut set (at
-            a servo's start) would turn a drum's 0.5 % into metres of variance.
+            a servo's start, condition ≈ 3·10⁴) turns a drum's 0.5 % into a 13 mm std growth
+            in one 40 ms step, against 0.3 mm with the guard.
     """
 
     initial_position_std: float = option(0.001, minimum=0.0, unit="m")
@@ -128,6 +129,8 @@ class FusedOptions:
             raise OptionError("distortion_error_std", f"must be 4 finite numbers ≥ 0, got {d}")
         if len(self.lens) != 4 or not all(map(math.isfinite, self.lens)):
             raise OptionError("lens", f"must be 4 finite (k1, k2, p1, p2), got {self.lens}")
+        if not self.max_condition >= 1.0:
+            raise OptionError("max_condition", f"must be ≥ 1, got {self.max_condition}")
         if not self.gate_probability < 1.0:
             raise OptionError("gate_probability", "must be below 1")
 

@@ -83,6 +83,11 @@ class Layout:
         consider[out["drum"].start if consider_drums else out["drum"].stop :] = True
         return cls(n=start, consider=consider, **out)
 
+    def __post_init__(self) -> None:
+        c = self.corrected
+        if not (self.consider[c:].all() and not self.consider[:c].any()):
+            raise ValueError("the considered states must come last (one block at the end)")
+
     @property
     def corrected(self) -> int:
         """How many leading states an update corrects (the rest are considered)."""
@@ -171,7 +176,7 @@ def _lens(xy: np.ndarray, coeffs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def _corner_jacobian(
     T_cam_tag: np.ndarray, tag_size: float, focal_px: float, lens=(0.0, 0.0, 0.0, 0.0)
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The corners' pixel Jacobian through the lens, and what the calibration's needs.
 
     Returns:
@@ -216,8 +221,8 @@ def tag_covariance(
     Returns:
         (6, 6) covariance [m², m·rad, rad²].
     """
-    J = _corner_jacobian(T_cam_tag, tag_size, focal_px)[0]
-    return pixel_std**2 * np.linalg.inv(J.T @ J)
+    J = _corner_jacobian(T_cam_tag, tag_size, focal_px)[0]  # pinhole: the lens changes this
+    return pixel_std**2 * np.linalg.inv(J.T @ J)  # by ~k1·r² (≲ 1 %), within pixel_std's doubt
 
 
 def tag_calibration_jacobian(
@@ -292,7 +297,9 @@ def joseph_update(
     (their uncertainty and correlations shape every update) but never corrected, and what the
     data seem to say about them is not believed. It is evaluated as
     P⁺ = P − K(HP) − (HP)ᵀKᵀ + K S Kᵀ (S = HPHᵀ + R), the same matrix in O(n²k) rather than
-    O(n³): with the considered states last, only the leading rows and columns change.
+    O(n³) (algebraically equal; the product form's built-in symmetry and positive
+    semi-definiteness are restored by symmetrising, and a test holds it to the product form):
+    with the considered states last, only the leading rows and columns change.
 
     Args:
         P: (n, n) prior covariance.

@@ -255,7 +255,7 @@ class OnboardCamera:
         d reads deliver it rather than nothing.
         """
         reset = self.physics.time < self._last_read
-        if reset:  # a new run: the tag's last place means nothing
+        if self.physics.time <= self._last_read:  # a new run (or a re-read): search everywhere
             self._detector.forget()
         image = self.render()
         tag = self._detector.detect(image)

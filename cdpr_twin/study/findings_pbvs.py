@@ -178,8 +178,8 @@ def _loss(experiment: str, best: str, value: float, unit: str, refs: dict) -> st
     text = f" Where it loses ({experiment}, {best} {value:.3g} {unit}), its absolute references "
     text += f"do worse ({', '.join(seen)})" if seen else "are missing"
     if best == "control":
-        text += ": the control estimate keeps the error it starts with (homing) plus the "
-        text += "motion's, and where the motion is small, as here, no sensor of this robot beats it"
+        text += ": the control estimate keeps the error it starts with (homing) and adds only "
+        text += "what the commanded motion misses, which a small motion keeps small"
     return text + "."
 
 

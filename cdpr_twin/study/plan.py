@@ -143,20 +143,28 @@ def extra_runs(
     return out
 
 
+def spec_scenario(spec: RunSpec):
+    """The scenario a spec runs: its file with the spec's overrides (``Scenario``).
+
+    Raises:
+        cdpr_twin.scenario.ScenarioError: the file or an override is invalid.
+    """
+    from cdpr_twin.scenario import load_scenario
+
+    s = load_scenario(spec.scenario).with_overrides(
+        seed=spec.seed, in_loop=spec.in_loop, duration=spec.duration
+    )
+    s = s.without(*spec.without)
+    return s if spec.goal is None else s.with_controller_options(goal=spec.goal)
+
+
 def _run_one(spec: RunSpec, runs_dir: str) -> dict:
     """Worker (a spawned process): run one spec; never raise, report instead."""
     from cdpr_twin.runner import run
-    from cdpr_twin.scenario import load_scenario
 
     out = Path(runs_dir) / spec.name
     try:
-        s = load_scenario(spec.scenario).with_overrides(
-            seed=spec.seed, in_loop=spec.in_loop, duration=spec.duration
-        )
-        s = s.without(*spec.without)
-        if spec.goal is not None:
-            s = s.with_controller_options(goal=spec.goal)
-        result = run(s, out, record_rrd=spec.record_rrd)
+        result = run(spec_scenario(spec), out, record_rrd=spec.record_rrd)
         return {
             **asdict(spec),
             "ok": True,

@@ -40,53 +40,39 @@ def model_physics(ts: Timeseries, scenario_file: Path) -> dict:
         "wrap_min_m": float(wrap.min()),
         "wrap_max_m": float(wrap.max()),
         "wrap_change_max_m": float((wrap.max(axis=0) - wrap.min(axis=0)).max()),
-        "max_sag_m": max_sag(geom, rho, T[:: max(1, len(T) // 50)], tau[:: max(1, len(T) // 50)]),
-        "max_sag_excess_m": _max_excess(
-            geom, rho, T[:: max(1, len(T) // 200)], tau[:: max(1, len(T) // 200)]
-        ),
+        **sag_numbers(geom, rho, T[:: max(1, len(T) // 50)], tau[:: max(1, len(T) // 50)]),
     }
 
 
-def _max_excess(geom, rho: float, poses: np.ndarray, tau: np.ndarray) -> float:
-    """Largest arc − chord of a sagging span along the run, w²h²c/(24τ²) (Irvine 2.18) [m].
+def sag_numbers(geom, rho: float, poses: np.ndarray, tau: np.ndarray) -> dict[str, float]:
+    """Largest mid-span sag, and arc − chord, of the cables along the run if they had their mass.
 
-    Spans reading 1 N or less are left out (as in :func:`max_sag`): the law is for small sag,
-    and a nearly slack cable's τ → 0 would make it metres.
-    """
-    import dataclasses
+    Irvine's elastic catenary (:mod:`cdpr_twin.catenary`, exact, not the small-sag law) for
+    each span A_i → B_i with a tension above 1 N, its unstretched length the straight one at
+    the measured tension; NaN without a density (rho [kg/m]).
 
-    from cdpr_twin.estimators.catenary import sag_excess
-
-    if not rho > 0:
-        return float("nan")
-    heavy = dataclasses.replace(geom, linear_density=rho)
-    taut = np.where(tau > 1.0, tau, 0.0)  # as max_sag: the small-sag law needs a taut span
-    return float(max(np.nanmax(sag_excess(heavy, T, t)) for T, t in zip(poses, taut, strict=True)))
-
-
-def max_sag(geom, rho: float, poses: np.ndarray, tau: np.ndarray) -> float:
-    """Largest mid-span sag of the cables along the run if they had their mass [m].
-
-    Irvine's catenary (:mod:`cdpr_twin.catenary`) for each span A_i → B_i, its unstretched
-    length the straight one at the measured tension; NaN without a density (rho [kg/m]).
+    Returns:
+        ``{"max_sag_m": …, "max_sag_excess_m": …}`` [m].
     """
     from cdpr_twin.catenary import CatenaryError, solve_catenary
 
     if not rho > 0:
-        return float("nan")
-    worst = 0.0
+        return {"max_sag_m": float("nan"), "max_sag_excess_m": float("nan")}
+    sag = excess = 0.0
     for T, t in zip(poses, tau, strict=True):
         span = geom.a_base - (geom.b_platform @ T[:3, :3].T + T[:3, 3])
         for i, (d, ti) in enumerate(zip(span, t, strict=True)):
-            h = float(np.hypot(d[0], d[1]))
+            h, chord = float(np.hypot(d[0], d[1])), float(np.linalg.norm(d))
             if not (ti > 1.0 and h > 0):
                 continue
-            l0 = float(np.linalg.norm(d)) / (1.0 + ti / geom.es[i])
             try:
-                worst = max(worst, solve_catenary(l0, geom.es[i], rho * 9.81, h, d[2]).sag)
+                cat = solve_catenary(
+                    chord / (1.0 + ti / geom.es[i]), geom.es[i], rho * 9.81, h, d[2]
+                )
             except CatenaryError:
                 continue
-    return worst
+            sag, excess = max(sag, cat.sag), max(excess, cat.length - chord)
+    return {"max_sag_m": sag, "max_sag_excess_m": excess}
 
 
 def robot_errors(scenario_file: str | Path) -> dict:
