@@ -25,6 +25,7 @@ import numpy as np
 
 import cdpr_twin.sim  # noqa: F401  (defaults MUJOCO_GL=egl before mujoco is imported)
 from cdpr_twin import se3
+from cdpr_twin.kinematics import jacobian
 from cdpr_twin.runner import prepare
 from cdpr_twin.scenario import load_scenario
 from cdpr_twin.types import Command
@@ -50,8 +51,6 @@ def measure(realism: str, pose: str, ticks: int, window: bool = False) -> dict[s
         parts: dict[str, list[float]] = {"physics": [], "read": [], "estimators": [], "render": []}
         detected = 0
         for k in range(ticks + 3):
-            from cdpr_twin.kinematics import jacobian
-
             rates = jacobian(setup.nominal.geometry, physics.T_base_platform, "platform") @ XI
             t0 = time.perf_counter()
             physics.advance(period, rates)
