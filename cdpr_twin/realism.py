@@ -45,6 +45,8 @@ class CameraRealism:
             reaches: ink reflects some light.
         exposure_s: exposure time [s]; 0 renders one instant (no motion blur).
         blur_subframes: frames rendered at the true poses during the exposure and averaged.
+        supersample: render ``supersample`` × ``supersample`` samples per pixel and average
+            them (each pixel integrates light over its area); 1 point-samples the render.
         distortion: true Brown–Conrady coefficients (k1, k2, p1, p2) of the lens.
         focal_error_std: per-robot relative std of the calibrated fx, fy.
         center_error_std_px: per-robot std of the calibrated cx, cy [px].
@@ -61,6 +63,7 @@ class CameraRealism:
     black_level: float = option(0.0, minimum=0.0)
     exposure_s: float = option(0.0, minimum=0.0, unit="s")
     blur_subframes: int = option(1, minimum=1)
+    supersample: int = option(1, minimum=1)
     distortion: tuple[float, ...] = option((0.0, 0.0, 0.0, 0.0))
     focal_error_std: float = option(0.0, minimum=0.0)
     center_error_std_px: float = option(0.0, minimum=0.0, unit="px")

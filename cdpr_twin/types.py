@@ -57,6 +57,22 @@ class CameraIntrinsics:
         f = 0.5 * height / np.tan(0.5 * fovy)
         return cls(width, height, f, f, 0.5 * width - 0.5, 0.5 * height - 0.5)
 
+    def scaled(self, factor: int) -> CameraIntrinsics:
+        """The same camera sampled ``factor`` times finer in each direction.
+
+        Pixel (u, v) covers [u − ½, u + ½] (OpenCV's centres at integers); the finer image
+        covers the same area with ``factor`` × ``factor`` pixels, so u' = factor·(u + ½) − ½.
+        """
+        s = int(factor)
+        return CameraIntrinsics(
+            self.width * s,
+            self.height * s,
+            self.fx * s,
+            self.fy * s,
+            s * (self.cx + 0.5) - 0.5,
+            s * (self.cy + 0.5) - 0.5,
+        )
+
     @property
     def K(self) -> np.ndarray:
         """(3, 3) camera matrix."""

@@ -56,20 +56,28 @@ def T_world_cam(data: mujoco.MjData, cid: int) -> np.ndarray:
 
 
 class CameraRenderer:
-    """Offscreen RGB rendering of one camera at its native resolution.
+    """Offscreen RGB rendering of one camera, at its native resolution or supersampled.
 
     Args:
         model: the compiled model (its ``<visual><global offwidth offheight>`` must be at least
-            the camera resolution).
+            the camera resolution; for ``scale`` > 1 it is enlarged here to the supersampled
+            size, which changes nothing but the offscreen buffer).
         name: camera name.
+        scale: render ``scale`` × ``scale`` samples per camera pixel (the same field of view;
+            :attr:`render_intrinsics` are the supersampled image's).
     """
 
-    def __init__(self, model: mujoco.MjModel, name: str = CAMERA_NAME) -> None:
+    def __init__(self, model: mujoco.MjModel, name: str = CAMERA_NAME, scale: int = 1) -> None:
         self.camera_id = camera_id(model, name)
         self._model = model
         self._scratch: mujoco.MjData | None = None
         self.intrinsics = intrinsics(model, name)
+        self.render_intrinsics = self.intrinsics.scaled(scale)
         w, h = self.intrinsics.width, self.intrinsics.height
+        if scale > 1:
+            g = model.vis.global_
+            w, h = self.render_intrinsics.width, self.render_intrinsics.height
+            g.offwidth, g.offheight = max(g.offwidth, w), max(g.offheight, h)
         if model.vis.global_.offwidth < w or model.vis.global_.offheight < h:
             raise ValueError(
                 f"camera {name!r} renders {w}×{h} px but the offscreen buffer is "
@@ -90,7 +98,7 @@ class CameraRenderer:
         self._option.tendongroup[:] = 1
 
     def render(self, data: mujoco.MjData) -> np.ndarray:
-        """Render the camera's view. Returns (H, W, 3) RGB uint8, top row first."""
+        """Render the camera's view: (H, W, 3) RGB uint8 at the render size, top row first."""
         self._renderer.update_scene(data, camera=self.camera_id, scene_option=self._option)
         return self._renderer.render()
 

@@ -224,6 +224,24 @@ def distort(linear: np.ndarray, maps: tuple[np.ndarray, np.ndarray]) -> np.ndarr
     )
 
 
+def integrate_pixels(linear: np.ndarray, factor: int) -> np.ndarray:
+    """What each sensor pixel collects: the mean of its ``factor`` × ``factor`` samples.
+
+    A pixel integrates the light over its area; rendering ``factor`` times finer and averaging
+    blocks is that integral by the midpoint rule (a point-sampled render aliases edges narrower
+    than a pixel, which biases sub-pixel corner fits).
+
+    Args:
+        linear: (H·factor, W·factor) float32 linear image.
+        factor: samples per pixel along each axis.
+
+    Returns:
+        (H, W) float32.
+    """
+    h, w = linear.shape[0] // factor, linear.shape[1] // factor
+    return cv2.resize(linear, (w, h), interpolation=cv2.INTER_AREA)
+
+
 def subframe_offsets(exposure_s: float, n: int) -> np.ndarray:
     """How long before the end of the exposure each sub-frame is taken [s].
 

@@ -10,6 +10,9 @@ monochrome camera forms it (:mod:`cdpr_twin.sim.imaging`):
   the robot passes through during the exposure [t − exposure, t]; an :class:`ExposureRecorder`
   hooked into the physics records those states while it steps;
 - lens distortion: the ideal pinhole render is remapped through the true Brown–Conrady lens;
+- pixel area (``supersample`` > 1): the render is made finer and each pixel averages its
+  samples, as a sensor pixel integrates the light over its area (a point-sampled render
+  aliases edges narrower than a pixel);
 - sensor noise: shot and read noise in electrons, the encoding gamma, 8-bit quantisation;
 - the detector uses the robot's *calibrated* intrinsics and distortion (true values plus a
   per-robot calibration error), not the true ones;
@@ -190,16 +193,20 @@ class OnboardCamera:
 
         self.physics, self.realism, self.run_rng = physics, realism, run_rng
         self.calibrated, self.calibrated_distortion = calibrate(intrinsics, r, robot_rng)
-        self._renderer: cam_mod.CameraRenderer | None = cam_mod.CameraRenderer(physics.model)
+        self._renderer: cam_mod.CameraRenderer | None = cam_mod.CameraRenderer(
+            physics.model, scale=r.supersample
+        )
         self.true_intrinsics = self._renderer.intrinsics
         self._maps = None
-        self._formed = r.noise or r.exposure_s > 0 or any(r.distortion)
+        self._formed = r.noise or r.exposure_s > 0 or any(r.distortion) or r.supersample > 1
         self._fifo: deque[tuple[np.ndarray, TagDetection | None]] = deque()
         self._last_read = -math.inf
         self.exposure: ExposureRecorder | None = None
         try:
             if any(r.distortion):
-                self._maps = imaging.distortion_maps(self.true_intrinsics, r.distortion)
+                self._maps = imaging.distortion_maps(
+                    self._renderer.render_intrinsics, r.distortion
+                )
             self._detector = TagDetector(
                 self.calibrated,
                 tag_size=tag_size,
@@ -237,6 +244,8 @@ class OnboardCamera:
         linear = imaging.average([imaging.linear_luminance(f, r.gamma) for f in renders])
         if self._maps is not None:
             linear = imaging.distort(linear, self._maps)
+        if r.supersample > 1:
+            linear = imaging.integrate_pixels(linear, r.supersample)
         if (r.black_level, r.white_level) != (0.0, 1.0):  # the scene's exposure levels
             linear *= np.float32(r.white_level - r.black_level)  # in place: b + (w − b)·L
             linear += np.float32(r.black_level)
