@@ -204,9 +204,7 @@ class OnboardCamera:
         self.exposure: ExposureRecorder | None = None
         try:
             if any(r.distortion):
-                self._maps = imaging.distortion_maps(
-                    self._renderer.render_intrinsics, r.distortion
-                )
+                self._maps = imaging.distortion_maps(self._renderer.render_intrinsics, r.distortion)
             self._detector = TagDetector(
                 self.calibrated,
                 tag_size=tag_size,
