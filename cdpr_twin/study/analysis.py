@@ -26,7 +26,7 @@ from cdpr_twin.se3 import pose_distance, pose_from_vector
 from cdpr_twin.study.findings import evaluate
 from cdpr_twin.study.plan import PBVS_SCENARIO
 from cdpr_twin.study.robot_numbers import model_physics, payloads, robot_errors
-from cdpr_twin.study.spread import PBVS_CONVERGED, is_main, spread
+from cdpr_twin.study.spread import PBVS_CONVERGED, is_main, repetition_rms, spread
 from cdpr_twin.timeseries import Timeseries
 
 
@@ -299,6 +299,7 @@ def analyse(out: Path, records: list[dict]) -> dict:
             for k in ("translation_m", "rotation_deg")
         }
     rep["spread"] = spread(ok, accuracy_at_p1, None if p1 is None else p1.T_waypoint)
+    rep["repetition_rms"] = repetition_rms(ok)
     rep["robot"] = {**robot_errors(_robot_scenario(records)), "payload_kg": payloads(records)}
     rep["realism"], rep["pbvs_goal"] = _realism(_robot_scenario(records))
     rep["findings"] = evaluate(rep)

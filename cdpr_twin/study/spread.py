@@ -9,6 +9,7 @@ disappears with it (sampling noise can make it slightly negative or push the sha
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -81,3 +82,41 @@ def spread(records: list[dict], accuracy_at_p1, p1) -> dict:
                     v_all, v_wo = base[f"std_{q}"] ** 2, st[f"std_{q}"] ** 2
                     st[f"variance_share_{q}"] = 1.0 - v_wo / v_all if v_all > 0 else None
     return out
+
+
+def repetition_rms(records: list[dict]) -> dict[str, dict[str, dict]]:
+    """Each estimator's RMS deviation over all repetitions of an experiment, not one run's.
+
+    A run's RMS deviation depends on its draws (homing offset, noise); the RMS over the
+    repetitions' runs, √(mean of each run's RMS²), is what a user of the estimator should
+    expect. Experiments: open loop (passive estimators) and PBVS with control in the loop (the
+    others passive beside it), main campaign runs only (decomposition runs switch sources off).
+
+    Returns:
+        ``{experiment: {estimator: {"n", "rms_translation_m", "rms_rotation_deg"}}}``.
+    """
+    runs: dict[str, list[dict]] = {}
+    for r in records:
+        if not (r["ok"] and is_main(r)) or (r["kind"] == "pbvs" and r.get("in_loop") != "control"):
+            continue
+        summary = Path(r["dir"]) / "summary.json"
+        if not summary.is_file():
+            continue
+        key = "open loop" if r["kind"] == "open_loop" else "PBVS (control in the loop)"
+        runs.setdefault(key, []).append(json.loads(summary.read_text("utf-8"))["estimators"])
+    out: dict[str, dict[str, dict]] = {}
+    for key, est in runs.items():
+        for name in est[0]:
+            rows = [e[name] for e in est if name in e and "rms_translation_m" in e[name]]
+            if rows:
+                out.setdefault(key, {})[name] = {
+                    "n": len(rows),
+                    "rms_translation_m": _quadratic_mean(r["rms_translation_m"] for r in rows),
+                    "rms_rotation_deg": _quadratic_mean(r["rms_rotation_deg"] for r in rows),
+                }
+    return out
+
+
+def _quadratic_mean(values) -> float:
+    v = np.fromiter(values, dtype=float)
+    return float(np.sqrt(np.mean(v**2)))
