@@ -3,9 +3,10 @@ calibrated model, and the time per robot (issue 11 item 3).
 
     python benchmarks/calibration_study.py --seeds 1-20 --workers 2 --out docs/calibration
 
-Each robot: `cdpr-twin calibrate paper_open_loop` (truth seed = the robot, acrobot profile),
-then `paper_open_loop` p0 -> p1 (10 s, camera off) with the nominal and with the calibrated
-model ([model] nominal). Writes results.json and prints a table.
+Each robot in turn: `cdpr-twin calibrate paper_open_loop --workers W` (truth seed = the robot,
+acrobot profile; W processes record the tour's segments side by side), then
+`paper_open_loop` p0 -> p1 (10 s, camera off) with the nominal and with the calibrated model
+([model] nominal). Writes results.json and prints a table.
 """
 
 import argparse
@@ -14,12 +15,11 @@ import math
 import statistics
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
 
-def one(seed: int, poses: int, out: str) -> dict:
+def one(seed: int, poses: int, out: str, workers: int) -> dict:
     from cdpr_twin.calibrate.output import write
     from cdpr_twin.calibrate.session import calibrate, truth_check
     from cdpr_twin.runner import run
@@ -29,7 +29,7 @@ def one(seed: int, poses: int, out: str) -> dict:
     s = load_scenario("paper_open_loop")
     s = replace(s, truth=replace(s.truth, seed=seed))
     t0 = time.perf_counter()
-    session = calibrate(s, poses)
+    session = calibrate(s, poses, workers=workers)
     wall = time.perf_counter() - t0
     _, nominal, _ = build_robot(s.model.file)
     check = truth_check(session, nominal.geometry, nominal.T_base_tag)
@@ -69,15 +69,12 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", default="1-20")
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--poses", type=int, default=60)
+    ap.add_argument("--poses", type=int, default=240)
     ap.add_argument("--out", default=None)
     a = ap.parse_args()
     lo, hi = (int(x) for x in a.seeds.split("-"))
     out = a.out or tempfile.mkdtemp()
-    with ProcessPoolExecutor(a.workers) as ex:
-        rows = list(
-            ex.map(one, range(lo, hi + 1), [a.poses] * (hi - lo + 1), [out] * (hi - lo + 1))
-        )
+    rows = [one(seed, a.poses, out, a.workers) for seed in range(lo, hi + 1)]
     print("seed  exit nominal  exit calibrated (shape)  p1 nominal  p1 calibrated  time")
     for r in rows:
         print(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -21,6 +22,8 @@ def _calibrate(args: argparse.Namespace) -> int:
         s = load_scenario(args.scenario).with_overrides(seed=args.seed)
         if args.poses < 12:
             raise ScenarioError(f"--poses must be ≥ 12 (the unknowns need them), got {args.poses}")
+        if args.workers < 1:
+            raise ScenarioError(f"--workers must be ≥ 1, got {args.workers}")
         source = s.model.nominal or s.model.file.parent / "robot.toml"
         if not source.is_file():
             raise ScenarioError(
@@ -57,7 +60,7 @@ def _solve_and_write(args, s, source: Path, out: Path, started: float) -> int:
     from cdpr_twin.sim import build_robot
 
     clear(out)  # an earlier calibration's files go first: none survives a failed one
-    session = calibrate(s, args.poses, args.frames)
+    session = calibrate(s, args.poses, args.frames, args.workers)
     _, nominal, _ = build_robot(s.model.file, nominal_path=s.model.nominal)
     cal, rec = session.calibration, session.recording
     extra = {
@@ -113,7 +116,14 @@ def add_parser(sub) -> None:
     )
     p.add_argument("scenario", help="a scenario file, or a shipped scenario's name")
     p.add_argument("--out", help="output directory (default: runs/<name>_calibration)")
-    p.add_argument("--poses", type=int, default=60, help="excitation poses (default 60)")
+    p.add_argument("--poses", type=int, default=240, help="excitation poses (default 240)")
     p.add_argument("--frames", type=int, default=4, help="readings averaged per pose")
     p.add_argument("--seed", type=int, help="run seed (sensor noise) instead of the file's")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="processes recording the tour's segments side by side (default: all cores; the "
+        "result does not depend on it)",
+    )
     p.set_defaults(func=_calibrate)

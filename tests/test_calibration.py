@@ -100,6 +100,33 @@ def test_recovers_a_synthetic_robot_within_its_stated_uncertainty():
     assert np.median(err) < 3 * np.median(cal.sigma[L.blocks["exit"]]) + 1e-4
 
 
+def test_the_normal_equations_reach_scipys_trust_region_minimum():
+    # truth: scipy's least_squares (dense exact trust-region steps) on the same residuals
+    from scipy.optimize import least_squares
+
+    from cdpr_twin.calibrate.solver import grouped_jacobian
+
+    g, T_tag, obs, _ = _synthetic(camera_error=True, n_poses=20, seed=5)
+    problem = Problem(g, T_tag, obs, Priors(), NOISE)
+    cal = solve(problem)
+    pattern = problem.sparsity().tocsc()
+    n_shared = problem.layout.n_shared
+    ref = least_squares(
+        problem.residuals,
+        np.zeros(problem.layout.n),
+        jac=lambda x: grouped_jacobian(problem.residuals, x, pattern, n_shared)[0].toarray(),
+        method="trf",
+        tr_solver="exact",
+        ftol=1e-12,
+        xtol=1e-12,
+        gtol=1e-12,
+    )
+    cost = 0.5 * float(ref.fun @ ref.fun)
+    got = problem.residuals(cal.x)
+    assert 0.5 * float(got @ got) == pytest.approx(cost, rel=1e-8)
+    assert np.max(np.abs(cal.estimate - ref.x[:n_shared]) / cal.sigma) < 1e-3
+
+
 def test_rank_report_finds_the_platform_frame_left_free():
     # camera and anchors both estimated, no priors: moving the platform frame (anchors, camera
     # mount and every pose together) changes no measurement — six directions the data cannot see

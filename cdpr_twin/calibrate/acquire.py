@@ -5,17 +5,28 @@ moved by the run's homing offset, the encoders zeroed as if it stood at the nomi
 then driven open loop through the excitation poses: straight quintic lines (eq. 26-29) whose
 cable rates are the *nominal* model's length changes from tick to tick, so the true robot goes
 wherever its true geometry and physics put it. At each pose it rests, waits out the camera's
-latency, and averages ``frames`` readings. What the solver gets is :class:`Observations` only;
-the truth (true poses and geometry) is kept apart in :class:`Truth`, for the report's check.
+latency, and averages ``frames`` readings (the camera only where the nominal model puts the
+tag near the image: elsewhere nothing could be detected, and a frame costs more than the
+physics). What the solver gets is :class:`Observations` only; the truth (true poses and
+geometry) is kept apart in :class:`Truth`, for the report's check.
+
+The tour is recorded in :data:`SEGMENTS` consecutive segments, each from the same homing (the
+twin's equivalent of one tour: at rest poses the path between them leaves no trace but the
+tightening, which each move pays back), so that segments can run side by side on several
+cores. Their number is fixed and each has its own sensor-noise seed, derived from the run
+seed: the readings do not depend on how many workers recorded them.
 """
 
 from __future__ import annotations
 
+import copyreg
 import time
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 
+from cdpr_twin.calibrate.excitation import tag_in_view
 from cdpr_twin.calibrate.problem import Observations
 from cdpr_twin.controllers.open_loop import Segment
 from cdpr_twin.kinematics import cable_lengths
@@ -35,6 +46,21 @@ TIGHTEN_TARGET = 3.0
 
 TIGHTEN_SPEED = 0.002
 """Speed at which a slack cable is reeled in [m/s]."""
+
+SEGMENTS = 4
+"""The tour is recorded in this many segments (fewer when there are fewer poses)."""
+
+VIEW_MARGIN = -60.0
+"""The camera is read where the nominal model puts the whole tag at least this far inside the
+image [px]; negative: up to 60 px outside it, a margin for the true robot's different pose."""
+
+
+def _proxy(items: dict) -> MappingProxyType:
+    return MappingProxyType(items)
+
+
+# a scenario crosses to the worker processes: its read-only mappings pickle as copies
+copyreg.pickle(MappingProxyType, lambda m: (_proxy, (dict(m),)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,18 +135,21 @@ def _tighten(physics, sensors, period: float, target: float, timeout: float = 4.
         physics.advance(period, np.where(low, np.maximum(rate, -TIGHTEN_SPEED), 0.0))
 
 
-def _read(physics, sensors, period: float, frames: int, wait: int) -> tuple:
-    """Rest, tighten, then average ``frames`` readings. Returns (encoders, tensions, taut, tag)."""
+def _read(physics, sensors, period: float, frames: int, wait: int, look: bool) -> tuple:
+    """Rest, tighten, then average ``frames`` readings (the camera's only if ``look``).
+
+    Returns (encoders, tensions, taut, tag).
+    """
     rest = np.zeros(physics.n_cables)
     physics.advance(round(SETTLE / period) * period, rest)
     _tighten(physics, sensors, period, TIGHTEN_TARGET)
     physics.advance(round(SETTLE / period) * period, rest)
-    for _ in range(wait):
+    for _ in range(wait if look else 0):
         sensors.read(None)
         physics.advance(period, rest)
     enc, ten, tags, ok = [], [], [], None
     for _ in range(frames):
-        m = sensors.read(None)
+        m = sensors.read(None, render=look)
         enc.append(m.cable_lengths)
         ten.append(m.tensions)
         clipped = m.tensions_clipped if m.tensions_clipped is not None else False
@@ -141,21 +170,53 @@ def _mean_pose(poses: list[np.ndarray]) -> np.ndarray | None:
     return transform(R0 @ so3_exp(w), np.mean([T[:3, 3] for T in poses], axis=0))
 
 
-def record(s: Scenario, poses: list[np.ndarray], frames: int = 4) -> Recording:
+def record(s: Scenario, poses: list[np.ndarray], frames: int = 4, workers: int = 1) -> Recording:
     """Home the scenario's robot, drive it through ``poses`` and record each.
 
     Args:
         s: the scenario (robot, truth seed, realism, run seed, start pose, stepping).
         poses: (4, 4) poses to visit, in order.
         frames: readings averaged at each pose.
+        workers: processes recording the tour's segments side by side (the readings do not
+            depend on it).
 
     Raises:
         ScenarioError: the scenario's robot cannot be built, or has no camera.
     """
-    from cdpr_twin.sim import ModelError, Sensors, build_robot
-
     if not s.sensors.camera:
         raise ScenarioError(f"{s.source}: sensors.camera: calibration needs the camera; set true")
+    started = time.perf_counter()
+    n = min(SEGMENTS, len(poses))
+    bounds = np.linspace(0, len(poses), n + 1).round().astype(int)
+    items = [(i, poses[bounds[i] : bounds[i + 1]]) for i in range(n)]
+    if workers > 1 and n > 1:
+        from cdpr_twin.campaign.executor import run_local  # spawned processes, no scheduler
+
+        parts = sorted(run_local(_segment, items, min(workers, n), s, frames), key=lambda p: p[0])
+    else:
+        parts = [_segment(item, s, frames) for item in items]
+    _, rows, truth, sim_time, static = zip(*parts, strict=True)
+    geometry, T_base_tag, drum_scale, nominal = static[0]  # one robot: the same in each
+    return Recording(
+        obs=_observations([r for part in rows for r in part], poses),
+        nominal=nominal,
+        truth=Truth(np.array([T for part in truth for T in part]), geometry, T_base_tag,
+                    drum_scale),
+        simulated_time=float(sum(sim_time)),
+        wall_time=time.perf_counter() - started,
+    )  # fmt: skip
+
+
+def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tuple:
+    """Record one segment of the tour from homing.
+
+    Returns:
+        (index, rows, true poses, simulated time, (true geometry, true tag, drum scales,
+        nominal robot)).
+    """
+    from cdpr_twin.sim import ModelError, Sensors, build_robot
+
+    index, poses = item
     try:
         physics, nominal, _ = build_robot(
             s.model.file,
@@ -170,35 +231,32 @@ def record(s: Scenario, poses: list[np.ndarray], frames: int = 4) -> Recording:
     if nominal.T_base_tag is None or nominal.intrinsics is None:
         raise ScenarioError(f"{s.source}: model: the robot needs a camera and a tag to calibrate")
     period = s.model.control_period
+    seed = (
+        s.seed if index == 0 else int(np.random.SeedSequence([s.seed, index]).generate_state(1)[0])
+    )
     sensors = Sensors(
-        physics, nominal, s.sensors.tension_noise_std, s.seed, camera=True,
+        physics, nominal, s.sensors.tension_noise_std, seed, camera=True,
         realism=s.realism, robot_seed=s.truth.seed, period=period,
     )  # fmt: skip
-    started = time.perf_counter()
+    g = nominal.geometry
     try:
         _, true_start = homing(s)
         physics.reset(true_start)
         sensors.home(s.start_pose)
         rows, truth, here = [], [], s.start_pose
         for T in poses:
-            _move(physics, sensors, nominal.geometry, here, T, period)
-            rows.append(_read(physics, sensors, period, frames, s.realism.camera.latency_ticks))
+            _move(physics, sensors, g, here, T, period)
+            look = tag_in_view(g, nominal.T_base_tag, nominal.intrinsics, nominal.tag_size, T,
+                               VIEW_MARGIN)  # fmt: skip
+            wait = s.realism.camera.latency_ticks
+            rows.append(_read(physics, sensors, period, frames, wait, look))
             truth.append(np.array(physics.T_base_platform))
             here = T
     finally:
         sensors.close()
-    return Recording(
-        obs=_observations(rows, poses),
-        nominal=nominal,
-        truth=Truth(
-            np.array(truth),
-            physics.geometry,
-            np.array(physics.T_base_tag),
-            physics.drum_radius_true / physics.winch.drum_radius - 1.0,
-        ),
-        simulated_time=float(physics.time),
-        wall_time=time.perf_counter() - started,
-    )
+    scale = physics.drum_radius_true / physics.winch.drum_radius - 1.0
+    static = (physics.geometry, np.array(physics.T_base_tag), scale, nominal)
+    return index, rows, truth, float(physics.time), static
 
 
 def _observations(rows: list[tuple], poses: list[np.ndarray]) -> Observations:

@@ -58,8 +58,11 @@ def priors_of(s: Scenario) -> Priors:
     )
 
 
-def calibrate(s: Scenario, n_poses: int = 60, frames: int = 4) -> Session:
+def calibrate(s: Scenario, n_poses: int = 240, frames: int = 4, workers: int = 1) -> Session:
     """Excite, record and calibrate the robot of scenario ``s``.
+
+    ``workers`` processes record the tour's segments side by side (the result does not depend
+    on their number).
 
     Raises:
         ScenarioError: the scenario's robot cannot be built or has no camera.
@@ -77,7 +80,7 @@ def calibrate(s: Scenario, n_poses: int = 60, frames: int = 4) -> Session:
     except ValueError as exc:
         raise CalibrationError(str(exc)) from None
     chosen = time.perf_counter() - started
-    rec = record(s, poses, frames)
+    rec = record(s, poses, frames, workers)
     if not rec.obs.seen.any():
         raise CalibrationError(
             "the tag was never detected at the excitation poses; check the camera and tag in "

@@ -1,18 +1,21 @@
 """Solve a calibration :class:`~cdpr_twin.calibrate.problem.Problem`; uncertainty and rank.
 
-One call of ``scipy.optimize.least_squares`` (trust region) whose Jacobian uses the problem's
-analytic sparsity pattern: each pose's residuals depend on its own six parameters and the shared
-ones, so central differences perturb all poses' k-th parameter at once (6 groups) and each
-shared parameter alone. The Jacobian is then small enough (a few hundred columns) for exact
-trust-region steps; scipy's sparse route (``jac_sparsity``, LSMR steps) stalled on it (seed 19,
-24 poses: cost 22.13 after 200 evaluations, against 20.90 in 14 with exact steps).
+Levenberg–Marquardt on the normal equations (:mod:`cdpr_twin.calibrate.normal_equations`),
+whose Jacobian uses the problem's analytic sparsity pattern: each pose's residuals depend on
+its own six parameters and the shared ones, so central differences perturb all poses' k-th
+parameter at once (6 groups) and each shared parameter alone. scipy's ``least_squares`` was
+the solver before: its exact trust-region steps take an SVD of the whole Jacobian per
+iteration (112 s at 240 poses), and its sparse route (LSMR steps) stalled on this problem
+(seed 19, 24 poses: cost 22.13 after 200 evaluations, against 20.90 in 14 with exact steps);
+a test holds the two to the same minimum.
 
 Uncertainty: the covariance (JᵀJ)⁻¹ at the solution, scaled by the residuals' variance
 χ²/(n − p). Identifiability: the singular values of the *data's* Jacobian (priors left out),
-columns scaled by each parameter's prior σ (so that millimetres and degrees compare); a
-direction with a singular value below ``rank_tol`` × the largest is one the data cannot see —
-the report names the parameters it moves. The posterior σ of a shared parameter that stays
-above half its prior σ is decided by the prior, not by the data.
+columns scaled by each parameter's prior σ (so that millimetres and degrees compare), from the
+eigenvalues of its normal matrix; a direction with a singular value below ``rank_tol`` × the
+largest is one the data cannot see — the report names the parameters it moves. The posterior σ
+of a shared parameter that stays above half its prior σ is decided by the prior, not by the
+data.
 """
 
 from __future__ import annotations
@@ -21,8 +24,10 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.sparse import csc_matrix
+from threadpoolctl import threadpool_limits
 
+from cdpr_twin.calibrate.normal_equations import levenberg_marquardt, shared_covariance
 from cdpr_twin.calibrate.problem import Model, Problem
 
 POSE_SCALE = 0.01
@@ -96,12 +101,12 @@ class Calibration:
     identifiability: Identifiability
 
 
-def solve(problem: Problem, max_nfev: int = 100, rank_tol: float = 1e-6) -> Calibration:
+def solve(problem: Problem, max_iterations: int = 100, rank_tol: float = 1e-6) -> Calibration:
     """Solve the calibration.
 
     Args:
         problem: the residuals.
-        max_nfev: most residual evaluations for the solver's iterations.
+        max_iterations: most Levenberg–Marquardt steps.
         rank_tol: relative singular value below which the data do not see a direction.
 
     Raises:
@@ -114,27 +119,28 @@ def solve(problem: Problem, max_nfev: int = 100, rank_tol: float = 1e-6) -> Cali
         )
     started = time.perf_counter()
     pattern = problem.sparsity().tocsc()
-    res = least_squares(
-        problem.residuals,
-        np.zeros(L.n),
-        jac=lambda x: grouped_jacobian(problem.residuals, x, pattern, L.n_shared),
-        method="trf",
-        tr_solver="exact",
-        x_scale=np.concatenate([L.sigma, np.full(6 * L.n_poses, POSE_SCALE)]),
-        ftol=1e-10,
-        xtol=1e-10,
-        gtol=1e-10,
-        max_nfev=max_nfev,
-    )
-    wall = time.perf_counter() - started
-    if res.status <= 0:
-        raise CalibrationError(
-            f"the solver did not converge ({res.message}); record more poses, or raise max_nfev"
+    # One BLAS thread: the factorisations are small enough, a loaded machine (calibrations
+    # side by side) makes threaded BLAS spin 10× slower, and the rounding then does not
+    # depend on the core count.
+    with threadpool_limits(limits=1, user_api="blas"):
+        res = levenberg_marquardt(
+            problem.residuals,
+            lambda x: grouped_jacobian(problem.residuals, x, pattern, L.n_shared),
+            np.zeros(L.n),
+            max_iterations=max_iterations,
         )
-    return _result(problem, res, wall, rank_tol)
+        if not res.converged or not np.all(np.isfinite(res.x)):
+            raise CalibrationError(
+                f"the solver did not converge ({res.message}); record more poses, or raise "
+                "max_iterations"
+            )
+        wall = time.perf_counter() - started
+        return _result(problem, res, wall, rank_tol)
 
 
-def grouped_jacobian(fun, x: np.ndarray, pattern, n_shared: int, h: float = 1e-6) -> np.ndarray:
+def grouped_jacobian(
+    fun, x: np.ndarray, pattern: csc_matrix, n_shared: int, h: float = 1e-6
+) -> tuple[csc_matrix, int]:
     """Central differences that use the sparsity: one pair of evaluations per group.
 
     Each shared parameter is its own group; pose parameter j of every pose forms one group
@@ -149,10 +155,10 @@ def grouped_jacobian(fun, x: np.ndarray, pattern, n_shared: int, h: float = 1e-6
         h: step [m or rad].
 
     Returns:
-        (n_rows, n) dense Jacobian (zeros outside the pattern).
+        The (n_rows, n) Jacobian on the pattern (CSC), and the evaluations it took.
     """
     n = len(x)
-    J = np.zeros(pattern.shape)
+    data = np.zeros(pattern.nnz)
     groups = [[j] for j in range(n_shared)]
     groups += [list(range(n_shared + j, n, 6)) for j in range(6)]
     for cols in groups:
@@ -160,26 +166,25 @@ def grouped_jacobian(fun, x: np.ndarray, pattern, n_shared: int, h: float = 1e-6
         dx[cols] = h
         d = (fun(x + dx) - fun(x - dx)) / (2.0 * h)
         for c in cols:
-            rows = pattern.indices[pattern.indptr[c] : pattern.indptr[c + 1]]
-            J[rows, c] = d[rows]
-    return J
+            at = slice(pattern.indptr[c], pattern.indptr[c + 1])
+            data[at] = d[pattern.indices[at]]
+    J = csc_matrix((data, pattern.indices, pattern.indptr), shape=pattern.shape)
+    return J, 2 * len(groups)
 
 
 def _result(problem: Problem, res, wall: float, rank_tol: float) -> Calibration:
     L = problem.layout
-    J = res.jac.toarray() if hasattr(res.jac, "toarray") else np.asarray(res.jac)
     r = res.fun
     n_rows = len(r)
     dof = max(n_rows - L.n, 1)
     s2 = float(r @ r) / dof
-    cov = np.linalg.pinv(J.T @ J) * s2
-    sigma = np.sqrt(np.maximum(np.diag(cov)[: L.n_shared], 0.0))
+    sigma = np.sqrt(np.maximum(np.diag(shared_covariance(res.jac, L.n_shared, s2)), 0.0))
     data = r[: problem.n_data]
     cab = data[: problem.n_cable_rows] * problem.noise.length_std
     rms_tag = np.full(2, np.nan)
     if problem.n_tag_rows:
         rms_tag = _tag_rms(problem, problem.model(res.x))
-    ident = identifiability(problem, J[: problem.n_data], sigma, rank_tol)
+    ident = identifiability(problem, res.jac[: problem.n_data], sigma, rank_tol)
     return Calibration(
         model=problem.model(res.x),
         x=res.x,
@@ -211,21 +216,28 @@ def _tag_rms(problem: Problem, model: Model) -> np.ndarray:
 
 
 def identifiability(
-    problem: Problem, J_data: np.ndarray, sigma: np.ndarray, rank_tol: float = 1e-6
+    problem: Problem, J_data, sigma: np.ndarray, rank_tol: float = 1e-6
 ) -> Identifiability:
     """The rank of the data Jacobian and the directions it does not see.
 
+    The scaled Jacobian's singular values and right singular vectors are the square roots
+    and eigenvectors of its normal matrix (n × n, where the Jacobian has several times more
+    rows); singular values below ≈ 1e-8 of the largest come out as rounding noise, far below
+    any useful ``rank_tol``.
+
     Args:
         problem: the problem (its layout names the parameters).
-        J_data: (n_data, n) Jacobian of the data residuals at the solution.
+        J_data: (n_data, n) Jacobian of the data residuals at the solution (dense or sparse).
         sigma: (n_shared,) posterior σ of the shared parameters.
         rank_tol: relative singular value below which a direction is unseen.
     """
     L = problem.layout
     scale = np.concatenate([L.sigma, np.full(6 * L.n_poses, POSE_SCALE)])
-    _, s, Vt = np.linalg.svd(J_data * scale, full_matrices=True)
-    s_full = np.zeros(L.n)
-    s_full[: len(s)] = s
+    Js = csc_matrix(J_data) @ csc_matrix(np.diag(scale))
+    eigenvalues, V = np.linalg.eigh((Js.T @ Js).toarray())
+    order = np.argsort(-eigenvalues)
+    s_full = np.sqrt(np.maximum(eigenvalues[order], 0.0))
+    Vt = V[:, order].T
     rel = s_full / max(s_full[0], 1e-300)
     rank = int(np.sum(rel > rank_tol))
     names, null = L.names(), []
