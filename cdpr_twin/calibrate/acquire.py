@@ -20,6 +20,7 @@ seed: the readings do not depend on how many workers recorded them.
 from __future__ import annotations
 
 import copyreg
+import multiprocessing
 import time
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -190,9 +191,7 @@ def record(s: Scenario, poses: list[np.ndarray], frames: int = 4, workers: int =
     bounds = np.linspace(0, len(poses), n + 1).round().astype(int)
     items = [(i, poses[bounds[i] : bounds[i + 1]]) for i in range(n)]
     if workers > 1 and n > 1:
-        from cdpr_twin.campaign.executor import run_local  # spawned processes, no scheduler
-
-        parts = sorted(run_local(_segment, items, min(workers, n), s, frames), key=lambda p: p[0])
+        parts = _in_processes(items, min(workers, n), s, frames)
     else:
         parts = [_segment(item, s, frames) for item in items]
     _, rows, truth, sim_time, static = zip(*parts, strict=True)
@@ -205,6 +204,24 @@ def record(s: Scenario, poses: list[np.ndarray], frames: int = 4, workers: int =
         simulated_time=float(sum(sim_time)),
         wall_time=time.perf_counter() - started,
     )  # fmt: skip
+
+
+def _in_processes(items: list, workers: int, s: Scenario, frames: int) -> list[tuple]:
+    """:func:`_segment` of each item in spawned processes, in order.
+
+    A stop (Ctrl-C, SIGTERM) or a failed segment ends the others at once: nothing is left
+    running.
+    """
+    pool = multiprocessing.get_context("spawn").Pool(workers)
+    try:
+        parts = pool.starmap(_segment, [(item, s, frames) for item in items])
+        pool.close()
+        return parts
+    except BaseException:
+        pool.terminate()
+        raise
+    finally:
+        pool.join()
 
 
 def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tuple:
