@@ -32,7 +32,9 @@ def test_se3_helpers_are_bit_identical():
         assert same(ff.se3_exp(twist.tolist()), se3.se3_exp(twist))
         T = se3.se3_exp(twist) @ random_pose(rng, 1e-3)
         assert same(ft.se3_log(T), se3.se3_log(T))
-        assert same(ff.adjoint_inverse(T), se3.adjoint(se3.inverse(T)))
+        assert same(ff.adjoint(T, invert=True), se3.adjoint(se3.inverse(T)))
+        assert same(ff.adjoint(T), se3.adjoint(T))
+        assert same(ff.inverse(T), se3.inverse(T))
 
 
 def test_tag_noise_is_the_covariance_and_calibration_jacobian():
@@ -78,7 +80,8 @@ def test_the_in_place_joseph_update_is_the_reference(n, k, c):
         R = B @ B.T + 0.1 * np.eye(k)
         dx, P_ref, _ = fm.joseph_update(P, H, R, r, c)
         P_fast = P.copy()
-        assert same(ff.joseph_update_in_place(P_fast, H, R, r, c), dx)
+        assert same(ff.joseph_update_in_place(P_fast, H, R, r, c), dx[:c])
+        assert not dx[c:].any()
         assert same(P_fast, P_ref)
 
 
@@ -128,3 +131,23 @@ def test_cable_readings_noise_and_innovations_are_the_reference():
             c.tolist(), c_0.tolist(), moved.tolist(), L.tolist(), L_0.tolist(), rho.tolist(), 3e-5
         )
         assert same(got, y - h)
+
+
+def test_taut_cables_and_the_cable_gate_are_the_reference():
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        tensions = rng.uniform(-1.0, 5.0, size=8)
+        clipped = rng.uniform(size=8) < 0.2
+        ref = tensions > 1.0
+        assert ff.taut(tensions, None, 1.0) == ref.tolist()
+        assert ff.taut(tensions, clipped, 1.0) == (ref & ~clipped).tolist()
+        r, s, var = (
+            rng.normal(size=8) * 1e-3,
+            rng.uniform(size=8) * 1e-7,
+            rng.uniform(size=8) * 1e-7,
+        )
+        taut = (ref & ~clipped).tolist()
+        gated = r**2 > 15.1 * (s + var)  # as the filter computed it
+        outlier, use = ff.gate_cables(r.tolist(), s.tolist(), var.tolist(), 15.1, taut)
+        assert outlier == bool(np.any(gated & taut))
+        assert use == np.flatnonzero(taut & ~gated).tolist()

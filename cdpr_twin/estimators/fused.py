@@ -207,7 +207,7 @@ class FusedEstimator(Estimator):
         """The tag's estimated pose in F_b (4, 4), or ``None`` before the first detection."""
         return None if self._T_tag is None else self._T_tag.copy()
 
-    def predict(self, twist: np.ndarray, dt: float, rates: np.ndarray, taut: np.ndarray) -> None:
+    def predict(self, twist: np.ndarray, dt: float, rates: np.ndarray, taut) -> None:
         """Propagate with the commanded twist ξ (F_p) over dt [s]; process noise added.
 
         The winches pay out (1 + ρ_i) times what they are commanded, so the platform moves by
@@ -218,45 +218,52 @@ class FusedEstimator(Estimator):
             twist: (6,) commanded platform twist [m/s, rad/s].
             dt: time step [s].
             rates: (m,) commanded winch rates [m/s].
-            taut: (m,) bool, the cables the platform hangs on (last reading).
+            taut: (m,) bool (array or list), the cables the platform hangs on (last reading).
         """
         o = self.options
         twist = np.asarray(twist, dtype=float)
         step = [v * dt for v in twist.tolist()]
+        taut = taut.tolist() if isinstance(taut, np.ndarray) else list(taut)
         T_prev, E = self._T, se3_exp(step)
         self._T = T_prev @ E
         F = np.zeros((6, self._n))  # the pose rows of the transition; the others are I's
-        F[:, fm.POSE] = ff.adjoint_inverse(E)
-        A, taut_l = None, taut.tolist()
-        if sum(taut_l) >= 6 and any(step):
-            self._at_T = (self._T, _kernel(self._cables, True, _pose(self._T)))
-            rows = np.asarray(self._at_T[1][1])
-            A = rows[taut]
-            if condition_number(A) > o.max_condition:  # A⁺ would amplify the drum errors into
-                A = None  # motions the statics forbid: propagate the commanded twist alone
-        if A is not None:
-            A_pinv = np.linalg.solve(A.T @ A, A.T)
-            cols = [i + self._drum.start for i, t in enumerate(taut_l) if t]
-            F[:, cols] = A_pinv * [v * dt for v, t in zip(rates.tolist(), taut_l, strict=True) if t]
-            if self._columns.geometry:
-                _, rows_prev = _kernel(self._cables, True, _pose(T_prev))
-                G = self._columns.transition(
-                    rows, self._T[:3, :3], np.asarray(rows_prev), T_prev[:3, :3]
-                )
-                F -= A_pinv @ G[taut]
+        ff.adjoint(E, out=F, invert=True)
+        if sum(taut) >= 6 and any(step):
+            lengths, rows = _kernel(self._cables, True, _pose(self._T))
+            self._at_T = (self._T, lengths, rows := np.asarray(rows))
+            A = rows if all(taut) else rows[taut]
+            if not condition_number(A) > o.max_condition:  # else A⁺ would amplify the drum
+                self._drum_share(F, A, rows, T_prev, taut, rates, dt)  # errors into motions
         X = F @ self.P  # F P Fᵀ, touching only the pose rows and columns
         self.P[fm.POSE, :] = X
         self.P[:, fm.POSE] = X.T
-        self.P[fm.POSE, fm.POSE] = X @ F.T
-        tau = o.winch_time_constant
-        lag = [
-            tau * abs(a - b) for a, b in zip(twist.tolist(), self._last_twist.tolist(), strict=True)
-        ]
-        noise = [q * dt + d * d for q, d in zip(self._process_var, lag, strict=True)]  # q dt + lag²
-        self.P[fm.POSE, fm.POSE] += np.diag(noise)
+        tw, last, tau = twist.tolist(), self._last_twist.tolist(), o.winch_time_constant
+        lag = [tau * abs(a - b) for a, b in zip(tw, last, strict=True)]
+        noise = np.diag([q * dt + d * d for q, d in zip(self._process_var, lag, strict=True)])
+        X = X @ F.T
+        X += noise  # + q dt + lag² on the diagonal
+        self.P[fm.POSE, fm.POSE] = X
         self._last_twist = twist
 
-    def _inject(self, dx: np.ndarray) -> None:
+    def _drum_share(
+        self, F: np.ndarray, A: np.ndarray, rows: np.ndarray, T_prev: np.ndarray, taut: list,
+        rates: np.ndarray, dt: float,
+    ) -> None:  # fmt: skip
+        """Add A⁺ (ρ ⊙ l̇ dt)'s columns to F (the statics allow it: A well conditioned)."""
+        A_pinv = np.linalg.solve(A.T @ A, A.T)
+        scaled = A_pinv * [v * dt for v, t in zip(rates.tolist(), taut, strict=True) if t]
+        if len(A) == self._m:
+            F[:, self._drum] = scaled
+        else:
+            F[:, [i + self._drum.start for i, t in enumerate(taut) if t]] = scaled
+        if self._columns.geometry:
+            _, rows_prev = _kernel(self._cables, True, _pose(T_prev))
+            G = self._columns.transition(
+                rows, self._T[:3, :3], np.asarray(rows_prev), T_prev[:3, :3]
+            )
+            F -= A_pinv @ (G if len(A) == self._m else G[taut])
+
+    def _inject(self, dx: np.ndarray) -> None:  # dx: the corrected states' (c,) at least
         d = dx.tolist()
         self._T = self._T @ se3_exp(d[fm.POSE])
         self._T0 = self._T0 @ se3_exp(d[fm.START])
@@ -265,15 +272,12 @@ class FusedEstimator(Estimator):
         if self._T_tag is not None:
             self._T_tag = self._T_tag @ se3_exp(d[self._tag_slice])
 
-    def _taut(self, m: Measurement) -> np.ndarray:
+    def _taut(self, m: Measurement) -> list[bool]:
         """(m,) bool: cables reading above the taut threshold, not clipped."""
-        taut = np.asarray(m.tensions) > self.options.taut_threshold
-        if m.tensions_clipped is not None:
-            taut &= ~np.asarray(m.tensions_clipped)
-        return taut
+        return ff.taut(m.tensions, m.tensions_clipped, self.options.taut_threshold)
 
-    def update_cables(self, m: Measurement, taut: np.ndarray | None = None) -> set[str]:
-        """Fuse the taut cables' lengths (taut: ``m``'s :meth:`_taut`, if known); returns flags."""
+    def update_cables(self, m: Measurement, taut: list[bool] | None = None) -> set[str]:
+        """Fuse the taut cables' lengths (taut: ``m``'s, if known); returns the flags raised."""
         o = self.options
         lengths, tensions = m.cable_lengths.tolist(), m.tensions.tolist()
         c = ff.corrected_readings(
@@ -284,15 +288,18 @@ class FusedEstimator(Estimator):
             return set()
         flags: set[str] = set()
         taut = self._taut(m) if taut is None else taut
-        if not taut.all():
+        if not all(taut):
             flags.add(SLACK_CABLES)
         at_T = self._at_T  # the prediction's lengths and rows at this very pose, if it made them
-        same = at_T is not None and at_T[0] is self._T
-        lengths_now, rows_now = at_T[1] if same else _kernel(self._cables, True, _pose(self._T))
+        if at_T is not None and at_T[0] is self._T:
+            lengths_now, rows_now = at_T[1:]
+        else:
+            lengths_now, rows_now = _kernel(self._cables, True, _pose(self._T))
+            rows_now = np.asarray(rows_now)
         lengths_0, rows_0 = _kernel(self._cables, True, _pose(self._T0))
         moved = [a - b for a, b in zip(lengths, self._ref[0], strict=True)]
         H = self._columns.measurement(
-            np.asarray(rows_now), self._T[:3, :3], np.asarray(rows_0), self._T0[:3, :3], moved
+            rows_now, self._T[:3, :3], np.asarray(rows_0), self._T0[:3, :3], moved
         )
         r = ff.cable_innovations(
             c, self._ref[1], moved, lengths_now, lengths_0, self._rho.tolist(), o.encoder_quantum
@@ -302,11 +309,9 @@ class FusedEstimator(Estimator):
             o.tension_noise_std, o.taut_threshold,
         )  # fmt: skip
         s = (np.sum((H @ self.P) * H, axis=1)).tolist()  # diag(H P Hᵀ)
-        gated = [ri * ri > self._gate1 * (si + vi) for ri, si, vi in zip(r, s, var, strict=True)]
-        taut_l = taut.tolist()
-        if any(a and b for a, b in zip(gated, taut_l, strict=True)):
+        outlier, use = ff.gate_cables(r, s, var, self._gate1, taut)
+        if outlier:
             flags.add(CABLE_OUTLIER)
-        use = [i for i, (t, gi) in enumerate(zip(taut_l, gated, strict=True)) if t and not gi]
         if not use:
             return flags | {PREDICTED}
         if len(use) < self._m:
@@ -338,7 +343,7 @@ class FusedEstimator(Estimator):
         H[:, fm.POSE] = H_pose
         H[:, self._tag_slice] = self._eye6
         if L.cam.stop > L.cam.start:
-            H[:, L.cam] = -adjoint(np.linalg.inv(z_hat))
+            H[:, L.cam] = -ff.adjoint(np.linalg.inv(z_hat))
         if intr:
             H[:, L.intr] = calibration
         S = H @ self.P @ H.T + R
@@ -347,9 +352,7 @@ class FusedEstimator(Estimator):
         self._inject(ff.joseph_update_in_place(self.P, H, R, r, self._corrected))
         return set()
 
-    def _anchor_tag(
-        self, z: np.ndarray, R: np.ndarray, lag: list[float], calibration: np.ndarray | None
-    ) -> None:
+    def _anchor_tag(self, z: np.ndarray, R: np.ndarray, lag: list, calibration) -> None:
         """Put the tag in F_b from detection z: ᵇT_o = T_lag ᵖT_c z, with its covariance R."""
         M = self.geometry.T_platform_cam @ z
         self._T_tag = self._T @ se3_exp([-v for v in lag]) @ M

@@ -30,6 +30,43 @@ def finite(values: np.ndarray) -> bool:
     return all(map(math.isfinite, values.tolist()))
 
 
+def taut(tensions: np.ndarray, clipped: np.ndarray | None, threshold: float) -> list[bool]:
+    """The taut cables, ``(tensions > threshold) & ~clipped``, as m bools.
+
+    Args:
+        tensions: (m,) measured tensions [N].
+        clipped: (m,) which readings sit at a limit of the sensor (bools), or ``None``.
+        threshold: the taut threshold [N].
+    """
+    if clipped is None:
+        return [t > threshold for t in tensions.tolist()]
+    if clipped.dtype != bool:  # ~ is then a bitwise not, as it was
+        return ((np.asarray(tensions) > threshold) & ~np.asarray(clipped)).tolist()
+    return [
+        t > threshold and not c for t, c in zip(tensions.tolist(), clipped.tolist(), strict=True)
+    ]
+
+
+def gate_cables(
+    r: list[float], s: list[float], var: list[float], gate: float, taut: list[bool]
+) -> tuple[bool, list[int]]:
+    """Mahalanobis gate of each cable's innovation: r² > gate · (HPHᵀ + var).
+
+    Args:
+        r: m innovations [m].
+        s: the m diagonal entries of H P Hᵀ [m²].
+        var: m reading variances [m²].
+        gate: the χ²(1) gate.
+        taut: m bools, the taut cables.
+
+    Returns:
+        Whether a taut cable failed the gate, and the indices of the taut cables that passed.
+    """
+    gated = [ri * ri > gate * (si + vi) for ri, si, vi in zip(r, s, var, strict=True)]
+    outlier = any(g and t for g, t in zip(gated, taut, strict=True))
+    return outlier, [i for i, (t, g) in enumerate(zip(taut, gated, strict=True)) if t and not g]
+
+
 def corrected_readings(
     lengths: list[float],
     tensions: list[float],
@@ -129,7 +166,7 @@ def joseph_update_in_place(
         corrected: the number c of leading states corrected; the others are considered.
 
     Returns:
-        (n,) correction dx (zero on the considered states).
+        (c,) the corrected states' part of dx (the considered states' is zero).
     """
     c = corrected
     PHt = P @ H.T
@@ -144,9 +181,7 @@ def joseph_update_in_place(
     top[:, :c] = 0.5 * (lead + lead.T)
     P[:c] = top
     P[c:, :c] = top[:, c:].T
-    dx = np.zeros(len(P))
-    dx[:c] = K @ innovation
-    return dx
+    return K @ innovation
 
 
 class CableColumns:
@@ -219,15 +254,37 @@ class CableColumns:
         return H
 
 
-def adjoint_inverse(T: np.ndarray) -> np.ndarray:
-    """``se3.adjoint(se3.inverse(T))`` of a (4, 4) rigid transform, bit for bit: (6, 6)."""
+_LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0])
+
+
+def inverse(T: np.ndarray) -> np.ndarray:
+    """``se3.inverse`` of a (4, 4) rigid transform, bit for bit: (4, 4)."""
     R = T[:3, :3]
-    R_inv = R.T.copy()
-    x, y, z = (-R.T @ T[:3, 3]).tolist()
-    Ad = np.zeros((6, 6))
-    Ad[:3, :3] = R_inv
-    Ad[:3, 3:] = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]]) @ R_inv
-    Ad[3:, 3:] = R_inv
+    out = np.empty((4, 4))
+    out[:3, :3] = R.T
+    out[:3, 3] = -R.T @ T[:3, 3]
+    out[3] = _LAST_ROW
+    return out
+
+
+def adjoint(T: np.ndarray, out: np.ndarray | None = None, invert: bool = False) -> np.ndarray:
+    """``se3.adjoint(T)``, or ``se3.adjoint(se3.inverse(T))``, bit for bit: (6, 6).
+
+    Args:
+        T: (4, 4) rigid transform.
+        out: an array whose first 6 columns of its 6 rows are zeros, to write it into.
+        invert: the adjoint of T's inverse.
+    """
+    if invert:
+        R = T[:3, :3].T.copy()
+        x, y, z = (-T[:3, :3].T @ T[:3, 3]).tolist()
+    else:
+        R = T[:3, :3]
+        x, y, z = T[:3, 3].tolist()
+    Ad = np.zeros((6, 6)) if out is None else out
+    Ad[:3, :3] = R
+    Ad[:3, 3:6] = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]]) @ R
+    Ad[3:6, 3:6] = R
     return Ad
 
 

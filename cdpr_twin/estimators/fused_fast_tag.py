@@ -12,8 +12,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from cdpr_twin.estimators.fused_fast import adjoint_inverse, se3_exp
-from cdpr_twin.se3 import _SERIES, _SMALL, _quat_of_one, adjoint, inverse
+from cdpr_twin.estimators.fused_fast import adjoint, inverse, se3_exp
+from cdpr_twin.se3 import _SERIES, _SMALL, _quat_of_one
 
 _NO_LENS = (0.0, 0.0, 0.0, 0.0)
 
@@ -48,7 +48,7 @@ def _pinhole(focal_px: float) -> np.ndarray:
 
 def _lens_pixels(
     points: list[tuple[float, float]], coeffs, focal_px: float
-) -> tuple[np.ndarray, list[list[float]]]:
+) -> tuple[np.ndarray, list[float]]:
     """``fused_models._lens`` on floats, corner by corner, scaled as ``_corner_jacobian`` uses it.
 
     Args:
@@ -57,28 +57,25 @@ def _lens_pixels(
         focal_px: focal length [px].
 
     Returns:
-        (4, 2, 2) ``focal_px · ∂(distorted)/∂(point)`` and the (8, 8) rows of Π, the pixels'
-        Jacobian with respect to (fx, fy, cx, cy, k1, k2, p1, p2) (tag_calibration_jacobian's).
+        (4, 2, 2) ``focal_px · ∂(distorted)/∂(point)`` and the 64 entries (row-major) of Π
+        (8, 8), the pixels' Jacobian with respect to (fx, fy, cx, cy, k1, k2, p1, p2).
     """
     k1, k2, p1, p2 = coeffs
-    fD, Pi = [], []
+    fD: list[float] = []
+    Pi: list[float] = []
     for x, y in points:
         r2 = x * x + y * y
         a, da = 1.0 + k1 * r2 + k2 * r2 * r2, 2.0 * k1 + 4.0 * k2 * r2
         xd = x * a + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
         yd = y * a + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
         d01 = focal_px * (x * y * da + 2 * p1 * x + 2 * p2 * y)
-        fD.append(
-            [
-                [focal_px * (a + x * x * da + 2 * p1 * y + 6 * p2 * x), d01],
-                [d01, focal_px * (a + y * y * da + 6 * p1 * y + 2 * p2 * x)],
-            ]
-        )
+        d00 = focal_px * (a + x * x * da + 2 * p1 * y + 6 * p2 * x)
+        fD += (d00, d01, d01, focal_px * (a + y * y * da + 6 * p1 * y + 2 * p2 * x))
         dx = (x * r2, x * r2 * r2, 2 * x * y, r2 + 2 * x * x)
         dy = (y * r2, y * r2 * r2, r2 + 2 * y * y, 2 * x * y)
-        Pi.append([xd, 0.0, 1.0, 0.0, *(focal_px * v for v in dx)])
-        Pi.append([0.0, yd, 0.0, 1.0, *(focal_px * v for v in dy)])
-    return np.array(fD), Pi
+        Pi += (xd, 0.0, 1.0, 0.0, *(focal_px * v for v in dx))
+        Pi += (0.0, yd, 0.0, 1.0, *(focal_px * v for v in dy))
+    return np.array(fD).reshape(4, 2, 2), Pi
 
 
 def tag_noise(
@@ -107,12 +104,13 @@ def tag_noise(
     """
     p, cross = _tag_corners(tag_size)
     R, t = T_cam_tag[:3, :3], T_cam_tag[:3, 3]
-    d_norm, points = [], []
+    norm: list[float] = []
+    points = []
     for X, Y, Z in (p @ R.T + t).tolist():  # the corners in the camera frame
         inv_z = 1.0 / Z
-        d_norm.append([[inv_z, 0.0, -inv_z * X / Z], [0.0, inv_z, -inv_z * Y / Z]])
+        norm += (inv_z, 0.0, -inv_z * X / Z, 0.0, inv_z, -inv_z * Y / Z)
         points.append((X * inv_z, Y * inv_z))
-    d_norm = np.array(d_norm)  # d(x, y)/dX, (4, 2, 3)
+    d_norm = np.array(norm).reshape(4, 2, 3)  # d(x, y)/dX
     d_point = np.zeros((4, 3, 6))  # dX/d[v, ω] = R [I, −[p]×]
     d_point[:, :, :3] = R
     d_point[:, :, 3:] = R @ cross
@@ -126,7 +124,7 @@ def tag_noise(
         return cov, None
     fD, Pi = _lens_pixels(points, lens, focal_px)
     J = (fD @ d_norm @ d_point).reshape(8, 6)
-    return cov, -np.linalg.solve(J.T @ J, J.T @ np.array(Pi))
+    return cov, -np.linalg.solve(J.T @ J, J.T @ np.array(Pi).reshape(8, 8))
 
 
 def se3_log(T: np.ndarray) -> np.ndarray:
@@ -178,4 +176,4 @@ def tag_residual(
     M = inverse(T_lag) @ T_base_tag  # ᵖT_o at the frame's time
     z_hat = T_cam_platform @ M
     r = se3_log(inverse(z_hat) @ T_cam_tag)
-    return r, -adjoint_inverse(M) @ adjoint(se3_exp(lag_twist)), z_hat
+    return r, -adjoint(M, invert=True) @ adjoint(se3_exp(lag_twist)), z_hat
