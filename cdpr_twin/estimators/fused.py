@@ -334,7 +334,7 @@ class FusedEstimator(Estimator):
         last = self._last_twist.tolist()
         lag = [v * o.tag_latency for v in last]
         tau = o.winch_time_constant
-        R = R + np.diag([(tau * abs(v)) * (tau * abs(v)) + 1e-12 for v in last])
+        R += np.diag([(tau * abs(v)) * (tau * abs(v)) + 1e-12 for v in last])  # R: a new array
         if self._T_tag is None:
             self._anchor_tag(z, R, lag, calibration)
             return set()
