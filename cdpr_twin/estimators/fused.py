@@ -26,13 +26,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cdpr_twin.estimators import fused_fast as ff
+from cdpr_twin.estimators import fused_fast_tag as ft
 from cdpr_twin.estimators import fused_models as fm
 from cdpr_twin.estimators.base import NO_INPUTS, NON_FINITE_INPUT, TAG_LOST, Estimator
+from cdpr_twin.estimators.fused_fast import se3_exp
 from cdpr_twin.estimators.selection import condition_number
 from cdpr_twin.estimators.solvers import _cable_tuples, _kernel, _pose
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.plugins import OptionError, option, register
-from cdpr_twin.se3 import adjoint, inverse, se3_exp
+from cdpr_twin.se3 import adjoint, inverse
 from cdpr_twin.types import Measurement, PoseEstimate
 
 SLACK_CABLES = "slack_cables"
@@ -165,6 +168,12 @@ class FusedEstimator(Estimator):
         self._cables = _cable_tuples(geometry.a_base, geometry.b_platform, geometry.pulley_radius)
         self._gate1 = fm.chi2_gate(1, self.options.gate_probability)
         self._gate6 = fm.chi2_gate(6, self.options.gate_probability)
+        self._corrected = self.layout.corrected
+        self._es = np.broadcast_to(geometry.es, m).tolist()
+        self._process_var = [o.process_position_std**2] * 3 + [o.process_rotation_std**2] * 3
+        self._T_cam_platform = inverse(geometry.T_platform_cam)
+        self._eye6 = np.eye(6)
+        self._columns = ff.CableColumns(self.layout, m)
         self.P = np.zeros((self._n, self._n))
 
     def reset(self, T_base_platform0: np.ndarray, time: float = 0.0) -> None:
@@ -198,7 +207,7 @@ class FusedEstimator(Estimator):
         """The tag's estimated pose in F_b (4, 4), or ``None`` before the first detection."""
         return None if self._T_tag is None else self._T_tag.copy()
 
-    def predict(self, twist: np.ndarray, dt: float, rates: np.ndarray, taut: np.ndarray) -> None:
+    def predict(self, twist: np.ndarray, dt: float, rates: np.ndarray, taut) -> None:
         """Propagate with the commanded twist ξ (F_p) over dt [s]; process noise added.
 
         The winches pay out (1 + ρ_i) times what they are commanded, so the platform moves by
@@ -209,135 +218,151 @@ class FusedEstimator(Estimator):
             twist: (6,) commanded platform twist [m/s, rad/s].
             dt: time step [s].
             rates: (m,) commanded winch rates [m/s].
-            taut: (m,) bool, the cables the platform hangs on (last reading).
+            taut: (m,) bool (array or list), the cables the platform hangs on (last reading).
         """
         o = self.options
         twist = np.asarray(twist, dtype=float)
-        step = twist * dt
+        step = [v * dt for v in twist.tolist()]
+        taut = taut.tolist() if isinstance(taut, np.ndarray) else list(taut)
         T_prev, E = self._T, se3_exp(step)
         self._T = T_prev @ E
         F = np.zeros((6, self._n))  # the pose rows of the transition; the others are I's
-        F[:, fm.POSE] = adjoint(inverse(E))
-        A = None
-        if taut.sum() >= 6 and np.any(step):
-            self._at_T = (self._T, _kernel(self._cables, True, _pose(self._T)))
-            rows = np.asarray(self._at_T[1][1])
-            A = rows[taut]
-            if condition_number(A) > o.max_condition:  # A⁺ would amplify the drum errors into
-                A = None  # motions the statics forbid: propagate the commanded twist alone
-        if A is not None:
-            A_pinv = np.linalg.solve(A.T @ A, A.T)
-            F[:, np.flatnonzero(taut) + self._drum.start] = A_pinv * (rates[taut] * dt)
-            if self.layout.exit.stop > self.layout.exit.start:
-                _, rows_prev = _kernel(self._cables, True, _pose(T_prev))
-                G = fm.geometry_rows(self.layout, rows, self._T[:3, :3])
-                G -= fm.geometry_rows(self.layout, np.asarray(rows_prev), T_prev[:3, :3])
-                F -= A_pinv @ G[taut]
+        ff.adjoint(E, out=F, invert=True)
+        if sum(taut) >= 6 and any(step):
+            lengths, rows = _kernel(self._cables, True, _pose(self._T))
+            self._at_T = (self._T, lengths, rows := np.asarray(rows))
+            A = rows if all(taut) else rows[taut]
+            if not condition_number(A) > o.max_condition:  # else A⁺ would amplify the drum
+                self._drum_share(F, A, rows, T_prev, taut, rates, dt)  # errors into motions
         X = F @ self.P  # F P Fᵀ, touching only the pose rows and columns
         self.P[fm.POSE, :] = X
         self.P[:, fm.POSE] = X.T
-        self.P[fm.POSE, fm.POSE] = X @ F.T
-        lag = (o.winch_time_constant * np.abs(twist - self._last_twist)) ** 2
-        q = np.array([o.process_position_std**2] * 3 + [o.process_rotation_std**2] * 3) * dt
-        self.P[fm.POSE, fm.POSE] += np.diag(q + lag)
+        tw, last, tau = twist.tolist(), self._last_twist.tolist(), o.winch_time_constant
+        lag = [tau * abs(a - b) for a, b in zip(tw, last, strict=True)]
+        noise = np.diag([q * dt + d * d for q, d in zip(self._process_var, lag, strict=True)])
+        X = X @ F.T
+        X += noise  # + q dt + lag² on the diagonal
+        self.P[fm.POSE, fm.POSE] = X
         self._last_twist = twist
 
-    def _inject(self, dx: np.ndarray) -> None:
-        self._T = self._T @ se3_exp(dx[fm.POSE])
-        self._T0 = self._T0 @ se3_exp(dx[fm.START])
-        self._rho = self._rho + dx[self._drum]
+    def _drum_share(
+        self, F: np.ndarray, A: np.ndarray, rows: np.ndarray, T_prev: np.ndarray, taut: list,
+        rates: np.ndarray, dt: float,
+    ) -> None:  # fmt: skip
+        """Add A⁺ (ρ ⊙ l̇ dt)'s columns to F (the statics allow it: A well conditioned)."""
+        A_pinv = np.linalg.solve(A.T @ A, A.T)
+        scaled = A_pinv * [v * dt for v, t in zip(rates.tolist(), taut, strict=True) if t]
+        if len(A) == self._m:
+            F[:, self._drum] = scaled
+        else:
+            F[:, [i + self._drum.start for i, t in enumerate(taut) if t]] = scaled
+        if self._columns.geometry:
+            _, rows_prev = _kernel(self._cables, True, _pose(T_prev))
+            G = self._columns.transition(
+                rows, self._T[:3, :3], np.asarray(rows_prev), T_prev[:3, :3]
+            )
+            F -= A_pinv @ (G if len(A) == self._m else G[taut])
+
+    def _inject(self, dx: np.ndarray) -> None:  # dx: the corrected states' (c,) at least
+        d = dx.tolist()
+        self._T = self._T @ se3_exp(d[fm.POSE])
+        self._T0 = self._T0 @ se3_exp(d[fm.START])
+        if self._drum.start < self._corrected:  # considered drums: dx is 0 there
+            self._rho = self._rho + dx[self._drum]
         if self._T_tag is not None:
-            self._T_tag = self._T_tag @ se3_exp(dx[self._tag_slice])
+            self._T_tag = self._T_tag @ se3_exp(d[self._tag_slice])
 
-    def _taut(self, m: Measurement) -> np.ndarray:
+    def _taut(self, m: Measurement) -> list[bool]:
         """(m,) bool: cables reading above the taut threshold, not clipped."""
-        taut = np.asarray(m.tensions) > self.options.taut_threshold
-        if m.tensions_clipped is not None:
-            taut &= ~np.asarray(m.tensions_clipped)
-        return taut
+        return ff.taut(m.tensions, m.tensions_clipped, self.options.taut_threshold)
 
-    def update_cables(self, m: Measurement) -> set[str]:
-        """Fuse the taut cables' lengths; returns the flags raised."""
-        o, g = self.options, self.geometry
-        c = fm.corrected_readings(m.cable_lengths, m.tensions, m.cable_rates, g.es, o.damping_time)
+    def update_cables(self, m: Measurement, taut: list[bool] | None = None) -> set[str]:
+        """Fuse the taut cables' lengths (taut: ``m``'s, if known); returns the flags raised."""
+        o = self.options
+        lengths, tensions = m.cable_lengths.tolist(), m.tensions.tolist()
+        c = ff.corrected_readings(
+            lengths, tensions, m.cable_rates.tolist(), self._es, o.damping_time
+        )
         if self._ref is None:
-            self._ref = (np.asarray(m.cable_lengths).copy(), c)
+            self._ref = (lengths, c)
             return set()
         flags: set[str] = set()
-        taut = self._taut(m)
-        if not taut.all():
+        taut = self._taut(m) if taut is None else taut
+        if not all(taut):
             flags.add(SLACK_CABLES)
         at_T = self._at_T  # the prediction's lengths and rows at this very pose, if it made them
-        same = at_T is not None and at_T[0] is self._T
-        lengths_now, rows_now = at_T[1] if same else _kernel(self._cables, True, _pose(self._T))
+        if at_T is not None and at_T[0] is self._T:
+            lengths_now, rows_now = at_T[1:]
+        else:
+            lengths_now, rows_now = _kernel(self._cables, True, _pose(self._T))
+            rows_now = np.asarray(rows_now)
         lengths_0, rows_0 = _kernel(self._cables, True, _pose(self._T0))
-        moved = np.asarray(m.cable_lengths) - self._ref[0]
-        y = c - self._ref[1] + np.where(moved != 0.0, 0.5 * o.encoder_quantum, 0.0)
-        h = np.subtract(lengths_now, lengths_0) - self._rho * moved
-        H = np.zeros((self._m, self._n))
-        H[:, fm.POSE] = rows_now
-        H[:, fm.START] = -np.asarray(rows_0)
-        H[:, self._drum] = -np.diag(moved)
-        H += fm.geometry_rows(self.layout, np.asarray(rows_now), self._T[:3, :3])
-        H -= fm.geometry_rows(self.layout, np.asarray(rows_0), self._T0[:3, :3])
-        var = fm.cable_noise_var(
-            np.asarray(m.cable_lengths), np.maximum(m.tensions, 1e-9), g.es, o.encoder_quantum,
-            o.length_noise_std, o.tension_noise_std, o.taut_threshold,
+        moved = [a - b for a, b in zip(lengths, self._ref[0], strict=True)]
+        H = self._columns.measurement(
+            rows_now, self._T[:3, :3], np.asarray(rows_0), self._T0[:3, :3], moved
+        )
+        r = ff.cable_innovations(
+            c, self._ref[1], moved, lengths_now, lengths_0, self._rho.tolist(), o.encoder_quantum
+        )
+        var = ff.cable_noise_var(
+            lengths, tensions, self._es, o.encoder_quantum, o.length_noise_std,
+            o.tension_noise_std, o.taut_threshold,
         )  # fmt: skip
-        r = y - h
-        s = np.sum((H @ self.P) * H, axis=1) + var  # diag(H P Hᵀ) + var
-        gated = r**2 > self._gate1 * s
-        if np.any(gated & taut):
+        s = (np.sum((H @ self.P) * H, axis=1)).tolist()  # diag(H P Hᵀ)
+        outlier, use = ff.gate_cables(r, s, var, self._gate1, taut)
+        if outlier:
             flags.add(CABLE_OUTLIER)
-        use = taut & ~gated
-        if use.sum() == 0:
+        if not use:
             return flags | {PREDICTED}
-        c = self.layout.corrected
-        dx, self.P, _ = fm.joseph_update(self.P, H[use], np.diag(var[use]), r[use], c)
-        self._inject(dx)
+        if len(use) < self._m:
+            H, var, r = H[use], [var[i] for i in use], [r[i] for i in use]
+        self._inject(
+            ff.joseph_update_in_place(self.P, H, np.diag(var), np.array(r), self._corrected)
+        )
         return flags
 
     def update_tag(self, m: Measurement) -> set[str]:
         """Fuse a tag detection (the first one anchors the tag); returns the flags raised."""
-        o, g = self.options, self.geometry
+        o, L = self.options, self.layout
         if m.tag is None:
             return {TAG_LOST} if m.camera_on else set()
         z = np.asarray(m.tag.T_cam_tag)
-        if not np.all(np.isfinite(z)):
+        if not ff.finite(z.ravel()):
             return {NON_FINITE_INPUT}
-        R = fm.tag_covariance(z, o.tag_size, o.focal_px, o.pixel_std)
-        lag = self._last_twist * o.tag_latency
-        R = R + np.diag((o.winch_time_constant * np.abs(self._last_twist)) ** 2 + 1e-12)
+        intr = L.intr.stop > L.intr.start
+        R, calibration = ft.tag_noise(z, o.tag_size, o.focal_px, o.pixel_std, o.lens, intr)
+        last = self._last_twist.tolist()
+        lag = [v * o.tag_latency for v in last]
+        tau = o.winch_time_constant
+        R += np.diag([(tau * abs(v)) * (tau * abs(v)) + 1e-12 for v in last])  # R: a new array
         if self._T_tag is None:
-            self._anchor_tag(z, R, lag)
+            self._anchor_tag(z, R, lag, calibration)
             return set()
-        r, H_pose, z_hat = fm.tag_residual(self._T, self._T_tag, g.T_platform_cam, z, lag)
+        r, H_pose, z_hat = ft.tag_residual(self._T, self._T_tag, self._T_cam_platform, z, lag)
         H = np.zeros((6, self._n))
         H[:, fm.POSE] = H_pose
-        H[:, self._tag_slice] = np.eye(6)
-        L = self.layout
+        H[:, self._tag_slice] = self._eye6
         if L.cam.stop > L.cam.start:
-            H[:, L.cam] = -adjoint(np.linalg.inv(z_hat))
-        if L.intr.stop > L.intr.start:
-            H[:, L.intr] = fm.tag_calibration_jacobian(z, o.tag_size, o.focal_px, o.lens)
+            H[:, L.cam] = -ff.adjoint(np.linalg.inv(z_hat))
+        if intr:
+            H[:, L.intr] = calibration
         S = H @ self.P @ H.T + R
         if r @ np.linalg.solve(S, r) > self._gate6:
             return {TAG_OUTLIER}
-        dx, self.P, _ = fm.joseph_update(self.P, H, R, r, self.layout.corrected)
-        self._inject(dx)
+        self._inject(ff.joseph_update_in_place(self.P, H, R, r, self._corrected))
         return set()
 
-    def _anchor_tag(self, z: np.ndarray, R: np.ndarray, lag: np.ndarray) -> None:
-        """Put the tag in F_b from this detection: ᵇT_o = T_lag ᵖT_c z, with its covariance."""
+    def _anchor_tag(self, z: np.ndarray, R: np.ndarray, lag: list, calibration) -> None:
+        """Put the tag in F_b from detection z: ᵇT_o = T_lag ᵖT_c z, with its covariance R."""
         M = self.geometry.T_platform_cam @ z
-        self._T_tag = self._T @ se3_exp(-lag) @ M
+        self._T_tag = self._T @ se3_exp([-v for v in lag]) @ M
         J = np.zeros((6, self._n))  # δ_o = J x − n
         J[:, fm.POSE] = adjoint(np.linalg.inv(M)) @ adjoint(se3_exp(lag))
-        L, o = self.layout, self.options
+        L = self.layout
         if L.cam.stop > L.cam.start:
             J[:, L.cam] = adjoint(np.linalg.inv(z))
         if L.intr.stop > L.intr.start:  # the calibration's bias in this first view
-            J[:, L.intr] = -fm.tag_calibration_jacobian(z, o.tag_size, o.focal_px, o.lens)
+            J[:, L.intr] = -calibration
         t, P = self._tag_slice, self.P
         P[t, :] = J @ P
         P[:, t] = P[t, :].T
@@ -355,15 +380,16 @@ class FusedEstimator(Estimator):
         if not dt >= 0:
             raise ValueError(f"fused: measurement time {m.time} s precedes {self._time} s")
         twist = m.twist_platform
-        if not np.all(np.isfinite(m.cable_lengths)) or not np.all(np.isfinite(m.tensions)):
+        if not (ff.finite(m.cable_lengths) and ff.finite(m.tensions)):
             return self._held(m, NON_FINITE_INPUT, covariance=self.P[fm.POSE, fm.POSE])
+        taut = self._taut(m)
         if dt > 0:
-            moving = twist is not None and np.all(np.isfinite(twist))
+            moving = twist is not None and ff.finite(twist)
             self.predict(
                 twist if moving else np.zeros(6), dt, m.cable_rates if moving else
-                np.zeros(self._m), self._taut(m),
+                np.zeros(self._m), taut,
             )  # fmt: skip
-        flags = self.update_cables(m)
+        flags = self.update_cables(m, taut)
         if self.options.use_tag:
             flags |= self.update_tag(m)
         self._time = m.time

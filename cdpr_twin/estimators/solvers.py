@@ -192,7 +192,8 @@ def _newton(
 
 def _pose(T: np.ndarray) -> Pose:
     """The 12 floats of a (4, 4) pose (:data:`Pose`)."""
-    return tuple(T[:3].ravel().tolist()[i] for i in _POSE_IDX)
+    v = T[:3].ravel().tolist()
+    return tuple(v[i] for i in _POSE_IDX)
 
 
 def _matrix(p: Pose) -> np.ndarray:
