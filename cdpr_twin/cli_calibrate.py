@@ -68,6 +68,7 @@ def _solve_and_write(args, s, source: Path, out: Path, started: float) -> int:
         "robot_seed": s.truth.seed,
         "run_seed": s.seed,
         "poses": rec.obs.n_poses,
+        "poses_without_redundancy_left_out": session.dropped,
         "tag_seen": int(rec.obs.seen.sum()),
         "timing_s": {
             "excitation": session.excitation_s,

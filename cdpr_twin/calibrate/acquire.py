@@ -22,7 +22,7 @@ from __future__ import annotations
 import copyreg
 import multiprocessing
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import MappingProxyType
 
 import numpy as np
@@ -73,12 +73,15 @@ class Truth:
         geometry: the simulated robot's true :class:`~cdpr_twin.geometry.CdprGeometry`.
         T_base_tag: (4, 4) the true tag pose.
         drum_scale: (m,) true drum radius / nominal radius − 1.
+        intrinsics_error: (8,) the detector's intrinsics minus the true ones (fx, fy, cx, cy
+            [px], k1, k2, p1, p2).
     """
 
     T_base_platform: np.ndarray
     geometry: object
     T_base_tag: np.ndarray
     drum_scale: np.ndarray
+    intrinsics_error: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,6 +101,11 @@ class Recording:
     truth: Truth
     simulated_time: float
     wall_time: float
+
+    def subset(self, keep: np.ndarray) -> Recording:
+        """The recording at the poses ``keep`` (a (K,) mask or indices) selects."""
+        truth = replace(self.truth, T_base_platform=self.truth.T_base_platform[keep])
+        return replace(self, obs=self.obs.subset(keep), truth=truth)
 
 
 def _move(physics, sensors, geom, T_from: np.ndarray, T_to: np.ndarray, period: float) -> None:
@@ -195,12 +203,12 @@ def record(s: Scenario, poses: list[np.ndarray], frames: int = 4, workers: int =
     else:
         parts = [_segment(item, s, frames) for item in items]
     _, rows, truth, sim_time, static = zip(*parts, strict=True)
-    geometry, T_base_tag, drum_scale, nominal = static[0]  # one robot: the same in each
+    geometry, T_base_tag, drum_scale, intrinsics_error, nominal = static[0]  # the same in each
     return Recording(
         obs=_observations([r for part in rows for r in part], poses),
         nominal=nominal,
         truth=Truth(np.array([T for part in truth for T in part]), geometry, T_base_tag,
-                    drum_scale),
+                    drum_scale, intrinsics_error),
         simulated_time=float(sum(sim_time)),
         wall_time=time.perf_counter() - started,
     )  # fmt: skip
@@ -229,7 +237,7 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
 
     Returns:
         (index, rows, true poses, simulated time, (true geometry, true tag, drum scales,
-        nominal robot)).
+        intrinsics error, nominal robot)).
     """
     from cdpr_twin.sim import ModelError, Sensors, build_robot
 
@@ -269,11 +277,22 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
             rows.append(_read(physics, sensors, period, frames, wait, look))
             truth.append(np.array(physics.T_base_platform))
             here = T
+        intrinsics_error = _intrinsics_error(sensors.camera, s.realism.camera.distortion)
     finally:
         sensors.close()
     scale = physics.drum_radius_true / physics.winch.drum_radius - 1.0
-    static = (physics.geometry, np.array(physics.T_base_tag), scale, nominal)
+    static = (physics.geometry, np.array(physics.T_base_tag), scale, intrinsics_error, nominal)
     return index, rows, truth, float(physics.time), static
+
+
+def _intrinsics_error(camera, true_lens) -> np.ndarray:
+    """(8,) what the detector assumes minus the truth: fx, fy, cx, cy [px], k1, k2, p1, p2."""
+    cal, true = camera.calibrated, camera.true_intrinsics
+    lens = camera.calibrated_distortion or (0.0, 0.0, 0.0, 0.0)
+    return np.array(
+        [cal.fx - true.fx, cal.fy - true.fy, cal.cx - true.cx, cal.cy - true.cy]
+        + [a - b for a, b in zip(lens, true_lens, strict=True)]
+    )
 
 
 def _observations(rows: list[tuple], poses: list[np.ndarray]) -> Observations:

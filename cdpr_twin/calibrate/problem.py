@@ -4,7 +4,9 @@ Unknowns (all corrections to the nominal model, zero at the start):
 
 - shared: exit points A_i (m × 3, F_b), anchor points B_i (m × 3, F_p), one length offset c_i
   per cable, one drum scale error s_i per cable, the camera mount ᵖT_c (6, a twist applied on
-  the right of the nominal mount) and the tag pose ᵇT_o (6, likewise);
+  the right of the nominal mount), the tag pose ᵇT_o (6, likewise) and the error of the
+  intrinsics the tag detector uses (8: fx, fy, cx, cy [px], k1, k2, p1, p2; with a
+  :class:`Detector`);
 - per recorded pose k: the platform pose ᵇT_p,k (6, a twist on the right of the pose the
   robot was commanded to).
 
@@ -16,8 +18,12 @@ Residuals, each divided by its noise so that they are unitless:
   which decouples offset and scale; s_i = r'_i/r_i − 1 for a drum whose true radius r'_i
   differs from the nominal r_i);
 - the tag at pose k (when detected): the measured ᶜT_o against
-  ᵖT_c⁻¹ · ᵇT_p,k⁻¹ · ᵇT_o, position in the camera frame and the rotation's axis-angle, their
-  noise growing with the distance to the tag;
+  ᵖT_c⁻¹ · ᵇT_p,k⁻¹ · ᵇT_o · exp(G_k δk), position in the camera frame and the rotation's
+  axis-angle, their noise growing with the distance to the tag. G_k (6 × 8) is the first-order
+  effect of an intrinsics error δk on a detection from that view
+  (:func:`cdpr_twin.estimators.fused_models.tag_calibration_jacobian`): a camera calibration
+  error biases every detection by an amount that depends on the view, which the other
+  parameters would otherwise absorb (it was the largest error left in the exit points);
 - priors: each shared correction over the builder's tolerance (:class:`Priors`). The data
   cannot see the base and platform frames themselves (a rigid motion of exit points, tag and
   poses together, or of anchors, camera and poses, leaves every measurement unchanged): the
@@ -37,7 +43,7 @@ from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import pulley_lengths
 from cdpr_twin.se3 import inverse, se3_exp
 
-BLOCKS = ("exit", "anchor", "offset", "scale", "camera", "tag")
+BLOCKS = ("exit", "anchor", "offset", "scale", "camera", "tag", "intrinsics")
 """The shared parameter blocks, in the order they sit in the parameter vector."""
 
 
@@ -65,6 +71,23 @@ class Observations:
     def n_poses(self) -> int:
         """Number of poses K."""
         return self.encoder.shape[0]
+
+    @property
+    def redundancy(self) -> np.ndarray:
+        """(K,) equations beyond the pose's own six unknowns: taut cables, + 6 with the tag.
+
+        A pose without any (e.g. six taut cables and no tag) is fitted exactly whatever the
+        shared parameters are: it carries no information on them, and where its six cables are
+        ill-conditioned it only slows the solver down.
+        """
+        return self.taut.sum(axis=1) + 6 * self.seen.astype(int) - 6
+
+    def subset(self, keep: np.ndarray) -> Observations:
+        """The observations at the poses ``keep`` (a (K,) mask or indices) selects."""
+        return Observations(
+            self.encoder[keep], self.tensions[keep], self.taut[keep], self.T_cam_tag[keep],
+            self.seen[keep], self.T_guess[keep],
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -100,7 +123,9 @@ class Priors:
         camera_rotation: camera mount orientation [rad] per axis.
         tag_position: tag position [m] per axis.
         tag_rotation: tag orientation [rad] per axis.
-        estimate: the blocks to estimate (others stay nominal), from :data:`BLOCKS`.
+        intrinsics: the detector's intrinsics error: fx, fy, cx, cy [px], k1, k2, p1, p2.
+        estimate: the blocks to estimate (others stay nominal), from :data:`BLOCKS`
+            (``intrinsics`` only with a :class:`Detector`).
         use_priors: add the prior residuals (without them the gauges are free).
     """
 
@@ -112,6 +137,7 @@ class Priors:
     camera_rotation: float = math.radians(0.3)
     tag_position: float = 0.001
     tag_rotation: float = math.radians(0.3)
+    intrinsics: tuple[float, ...] = (2.0, 2.0, 1.5, 1.5, 0.01, 0.02, 5e-4, 5e-4)
     estimate: tuple[str, ...] = BLOCKS
     use_priors: bool = True
 
@@ -119,6 +145,23 @@ class Priors:
         unknown = sorted(set(self.estimate) - set(BLOCKS))
         if unknown:
             raise ValueError(f"unknown parameter block {unknown[0]!r}; choose from {BLOCKS}")
+        if len(self.intrinsics) != 8:
+            raise ValueError("intrinsics: 8 values (fx, fy, cx, cy, k1, k2, p1, p2)")
+
+
+@dataclass(frozen=True)
+class Detector:
+    """What the tag detector assumes: the first-order effect of its intrinsics' error.
+
+    Attributes:
+        tag_size: edge of the tag's black square [m].
+        focal_px: its focal length [px].
+        lens: its Brown–Conrady (k1, k2, p1, p2).
+    """
+
+    tag_size: float
+    focal_px: float
+    lens: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0)
 
 
 def exp_stack(xi: np.ndarray) -> np.ndarray:
@@ -157,14 +200,16 @@ class Layout:
         m: cable count.
         n_poses: K.
         priors: which blocks are estimated, and their prior σ.
+        with_intrinsics: whether the intrinsics block can be estimated (a detector is known).
     """
 
-    def __init__(self, m: int, n_poses: int, priors: Priors) -> None:
-        sizes = {"exit": 3 * m, "anchor": 3 * m, "offset": m, "scale": m, "camera": 6, "tag": 6}
+    def __init__(self, m: int, n_poses: int, priors: Priors, with_intrinsics: bool = False) -> None:
+        sizes = {"exit": 3 * m, "anchor": 3 * m, "offset": m, "scale": m, "camera": 6, "tag": 6,
+                 "intrinsics": 8}  # fmt: skip
         self.m, self.n_poses, self.blocks = m, n_poses, {}
         at = 0
         for name in BLOCKS:
-            if name in priors.estimate:
+            if name in priors.estimate and (name != "intrinsics" or with_intrinsics):
                 self.blocks[name] = slice(at, at + sizes[name])
                 at += sizes[name]
         self.n_shared = at
@@ -172,6 +217,8 @@ class Layout:
         self.sigma = np.concatenate([self._prior(n, priors) for n in self.blocks] or [[]])
 
     def _prior(self, name: str, p: Priors) -> np.ndarray:
+        if name == "intrinsics":
+            return np.asarray(p.intrinsics, dtype=float)
         if name in ("camera", "tag"):
             pos, rot = getattr(p, f"{name}_position"), getattr(p, f"{name}_rotation")
             return np.array([pos] * 3 + [rot] * 3)
@@ -189,6 +236,8 @@ class Layout:
                 out += [f"{name}{i + 1}.{ax}" for i in range(self.m) for ax in "xyz"]
             elif name in ("camera", "tag"):
                 out += [f"{name}.{ax}" for ax in ("x", "y", "z", "rx", "ry", "rz")]
+            elif name == "intrinsics":
+                out += [f"intrinsics.{k}" for k in ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2")]
             else:
                 out += [f"{name}{i + 1}" for i in range(self.m)]
         return out
@@ -196,7 +245,8 @@ class Layout:
     def get(self, x: np.ndarray, name: str) -> np.ndarray:
         """A block's values (zeros when not estimated), shaped (m, 3), (m,) or (6,)."""
         m = self.m
-        shape = {"exit": (m, 3), "anchor": (m, 3), "offset": (m,), "scale": (m,)}.get(name, (6,))
+        shape = {"exit": (m, 3), "anchor": (m, 3), "offset": (m,), "scale": (m,),
+                 "intrinsics": (8,)}.get(name, (6,))  # fmt: skip
         if name not in self.blocks:
             return np.zeros(shape)
         return x[self.blocks[name]].reshape(shape)
@@ -214,6 +264,7 @@ class Model:
         T_platform_cam: (4, 4) camera mount.
         T_base_tag: (4, 4) tag pose.
         T_base_platform: (K, 4, 4) platform poses.
+        intrinsics: (8,) the detector's intrinsics error (fx, fy, cx, cy [px], k1, k2, p1, p2).
     """
 
     a_base: np.ndarray
@@ -223,6 +274,7 @@ class Model:
     T_platform_cam: np.ndarray
     T_base_tag: np.ndarray
     T_base_platform: np.ndarray
+    intrinsics: np.ndarray
 
 
 class Problem:
@@ -234,6 +286,8 @@ class Problem:
         obs: the recordings.
         priors: tolerances and estimated blocks.
         noise: measurement noise.
+        detector: the tag detector's assumptions; with it, its intrinsics' error is estimated
+            (if ``priors.estimate`` lists ``intrinsics``).
     """
 
     def __init__(
@@ -243,15 +297,25 @@ class Problem:
         obs: Observations,
         priors: Priors = Priors(),
         noise: NoiseModel = NoiseModel(),
+        detector: Detector | None = None,
     ) -> None:
         self.nominal, self.T_base_tag, self.obs = nominal, np.asarray(T_base_tag), obs
         self.priors, self.noise = priors, noise
-        self.layout = Layout(nominal.n_cables, obs.n_poses, priors)
+        self.layout = Layout(nominal.n_cables, obs.n_poses, priors, detector is not None)
         taut = np.asarray(obs.taut, bool)
         counts = np.maximum(taut.sum(axis=0), 1)
         self.e_ref = np.where(taut, obs.encoder, 0.0).sum(axis=0) / counts
         self.rows_k, self.rows_i = np.nonzero(taut)
         self.seen = np.flatnonzero(obs.seen)
+        self._G = None  # (n_seen, 6, 8): each detection's intrinsics-error Jacobian
+        if "intrinsics" in self.layout.blocks:
+            from cdpr_twin.estimators.fused_models import tag_calibration_jacobian
+
+            d = detector
+            self._G = np.array(
+                [tag_calibration_jacobian(T, d.tag_size, d.focal_px, d.lens)
+                 for T in obs.T_cam_tag[self.seen]]
+            )  # fmt: skip
         self.n_cable_rows, self.n_tag_rows = len(self.rows_k), 6 * len(self.seen)
         self.n_data = self.n_cable_rows + self.n_tag_rows
         self.n_prior = self.layout.n_shared if priors.use_priors else 0
@@ -268,6 +332,7 @@ class Problem:
             T_platform_cam=g.T_platform_cam @ se3_exp(L.get(x, "camera")),
             T_base_tag=self.T_base_tag @ se3_exp(L.get(x, "tag")),
             T_base_platform=poses,
+            intrinsics=L.get(x, "intrinsics"),
         )
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
@@ -295,6 +360,8 @@ class Problem:
         n = self.noise
         pred = inverse(mod.T_platform_cam) @ inverse_stack(mod.T_base_platform[self.seen])
         pred = pred @ mod.T_base_tag
+        if self._G is not None:  # what the detector's intrinsics error does to each view
+            pred = pred @ exp_stack(self._G @ mod.intrinsics)
         meas = self.obs.T_cam_tag[self.seen]
         d = np.linalg.norm(meas[:, :3, 3], axis=1)[:, None]
         std = np.array([n.tag_lateral_std, n.tag_lateral_std, n.tag_depth_std])
@@ -316,7 +383,7 @@ class Problem:
             S[row, cols] = 1
         for j, k in enumerate(self.seen):
             cols = list(range(L.pose(k).start, L.pose(k).stop))
-            for name in ("camera", "tag"):
+            for name in ("camera", "tag", "intrinsics"):
                 if name in L.blocks:
                     cols += range(L.blocks[name].start, L.blocks[name].stop)
             for r in range(6):

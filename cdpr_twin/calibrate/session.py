@@ -16,7 +16,7 @@ import numpy as np
 
 from cdpr_twin.calibrate.acquire import Recording, record
 from cdpr_twin.calibrate.excitation import excitation_poses
-from cdpr_twin.calibrate.problem import NoiseModel, Priors, Problem
+from cdpr_twin.calibrate.problem import Detector, NoiseModel, Priors, Problem
 from cdpr_twin.calibrate.solver import Calibration, CalibrationError, solve
 from cdpr_twin.scenario import Scenario
 from cdpr_twin.se3 import pose_distance
@@ -36,17 +36,27 @@ class Session:
         recording: the readings (and the truth, kept apart).
         priors: the tolerances the solver used.
         excitation_s: time to choose the poses [s].
+        dropped: recorded poses left out: no equation beyond their own six unknowns
+            (:attr:`~cdpr_twin.calibrate.problem.Observations.redundancy`).
     """
 
     calibration: Calibration
     recording: Recording
     priors: Priors
     excitation_s: float
+    dropped: int = 0
 
 
-def priors_of(s: Scenario) -> Priors:
-    """The builder's tolerances of a scenario's robot (its ``[truth]`` magnitudes)."""
+def priors_of(s: Scenario, focal_px: float = 1.0) -> Priors:
+    """The builder's tolerances of a scenario's robot (its ``[truth]`` magnitudes).
+
+    And the camera calibration's (the realism profile's; ``focal_px`` turns the relative focal
+    error into pixels).
+    """
     t, tiny = s.truth, 1e-7  # a zero tolerance: the block is known (kept at nominal)
+    c = s.realism.camera
+    lens = np.broadcast_to(np.asarray(c.distortion_error_std, dtype=float), (4,))
+    intrinsics = [focal_px * c.focal_error_std] * 2 + [c.center_error_std_px] * 2 + list(lens)
     return Priors(
         exit=max(t.exit_point_std, tiny),
         anchor=max(t.anchor_point_std, tiny),
@@ -55,6 +65,7 @@ def priors_of(s: Scenario) -> Priors:
         camera_rotation=max(t.camera_rotation_std, tiny),
         tag_position=max(t.tag_position_std, tiny),
         tag_rotation=max(t.tag_rotation_std, tiny),
+        intrinsics=tuple(max(float(v), tiny) for v in intrinsics),
     )
 
 
@@ -86,9 +97,13 @@ def calibrate(s: Scenario, n_poses: int = 240, frames: int = 4, workers: int = 1
             "the tag was never detected at the excitation poses; check the camera and tag in "
             "the robot description (cdpr-twin demo shows what the camera sees)"
         )
-    priors = priors_of(s)
-    cal = solve(Problem(nominal.geometry, nominal.T_base_tag, rec.obs, priors, NOISE))
-    return Session(cal, rec, priors, chosen)
+    keep = rec.obs.redundancy > 0
+    rec = rec.subset(keep)
+    priors = priors_of(s, nominal.intrinsics.fx)
+    detector = Detector(nominal.tag_size, nominal.intrinsics.fx, tuple(s.realism.camera.distortion))
+    problem = Problem(nominal.geometry, nominal.T_base_tag, rec.obs, priors, NOISE, detector)
+    cal = solve(problem)
+    return Session(cal, rec, priors, chosen, int(np.count_nonzero(~keep)))
 
 
 def _aligned(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
@@ -131,6 +146,10 @@ def truth_check(session: Session, nominal_geometry, nominal_T_base_tag) -> dict:
         float(np.degrees(np.median(dr))),
     ]
     out["calibrated"]["drum_scale_error"] = np.round(cal.scale - truth.drum_scale, 6).tolist()
+    if "intrinsics" in session.calibration.names[-1]:  # the detector's intrinsics estimated
+        est = session.calibration.estimate[-8:]
+        out["nominal"]["intrinsics_error"] = np.round(truth.intrinsics_error, 6).tolist()
+        out["calibrated"]["intrinsics_error"] = np.round(est - truth.intrinsics_error, 6).tolist()
     out["note"] = (
         "exit_shape: after the rigid motion that best fits the estimate onto the truth (the "
         "base frame is a gauge the data cannot see: only the priors place it)"
