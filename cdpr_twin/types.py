@@ -64,6 +64,8 @@ class CameraIntrinsics:
         covers the same area with ``factor`` × ``factor`` pixels, so u' = factor·(u + ½) − ½.
         """
         s = int(factor)
+        if s == 1:
+            return self
         return CameraIntrinsics(
             self.width * s,
             self.height * s,

@@ -5,10 +5,12 @@ moved by the run's homing offset, the encoders zeroed as if it stood at the nomi
 then driven open loop through the excitation poses: straight quintic lines (eq. 26-29) whose
 cable rates are the *nominal* model's length changes from tick to tick, so the true robot goes
 wherever its true geometry and physics put it. At each pose it rests, waits out the camera's
-latency, and averages ``frames`` readings (the camera only where the nominal model puts the
-tag near the image: elsewhere nothing could be detected, and a frame costs more than the
-physics). What the solver gets is :class:`Observations` only; the truth (true poses and
-geometry) is kept apart in :class:`Truth`, for the report's check.
+latency, and averages ``frames`` readings. The camera is read only where the nominal model
+puts the whole tag within :data:`VIEW_MARGIN` of the image and not edge-on (elsewhere nothing
+could be detected, and a frame costs more than the physics); at the other poses the readings
+are taken without waiting out the camera's latency (the robot is at rest either way). What the
+solver gets is :class:`Observations` only; the truth (true poses and geometry) is kept apart in
+:class:`Truth`, for the report's check.
 
 The tour is recorded in :data:`SEGMENTS` consecutive segments, each from the same homing (the
 twin's equivalent of one tour: at rest poses the path between them leaves no trace but the
@@ -21,14 +23,16 @@ from __future__ import annotations
 
 import copyreg
 import multiprocessing
+import signal
 import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, replace
 from types import MappingProxyType
 
 import numpy as np
 
 from cdpr_twin.calibrate.excitation import tag_in_view
-from cdpr_twin.calibrate.problem import Observations
+from cdpr_twin.calibrate.problem import Detector, Observations
 from cdpr_twin.controllers.open_loop import Segment
 from cdpr_twin.kinematics import cable_lengths
 from cdpr_twin.procedure import homing
@@ -91,6 +95,7 @@ class Recording:
     Attributes:
         obs: what the solver sees.
         nominal: the robot's software model (:class:`cdpr_twin.sim.NominalRobot`).
+        detector: what the software assumes of its tag detector (its calibrated intrinsics).
         truth: ground truth, for the report only.
         simulated_time: simulated seconds [s].
         wall_time: wall-clock seconds of the recording [s].
@@ -98,6 +103,7 @@ class Recording:
 
     obs: Observations
     nominal: object
+    detector: Detector
     truth: Truth
     simulated_time: float
     wall_time: float
@@ -203,10 +209,11 @@ def record(s: Scenario, poses: list[np.ndarray], frames: int = 4, workers: int =
     else:
         parts = [_segment(item, s, frames) for item in items]
     _, rows, truth, sim_time, static = zip(*parts, strict=True)
-    geometry, T_base_tag, drum_scale, intrinsics_error, nominal = static[0]  # the same in each
+    geometry, T_base_tag, drum_scale, intrinsics_error, nominal, detector = static[0]  # all same
     return Recording(
         obs=_observations([r for part in rows for r in part], poses),
         nominal=nominal,
+        detector=detector,
         truth=Truth(np.array([T for part in truth for T in part]), geometry, T_base_tag,
                     drum_scale, intrinsics_error),
         simulated_time=float(sum(sim_time)),
@@ -217,19 +224,29 @@ def record(s: Scenario, poses: list[np.ndarray], frames: int = 4, workers: int =
 def _in_processes(items: list, workers: int, s: Scenario, frames: int) -> list[tuple]:
     """:func:`_segment` of each item in spawned processes, in order.
 
-    A stop (Ctrl-C, SIGTERM) or a failed segment ends the others at once: nothing is left
-    running.
+    The first failure — a segment's error, a worker that died, Ctrl-C or SIGTERM in this
+    process — ends the other segments at once: nothing is left running.
     """
-    pool = multiprocessing.get_context("spawn").Pool(workers)
-    try:
-        parts = pool.starmap(_segment, [(item, s, frames) for item in items])
-        pool.close()
-        return parts
-    except BaseException:
-        pool.terminate()
-        raise
-    finally:
-        pool.join()
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_ignore_sigint) as pool:
+        futures = [pool.submit(_segment, item, s, frames) for item in items]
+        try:
+            for f in as_completed(futures):
+                f.result()  # raises the segment's error (BrokenProcessPool: a worker died)
+        except BaseException:
+            if hasattr(pool, "terminate_workers"):  # Python ≥ 3.14
+                pool.terminate_workers()
+            else:
+                for proc in list(getattr(pool, "_processes", {}).values()):
+                    proc.terminate()
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        return [f.result() for f in futures]
+
+
+def _ignore_sigint() -> None:
+    """In a worker: Ctrl-C is the parent's to handle (it ends the workers)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tuple:
@@ -237,7 +254,7 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
 
     Returns:
         (index, rows, true poses, simulated time, (true geometry, true tag, drum scales,
-        intrinsics error, nominal robot)).
+        intrinsics error, nominal robot, detector)).
     """
     from cdpr_twin.sim import ModelError, Sensors, build_robot
 
@@ -278,10 +295,14 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
             truth.append(np.array(physics.T_base_platform))
             here = T
         intrinsics_error = _intrinsics_error(sensors.camera, s.realism.camera.distortion)
+        cam = sensors.camera  # what the robot's software knows of its detector
+        lens = cam.calibrated_distortion or (0.0, 0.0, 0.0, 0.0)
+        detector = Detector(nominal.tag_size, cam.calibrated.fx, lens)
     finally:
         sensors.close()
     scale = physics.drum_radius_true / physics.winch.drum_radius - 1.0
-    static = (physics.geometry, np.array(physics.T_base_tag), scale, intrinsics_error, nominal)
+    static = (physics.geometry, np.array(physics.T_base_tag), scale, intrinsics_error, nominal,
+              detector)  # fmt: skip
     return index, rows, truth, float(physics.time), static
 
 

@@ -87,7 +87,7 @@ def levenberg_marquardt(
         cost_new = 0.5 * float(r_new @ r_new)
         predicted = 0.5 * float(step @ (lam * d * step - g))  # the linear model's decrease
         rho = (cost - cost_new) / predicted if predicted > 0 else -1.0
-        if rho <= 0:  # worse: reject, damp more
+        if not np.isfinite(cost_new) or rho <= 0:  # worse (or not finite): reject, damp more
             lam, nu = lam * nu, 2.0 * nu
             continue
         x, r, decrease, cost = x + step, r_new, cost - cost_new, cost_new

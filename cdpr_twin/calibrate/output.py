@@ -75,7 +75,9 @@ def report(cal: Calibration, extra: dict) -> dict:
     ]
     return {
         "units": "exit/anchor/offset and camera/tag x y z: m; camera/tag rx ry rz: rad "
-        "(twists on the nominal); scale: relative drum radius error",
+        "(twists on the nominal); scale: relative drum radius error; intrinsics: the tag "
+        "detector's error, fx fy cx cy: px, k1 k2 p1 p2: dimensionless (estimated, reported, "
+        "not written into the description)",
         "parameters": params,
         "fit": {
             "chi2_data": cal.chi2,

@@ -204,8 +204,7 @@ class Layout:
     """
 
     def __init__(self, m: int, n_poses: int, priors: Priors, with_intrinsics: bool = False) -> None:
-        sizes = {"exit": 3 * m, "anchor": 3 * m, "offset": m, "scale": m, "camera": 6, "tag": 6,
-                 "intrinsics": 8}  # fmt: skip
+        sizes = dict(exit=3 * m, anchor=3 * m, offset=m, scale=m, camera=6, tag=6, intrinsics=8)
         self.m, self.n_poses, self.blocks = m, n_poses, {}
         at = 0
         for name in BLOCKS:
@@ -245,8 +244,8 @@ class Layout:
     def get(self, x: np.ndarray, name: str) -> np.ndarray:
         """A block's values (zeros when not estimated), shaped (m, 3), (m,) or (6,)."""
         m = self.m
-        shape = {"exit": (m, 3), "anchor": (m, 3), "offset": (m,), "scale": (m,),
-                 "intrinsics": (8,)}.get(name, (6,))  # fmt: skip
+        shape = dict(exit=(m, 3), anchor=(m, 3), offset=(m,), scale=(m,), intrinsics=(8,))
+        shape = shape.get(name, (6,))
         if name not in self.blocks:
             return np.zeros(shape)
         return x[self.blocks[name]].reshape(shape)
@@ -354,14 +353,22 @@ class Problem:
         l0_enc = e + mod.offset[i] + mod.scale[i] * (e - self.e_ref[i])
         return (l0_model - l0_enc) / self.noise.length_std
 
-    def _tags(self, mod: Model) -> np.ndarray:
-        if not len(self.seen):
-            return np.zeros(0)
-        n = self.noise
+    def predicted_tags(self, mod: Model) -> np.ndarray:
+        """The detections the model predicts where the tag was seen, (n_seen, 4, 4).
+
+        The detector's intrinsics error is included (when estimated).
+        """
         pred = inverse(mod.T_platform_cam) @ inverse_stack(mod.T_base_platform[self.seen])
         pred = pred @ mod.T_base_tag
         if self._G is not None:  # what the detector's intrinsics error does to each view
             pred = pred @ exp_stack(self._G @ mod.intrinsics)
+        return pred
+
+    def _tags(self, mod: Model) -> np.ndarray:
+        if not len(self.seen):
+            return np.zeros(0)
+        n = self.noise
+        pred = self.predicted_tags(mod)
         meas = self.obs.T_cam_tag[self.seen]
         d = np.linalg.norm(meas[:, :3, 3], axis=1)[:, None]
         std = np.array([n.tag_lateral_std, n.tag_lateral_std, n.tag_depth_std])

@@ -16,7 +16,7 @@ import numpy as np
 
 from cdpr_twin.calibrate.acquire import Recording, record
 from cdpr_twin.calibrate.excitation import excitation_poses
-from cdpr_twin.calibrate.problem import Detector, NoiseModel, Priors, Problem
+from cdpr_twin.calibrate.problem import NoiseModel, Priors, Problem
 from cdpr_twin.calibrate.solver import Calibration, CalibrationError, solve
 from cdpr_twin.scenario import Scenario
 from cdpr_twin.se3 import pose_distance
@@ -47,7 +47,7 @@ class Session:
     dropped: int = 0
 
 
-def priors_of(s: Scenario, focal_px: float = 1.0) -> Priors:
+def priors_of(s: Scenario, focal_px: float) -> Priors:
     """The builder's tolerances of a scenario's robot (its ``[truth]`` magnitudes).
 
     And the camera calibration's (the realism profile's; ``focal_px`` turns the relative focal
@@ -99,9 +99,8 @@ def calibrate(s: Scenario, n_poses: int = 240, frames: int = 4, workers: int = 1
         )
     keep = rec.obs.redundancy > 0
     rec = rec.subset(keep)
-    priors = priors_of(s, nominal.intrinsics.fx)
-    detector = Detector(nominal.tag_size, nominal.intrinsics.fx, tuple(s.realism.camera.distortion))
-    problem = Problem(nominal.geometry, nominal.T_base_tag, rec.obs, priors, NOISE, detector)
+    priors = priors_of(s, rec.detector.focal_px)
+    problem = Problem(nominal.geometry, nominal.T_base_tag, rec.obs, priors, NOISE, rec.detector)
     cal = solve(problem)
     return Session(cal, rec, priors, chosen, int(np.count_nonzero(~keep)))
 

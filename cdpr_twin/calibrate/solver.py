@@ -24,7 +24,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse import csc_matrix
+from scipy.sparse import csc_matrix, diags
 from threadpoolctl import threadpool_limits
 
 from cdpr_twin.calibrate.normal_equations import levenberg_marquardt, shared_covariance
@@ -123,6 +123,13 @@ def solve(problem: Problem, max_iterations: int = 100, rank_tol: float = 1e-6) -
     # side by side) makes threaded BLAS spin 10× slower, and the rounding then does not
     # depend on the core count.
     with threadpool_limits(limits=1, user_api="blas"):
+        unseen = np.flatnonzero(np.diff(pattern.indptr) == 0)
+        if len(unseen):
+            names = [*L.names(), *(f"pose{k}" for k in range(L.n_poses) for _ in range(6))]
+            raise CalibrationError(
+                f"no measurement or prior sees {names[unseen[0]]} ({len(unseen)} parameters); "
+                "keep the priors on, or record poses where the tag is seen"
+            )
         res = levenberg_marquardt(
             problem.residuals,
             lambda x: grouped_jacobian(problem.residuals, x, pattern, L.n_shared),
@@ -205,12 +212,9 @@ def _result(problem: Problem, res, wall: float, rank_tol: float) -> Calibration:
 
 def _tag_rms(problem: Problem, model: Model) -> np.ndarray:
     """RMS tag position [m] and rotation [rad] residuals at the solution. Returns (2,)."""
-    from cdpr_twin.se3 import inverse, pose_distance
+    from cdpr_twin.se3 import pose_distance
 
-    T_cam_base = inverse(model.T_platform_cam)
-    pred = np.array(
-        [T_cam_base @ inverse(model.T_base_platform[k]) @ model.T_base_tag for k in problem.seen]
-    )
+    pred = problem.predicted_tags(model)  # the prediction the solver fitted
     dt, dr = pose_distance(pred, problem.obs.T_cam_tag[problem.seen])
     return np.array([np.sqrt(np.mean(dt**2)), np.sqrt(np.mean(dr**2))])
 
@@ -233,7 +237,7 @@ def identifiability(
     """
     L = problem.layout
     scale = np.concatenate([L.sigma, np.full(6 * L.n_poses, POSE_SCALE)])
-    Js = csc_matrix(J_data) @ csc_matrix(np.diag(scale))
+    Js = csc_matrix(J_data) @ diags(scale)
     eigenvalues, V = np.linalg.eigh((Js.T @ Js).toarray())
     order = np.argsort(-eigenvalues)
     s_full = np.sqrt(np.maximum(eigenvalues[order], 0.0))

@@ -90,14 +90,17 @@ def repetition_rms(records: list[dict]) -> dict[str, dict[str, dict]]:
     A run's RMS deviation depends on its draws (homing offset, noise); the RMS over the
     repetitions' runs, √(mean of each run's RMS²), is what a user of the estimator should
     expect. Experiments: open loop (passive estimators) and PBVS with control in the loop (the
-    others passive beside it), main campaign runs only (decomposition runs switch sources off).
+    others passive beside it, converged runs only, as for the spread), main campaign runs only
+    (decomposition runs switch sources off).
 
     Returns:
         ``{experiment: {estimator: {"n", "rms_translation_m", "rms_rotation_deg"}}}``.
     """
     runs: dict[str, list[dict]] = {}
     for r in records:
-        if not (r["ok"] and is_main(r)) or (r["kind"] == "pbvs" and r.get("in_loop") != "control"):
+        if not (r["ok"] and is_main(r)):
+            continue
+        if r["kind"] == "pbvs" and (r.get("in_loop") != "control" or r["status"] != PBVS_CONVERGED):
             continue
         summary = Path(r["dir"]) / "summary.json"
         if not summary.is_file():
