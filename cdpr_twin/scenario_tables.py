@@ -6,10 +6,12 @@ returns the table's value in SI units, with errors naming the file and field.
 
 from __future__ import annotations
 
+import copyreg
 import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 from cdpr_twin import plugins, resources
@@ -23,6 +25,15 @@ from cdpr_twin.options import (
     read_options,
 )
 from cdpr_twin.realism import PARTS, PROFILES, Realism, profile
+
+
+def _read_only(items: dict) -> MappingProxyType:
+    return MappingProxyType(items)
+
+
+# A scenario pickles (to worker processes, e.g. a calibration's recording segments): its
+# read-only mappings (overrides, estimator options) travel as copies and come back read-only.
+copyreg.pickle(MappingProxyType, lambda m: (_read_only, (dict(m),)))
 
 
 @dataclass(frozen=True)

@@ -21,13 +21,11 @@ seed: the readings do not depend on how many workers recorded them.
 
 from __future__ import annotations
 
-import copyreg
 import multiprocessing
 import signal
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, replace
-from types import MappingProxyType
 
 import numpy as np
 
@@ -58,14 +56,6 @@ SEGMENTS = 4
 VIEW_MARGIN = -60.0
 """The camera is read where the nominal model puts the whole tag at least this far inside the
 image [px]; negative: up to 60 px outside it, a margin for the true robot's different pose."""
-
-
-def _proxy(items: dict) -> MappingProxyType:
-    return MappingProxyType(items)
-
-
-# a scenario crosses to the worker processes: its read-only mappings pickle as copies
-copyreg.pickle(MappingProxyType, lambda m: (_proxy, (dict(m),)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -294,10 +284,7 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
             rows.append(_read(physics, sensors, period, frames, wait, look))
             truth.append(np.array(physics.T_base_platform))
             here = T
-        intrinsics_error = _intrinsics_error(sensors.camera, s.realism.camera.distortion)
-        cam = sensors.camera  # what the robot's software knows of its detector
-        lens = cam.calibrated_distortion or (0.0, 0.0, 0.0, 0.0)
-        detector = Detector(nominal.tag_size, cam.calibrated.fx, lens)
+        detector, intrinsics_error = _detector(sensors.camera, nominal.tag_size, s.realism)
     finally:
         sensors.close()
     scale = physics.drum_radius_true / physics.winch.drum_radius - 1.0
@@ -306,14 +293,19 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
     return index, rows, truth, float(physics.time), static
 
 
-def _intrinsics_error(camera, true_lens) -> np.ndarray:
-    """(8,) what the detector assumes minus the truth: fx, fy, cx, cy [px], k1, k2, p1, p2."""
+def _detector(camera, tag_size: float, realism) -> tuple[Detector, np.ndarray]:
+    """What the robot's software knows of its tag detector (its calibrated intrinsics).
+
+    Also, for the report only, their error: (8,) calibrated − true fx, fy, cx, cy [px], k1, k2,
+    p1, p2.
+    """
     cal, true = camera.calibrated, camera.true_intrinsics
     lens = camera.calibrated_distortion or (0.0, 0.0, 0.0, 0.0)
-    return np.array(
+    error = np.array(
         [cal.fx - true.fx, cal.fy - true.fy, cal.cx - true.cx, cal.cy - true.cy]
-        + [a - b for a, b in zip(lens, true_lens, strict=True)]
+        + [a - b for a, b in zip(lens, realism.camera.distortion, strict=True)]
     )
+    return Detector(tag_size, cal.fx, tuple(lens)), error
 
 
 def _observations(rows: list[tuple], poses: list[np.ndarray]) -> Observations:
