@@ -2,6 +2,7 @@
 row equal to its run's own summary.json, resumable after a kill, stoppable with a valid table."""
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -127,11 +128,15 @@ def test_resume_after_a_killed_campaign_reruns_only_the_missing_runs(small, tmp_
     out = tmp_path / "killed"
     cmd = [sys.executable, "-m", "cdpr_twin", "campaign", str(campaign.source), "--out", str(out),
            "--workers", "1"]  # fmt: skip
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+    )
     deadline = time.monotonic() + 300
     while not list((out / "parts").glob("part-*.parquet")) and time.monotonic() < deadline:
         time.sleep(0.2)
-    proc.send_signal(signal.SIGKILL)  # no chance to clean up
+    # no chance to clean up: the campaign and its workers killed at once, as a job is (killing
+    # the parent alone left its spawned worker running after the test)
+    os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
     done = {r for p in (out / "parts").glob("part-*.parquet")
             for r in pq.read_table(p).column("run_id").to_pylist()}  # fmt: skip

@@ -30,12 +30,11 @@ from cdpr_twin.estimators import fused_fast as ff
 from cdpr_twin.estimators import fused_fast_tag as ft
 from cdpr_twin.estimators import fused_models as fm
 from cdpr_twin.estimators.base import NO_INPUTS, NON_FINITE_INPUT, TAG_LOST, Estimator
-from cdpr_twin.estimators.fused_fast import se3_exp
 from cdpr_twin.estimators.selection import condition_number
 from cdpr_twin.estimators.solvers import _cable_tuples, _kernel, _pose
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.plugins import OptionError, option, register
-from cdpr_twin.se3 import adjoint, inverse
+from cdpr_twin.se3 import adjoint, inverse, se3_exp
 from cdpr_twin.types import Measurement, PoseEstimate
 
 SLACK_CABLES = "slack_cables"

@@ -22,7 +22,6 @@ import math
 import numpy as np
 
 from cdpr_twin.estimators.fused_models import Layout
-from cdpr_twin.se3 import exp_coefficients
 
 
 def finite(values: np.ndarray) -> bool:
@@ -254,19 +253,6 @@ class CableColumns:
         return H
 
 
-_LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0])
-
-
-def inverse(T: np.ndarray) -> np.ndarray:
-    """``se3.inverse`` of a (4, 4) rigid transform, bit for bit: (4, 4)."""
-    R = T[:3, :3]
-    out = np.empty((4, 4))
-    out[:3, :3] = R.T
-    out[:3, 3] = -R.T @ T[:3, 3]
-    out[3] = _LAST_ROW
-    return out
-
-
 def adjoint(T: np.ndarray, out: np.ndarray | None = None, invert: bool = False) -> np.ndarray:
     """``se3.adjoint(T)``, or ``se3.adjoint(se3.inverse(T))``, bit for bit: (6, 6).
 
@@ -286,26 +272,3 @@ def adjoint(T: np.ndarray, out: np.ndarray | None = None, invert: bool = False) 
     Ad[:3, 3:6] = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]]) @ R
     Ad[3:6, 3:6] = R
     return Ad
-
-
-def se3_exp(twist: list[float]) -> np.ndarray:
-    """``se3.se3_exp`` of 6 floats ``[v, ω]``, bit for bit: (4, 4).
-
-    The same products in the same order as ``se3._rodrigues`` (``b * wx * wy`` is (b·wx)·wy).
-    """
-    vx, vy, vz, wx, wy, wz = twist
-    th2 = wx * wx + wy * wy + wz * wz
-    a, b, c = exp_coefficients(th2)
-    bx, by, cx, cy = b * wx, b * wy, c * wx, c * wy
-    r00, r11, r22 = 1.0 + b * (wx * wx - th2), 1.0 + b * (wy * wy - th2), 1.0 + b * (wz * wz - th2)
-    v00, v11, v22 = 1.0 + c * (wx * wx - th2), 1.0 + c * (wy * wy - th2), 1.0 + c * (wz * wz - th2)
-    v01, v02, v12 = cx * wy - b * wz, cx * wz + b * wy, cy * wz - b * wx
-    v10, v20, v21 = cx * wy + b * wz, cx * wz - b * wy, cy * wz + b * wx
-    return np.array(
-        [
-            [r00, bx * wy - a * wz, bx * wz + a * wy, v00 * vx + v01 * vy + v02 * vz],
-            [bx * wy + a * wz, r11, by * wz - a * wx, v10 * vx + v11 * vy + v12 * vz],
-            [bx * wz - a * wy, by * wz + a * wx, r22, v20 * vx + v21 * vy + v22 * vz],
-            [0.0, 0.0, 0.0, 1.0],
-        ]
-    )

@@ -12,8 +12,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from cdpr_twin.estimators.fused_fast import adjoint, inverse, se3_exp
-from cdpr_twin.se3 import _SERIES, _SMALL, _quat_of_one
+from cdpr_twin.estimators.fused_fast import adjoint
+from cdpr_twin.se3 import _SERIES, _SMALL, _quat_of_one, inverse, se3_exp
 
 _NO_LENS = (0.0, 0.0, 0.0, 0.0)
 
