@@ -438,3 +438,50 @@ def test_latency_delivers_the_frame_exposed_d_ticks_earlier(twin):
     for k in range(8):
         np.testing.assert_array_equal(delayed[k], fresh[max(k - d, 0)])
     assert not np.allclose(fresh[0], fresh[-1], atol=1e-4)  # the view changed meanwhile
+
+
+def test_pipelined_frames_are_the_sequential_ones(twin):
+    """With latency, each frame is formed and detected by the camera's worker thread while the
+    caller goes on: the frames, their noise and detections are byte for byte the ones made in
+    the caller's thread, across motion, a reset and a direct render in between."""
+    import threading
+    import time
+
+    def run(pipeline: bool):
+        twin.reset(paper_pose("p1"))
+        cam = _camera(twin, period=0.04, run_seed=7, noise=True, read_noise_e=10.0,
+                      exposure_s=0.008, blur_subframes=2, distortion=LENS,
+                      latency_ticks=1)  # fmt: skip
+        cam.pipeline = pipeline
+        threads, develop = set(), cam._develop
+
+        def spy(*args):  # a slow worker: the caller is well ahead of it
+            threads.add(threading.current_thread().name)
+            time.sleep(0.1 if pipeline else 0.0)
+            return develop(*args)
+
+        cam._develop = spy
+        out = []
+        try:
+            for k in range(7):
+                if k == 4:
+                    out.append((cam.render(), None))  # draws its noise after the frames in hand
+                    twin.reset(paper_pose("p1"))  # a new run: the pipeline refills
+                out.append(cam.read())
+                twin.advance(0.04, np.full(twin.physics.n_cables, 0.004))
+        finally:
+            cam.close()
+        return out, threads
+
+    pipelined, workers = run(True)
+    sequential, callers = run(False)
+    assert workers and all(name.startswith("camera") for name in workers)
+    assert callers == {threading.current_thread().name}
+    for (image_p, tag_p), (image_s, tag_s) in zip(pipelined, sequential, strict=True):
+        np.testing.assert_array_equal(image_p, image_s)
+        assert (tag_p is None) == (tag_s is None)
+        if tag_p is not None:
+            np.testing.assert_array_equal(tag_p.corners, tag_s.corners)
+            np.testing.assert_array_equal(tag_p.T_cam_tag, tag_s.T_cam_tag)
+    assert sum(tag is not None for _, tag in pipelined) >= 5
+    assert not np.array_equal(pipelined[0][0], pipelined[3][0])  # the view moved

@@ -19,6 +19,14 @@ monochrome camera forms it (:mod:`cdpr_twin.sim.imaging`):
 - latency: the frame (and tag) delivered at a read is the one exposed ``latency_ticks`` reads
   earlier (a FIFO, full of the start view after each reset).
 
+With a latency of d ≥ 1 reads, a frame is not needed until d reads after it was exposed, as on
+the real robot, whose camera pipeline forms and detects a frame while the controller goes on:
+:meth:`OnboardCamera.read` renders the sub-frames at once (the GL context belongs to the
+caller's thread) and hands their forming and detection to one worker thread, in order, so that
+they overlap the physics and the next renders. The frames, their noise draws and detections are
+the very ones the sequential path makes (one worker, the same order); ``pipeline=False`` keeps
+everything in the caller's thread.
+
 The realistic frame is gray (the sensor is monochrome), returned in three equal channels.
 """
 
@@ -26,6 +34,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import cv2
 import numpy as np
@@ -162,6 +171,8 @@ class OnboardCamera:
             the reads at k · period.
         tag_window: search the tag near its last detection first (``TagDetector``'s ``roi``;
             off by default: it moves corners by ~1e-5 px, which closed loops carry on).
+        pipeline: with ``latency_ticks`` ≥ 1, form and detect each frame in a worker thread
+            while the caller goes on (the same frames and detections, sooner).
 
     Raises:
         SimulationError: without a camera in the model.
@@ -178,6 +189,7 @@ class OnboardCamera:
         run_rng: np.random.Generator,
         period: float | None = None,
         tag_window: bool = False,
+        pipeline: bool = True,
     ) -> None:
         if not physics.has_camera:
             raise SimulationError(
@@ -199,7 +211,10 @@ class OnboardCamera:
         self.true_intrinsics = self._renderer.intrinsics
         self._maps = None
         self._formed = r.noise or r.exposure_s > 0 or any(r.distortion) or r.supersample > 1
-        self._fifo: deque[tuple[np.ndarray, TagDetection | None]] = deque()
+        self._fifo: deque[Future] = deque()
+        self._pool: ThreadPoolExecutor | None = None
+        self._last_job: Future | None = None  # the worker's newest frame (it works in order)
+        self.pipeline = pipeline  # may be switched between reads
         self._last_read = -math.inf
         self.exposure: ExposureRecorder | None = None
         try:
@@ -221,7 +236,10 @@ class OnboardCamera:
             physics.add_hook(self.exposure)
 
     def close(self) -> None:
-        """Free the GL context (and stop recording exposures)."""
+        """Free the GL context (and stop recording exposures), after the frames in hand."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
         if self.exposure is not None:
             self.exposure.active = False
         if self._renderer is not None:
@@ -230,15 +248,22 @@ class OnboardCamera:
 
     def render(self) -> np.ndarray:
         """The frame the camera takes now (exposure ending now), (H, W, 3) RGB uint8."""
-        if not self._formed:
-            return self._renderer.render(self.physics.data)
-        r = self.realism
+        self._drain()  # the frames in hand draw their noise first, as they were taken first
+        return self._form(self._renders())
+
+    def _renders(self) -> list[np.ndarray]:
+        """The GL part of a frame: the render(s) of the exposure ending now (this thread's)."""
         if self.exposure is not None:
-            renders = [
+            return [
                 self._renderer.render_state(*s) for s in self.exposure.states(self.physics.time)
             ]
-        else:
-            renders = [self._renderer.render(self.physics.data)]
+        return [self._renderer.render(self.physics.data)]
+
+    def _form(self, renders: list[np.ndarray]) -> np.ndarray:
+        """The frame the sensor forms from the renders of its exposure (the run's noise)."""
+        if not self._formed:
+            return renders[0]
+        r = self.realism
         linear = imaging.average([imaging.linear_luminance(f, r.gamma) for f in renders])
         if self._maps is not None:
             linear = imaging.distort(linear, self._maps)
@@ -253,6 +278,20 @@ class OnboardCamera:
             gray = imaging.encode(linear, r.gamma)
         return cv2.cvtColor(gray, cv2.COLOR_GRAY2RGB)
 
+    def _develop(
+        self, renders: list[np.ndarray], forget: bool
+    ) -> tuple[np.ndarray, TagDetection | None]:
+        """Form the frame and detect the tag in it (a new run first forgets the last place)."""
+        if forget:
+            self._detector.forget()
+        image = self._form(renders)
+        return image, self._detector.detect(image)
+
+    def _drain(self) -> None:
+        """Wait until the worker has formed every frame handed to it (it works in order)."""
+        if self._last_job is not None:
+            self._last_job.exception()  # done, its error (if any) left for its reader
+
     def read(self) -> tuple[np.ndarray, TagDetection | None]:
         """The frame delivered now and the tag detected in it (``None`` when not found).
 
@@ -262,15 +301,20 @@ class OnboardCamera:
         d reads deliver it rather than nothing.
         """
         reset = self.physics.time < self._last_read
-        if self.physics.time <= self._last_read:  # a new run (or a re-read): search everywhere
-            self._detector.forget()
-        image = self.render()
-        tag = self._detector.detect(image)
-        first, self._last_read = not self._fifo, self.physics.time
+        forget = self.physics.time <= self._last_read  # a new run (or a re-read): search anew
+        renders = self._renders()
         d = self.realism.latency_ticks
+        if self.pipeline and d > 0:
+            if self._pool is None:
+                self._pool = ThreadPoolExecutor(1, thread_name_prefix="camera")
+            job = self._last_job = self._pool.submit(self._develop, renders, forget)
+        else:
+            job = Future()
+            job.set_result(self._develop(renders, forget))
+        first, self._last_read = not self._fifo, self.physics.time
         if d == 0:
-            return image, tag
+            return job.result()
         if first or reset:
-            self._fifo = deque([(image, tag)] * d)
-        self._fifo.append((image, tag))
-        return self._fifo.popleft()
+            self._fifo = deque([job] * d)
+        self._fifo.append(job)
+        return self._fifo.popleft().result()
