@@ -453,10 +453,10 @@ def test_pipelined_frames_are_the_sequential_ones(twin):
                       exposure_s=0.008, blur_subframes=2, distortion=LENS,
                       latency_ticks=1)  # fmt: skip
         cam.pipeline = pipeline
-        threads, develop = set(), cam._develop
+        threads, develop = {}, cam._develop
 
         def spy(*args):  # a slow worker: the caller is well ahead of it
-            threads.add(threading.current_thread().name)
+            threads[threading.current_thread().name] = threading.current_thread()
             time.sleep(0.1 if pipeline else 0.0)
             return develop(*args)
 
@@ -476,7 +476,8 @@ def test_pipelined_frames_are_the_sequential_ones(twin):
     pipelined, workers = run(True)
     sequential, callers = run(False)
     assert workers and all(name.startswith("camera") for name in workers)
-    assert callers == {threading.current_thread().name}
+    assert not any(t.is_alive() for t in workers.values())  # closed: the worker is gone
+    assert set(callers) == {threading.current_thread().name}
     for (image_p, tag_p), (image_s, tag_s) in zip(pipelined, sequential, strict=True):
         np.testing.assert_array_equal(image_p, image_s)
         assert (tag_p is None) == (tag_s is None)
