@@ -440,49 +440,111 @@ def test_latency_delivers_the_frame_exposed_d_ticks_earlier(twin):
     assert not np.allclose(fresh[0], fresh[-1], atol=1e-4)  # the view changed meanwhile
 
 
-def test_pipelined_frames_are_the_sequential_ones(twin):
+def _pipelined_camera(twin, d: int, tag_window: bool, pipeline: bool) -> OnboardCamera:
+    realism = CameraRealism(noise=True, read_noise_e=10.0, exposure_s=0.008, blur_subframes=2,
+                            distortion=LENS, latency_ticks=d)  # fmt: skip
+    cam = OnboardCamera(twin.physics, twin.nominal.intrinsics, twin.nominal.tag_size, realism,
+                        np.random.default_rng(0), np.random.default_rng(7), period=0.04,
+                        tag_window=tag_window)  # fmt: skip
+    cam.pipeline = pipeline
+    return cam
+
+
+@pytest.mark.parametrize(("d", "tag_window"), [(1, False), (2, True)])
+def test_pipelined_frames_are_the_sequential_ones(twin, d, tag_window):
     """With latency, each frame is formed and detected by the camera's worker thread while the
     caller goes on: the frames, their noise and detections are byte for byte the ones made in
-    the caller's thread, across motion, a reset and a direct render in between."""
+    the caller's thread, across motion, a re-read, a direct render, a reset and the pipeline
+    switched off mid-run; one worker, gone with the camera."""
     import threading
     import time
 
+    me = threading.current_thread()
+
     def run(pipeline: bool):
         twin.reset(paper_pose("p1"))
-        cam = _camera(twin, period=0.04, run_seed=7, noise=True, read_noise_e=10.0,
-                      exposure_s=0.008, blur_subframes=2, distortion=LENS,
-                      latency_ticks=1)  # fmt: skip
-        cam.pipeline = pipeline
+        cam = _pipelined_camera(twin, d, tag_window, pipeline)
         threads, develop = {}, cam._develop
 
         def spy(*args):  # a slow worker: the caller is well ahead of it
-            threads[threading.current_thread().name] = threading.current_thread()
+            threads[threading.current_thread().ident] = threading.current_thread()
             time.sleep(0.1 if pipeline else 0.0)
             return develop(*args)
 
         cam._develop = spy
         out = []
         try:
-            for k in range(7):
-                if k == 4:
+            for k in range(10):
+                if k == 3:
+                    out.append(cam.read())  # a re-read at the same time: searched anew
+                if k == 5:
                     out.append((cam.render(), None))  # draws its noise after the frames in hand
                     twin.reset(paper_pose("p1"))  # a new run: the pipeline refills
+                if k == 8:
+                    cam.pipeline = False  # the frames in hand still come first
                 out.append(cam.read())
                 twin.advance(0.04, np.full(twin.physics.n_cables, 0.004))
         finally:
             cam.close()
-        return out, threads
+        alive = [t for t in threads.values() if t.is_alive() and t is not me]
+        return out, threads, alive
 
-    pipelined, workers = run(True)
-    sequential, callers = run(False)
-    assert workers and all(name.startswith("camera") for name in workers)
-    assert not any(t.is_alive() for t in workers.values())  # closed: the worker is gone
-    assert set(callers) == {threading.current_thread().name}
+    pipelined, workers, alive = run(True)
+    sequential, callers, _ = run(False)
+    assert not alive  # closed: the worker is gone
+    assert set(callers.values()) == {me}
+    assert len(workers) == 2 and me in workers.values()  # one worker (and the caller at the end)
+    assert all(t.name.startswith("camera") for t in workers.values() if t is not me)
     for (image_p, tag_p), (image_s, tag_s) in zip(pipelined, sequential, strict=True):
         np.testing.assert_array_equal(image_p, image_s)
         assert (tag_p is None) == (tag_s is None)
         if tag_p is not None:
             np.testing.assert_array_equal(tag_p.corners, tag_s.corners)
             np.testing.assert_array_equal(tag_p.T_cam_tag, tag_s.T_cam_tag)
-    assert sum(tag is not None for _, tag in pipelined) >= 5
-    assert not np.array_equal(pipelined[0][0], pipelined[3][0])  # the view moved
+    assert sum(tag is not None for _, tag in pipelined) >= 9
+    assert not np.array_equal(pipelined[0][0], pipelined[4][0])  # the view moved
+
+
+def test_a_frame_that_fails_to_form_raises_when_delivered_or_discarded(twin):
+    """A frame the worker cannot form raises its error at the read that delivers it, or at the
+    reset that discards it; one never delivered is a warning at close. Never lost silently."""
+
+    def failing_third(cam: OnboardCamera):
+        develop, calls = cam._develop, [0]
+
+        def failing(*args):
+            calls[0] += 1
+            if calls[0] == 3:
+                raise FloatingPointError("a broken frame")
+            return develop(*args)
+
+        return failing
+
+    rest = np.zeros(twin.physics.n_cables)
+    for discard in (False, True):
+        twin.reset(paper_pose("p1"))
+        cam = _pipelined_camera(twin, 2, False, True)
+        cam._develop = failing_third(cam)
+        try:
+            for _ in range(3):  # frame 3 fails in the worker; it is delivered 2 reads later
+                cam.read()
+                twin.advance(0.04, rest)
+            if discard:
+                twin.reset(paper_pose("p1"))
+                with pytest.raises(FloatingPointError, match="broken"):
+                    cam.read()
+            else:
+                cam.read()  # frame 4 delivers frame 2
+                twin.advance(0.04, rest)
+                with pytest.raises(FloatingPointError, match="broken"):
+                    cam.read()  # frame 5 delivers frame 3
+        finally:
+            cam.close()
+    cam = _pipelined_camera(twin, 2, False, True)  # failed, never delivered: said at close
+    cam._develop = failing_third(cam)
+    for _ in range(3):
+        cam.read()
+        twin.advance(0.04, rest)
+    cam.render()  # waits for the frames in hand: frame 3 has failed by now
+    with pytest.warns(RuntimeWarning, match="never delivered failed to form"):
+        cam.close()

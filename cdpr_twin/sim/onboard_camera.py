@@ -33,6 +33,7 @@ The realistic frame is gray (the sensor is monochrome), returned in three equal 
 from __future__ import annotations
 
 import math
+import warnings
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 
@@ -214,7 +215,7 @@ class OnboardCamera:
         self._fifo: deque[Future] = deque()
         self._pool: ThreadPoolExecutor | None = None
         self._last_job: Future | None = None  # the worker's newest frame (it works in order)
-        self.pipeline = pipeline  # may be switched between reads
+        self.pipeline = pipeline  # may be switched between reads (order is kept)
         self._last_read = -math.inf
         self.exposure: ExposureRecorder | None = None
         try:
@@ -236,10 +237,25 @@ class OnboardCamera:
             physics.add_hook(self.exposure)
 
     def close(self) -> None:
-        """Free the GL context (and stop recording exposures), after the frames in hand."""
+        """Free the GL context and stop recording exposures.
+
+        The worker finishes the frame it is forming; the frames queued behind it are dropped
+        (never delivered, they change no output). An error met in a frame formed but never
+        delivered is reported as a ``RuntimeWarning``.
+        """
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
+            undelivered = {id(job): job for job in (*self._fifo, self._last_job) if job}
+            for job in undelivered.values():
+                if not job.cancelled() and job.exception() is not None:
+                    warnings.warn(
+                        f"camera: a frame never delivered failed to form: {job.exception()!r}",
+                        RuntimeWarning,
+                        stacklevel=2,
+                    )
+            self._fifo.clear()
+            self._last_job = None
         if self.exposure is not None:
             self.exposure.active = False
         if self._renderer is not None:
@@ -298,7 +314,9 @@ class OnboardCamera:
         With ``latency_ticks = d`` it is the frame exposed d reads ago. At the first read after
         a reset the robot has been resting at its start pose while the camera streamed: the
         pipeline then holds d frames of that view (the one taken now, repeated), so the first
-        d reads deliver it rather than nothing.
+        d reads deliver it rather than nothing. A frame the worker failed to form raises its
+        error at the read that delivers it (d reads after its exposure), or at a reset that
+        discards it.
         """
         reset = self.physics.time < self._last_read
         forget = self.physics.time <= self._last_read  # a new run (or a re-read): search anew
@@ -309,12 +327,15 @@ class OnboardCamera:
                 self._pool = ThreadPoolExecutor(1, thread_name_prefix="camera")
             job = self._last_job = self._pool.submit(self._develop, renders, forget)
         else:
+            self._drain()  # switched off mid-run: the worker's frames come first
             job = Future()
             job.set_result(self._develop(renders, forget))
         first, self._last_read = not self._fifo, self.physics.time
         if d == 0:
             return job.result()
         if first or reset:
-            self._fifo = deque([job] * d)
+            discarded, self._fifo = self._fifo, deque([job] * d)
+            for frame in discarded:  # a failure is not lost with its frame
+                frame.result()
         self._fifo.append(job)
         return self._fifo.popleft().result()
