@@ -106,6 +106,33 @@ def test_a_finished_campaign_resumed_runs_nothing_and_is_refused_without_resume(
     assert (out / "distribution.png").stat().st_size > 1000
 
 
+def test_the_report_counts_each_estimators_wins_run_by_run(small):
+    """The estimators' section: medians and the runs each estimator deviates least in, counted
+    again here from every run's own summary.json (plain Python, no table)."""
+    from cdpr_twin.campaign.report import write_report
+
+    campaign, out, _ = small
+    report = write_report(out, campaign).read_text()
+    summaries = [json.loads(p.read_text()) for p in (out / "runs").glob("*/summary.json")]
+    names = sorted(summaries[0]["estimators"])
+    assert len(summaries) == 12 and len(names) >= 6
+    wins = {n: [0, 0, 0] for n in names}
+    for s in summaries:
+        e = s["estimators"]
+        for n in names:
+            t = all(e[n]["rms_translation_m"] < e[o]["rms_translation_m"] for o in names if o != n)
+            r = all(e[n]["rms_rotation_deg"] < e[o]["rms_rotation_deg"] for o in names if o != n)
+            wins[n] = [wins[n][0] + t, wins[n][1] + r, wins[n][2] + (t and r)]
+    assert sum(w[0] for w in wins.values()) == 12  # every run has its least deviating one
+    for n in names:
+        med_t = 1e3 * float(np.median([s["estimators"][n]["rms_translation_m"] for s in summaries]))
+        med_r = float(np.median([s["estimators"][n]["rms_rotation_deg"] for s in summaries]))
+        line = (
+            f"| {n} | {med_t:.2f} mm | {med_r:.3f}° | {wins[n][0]} | {wins[n][1]} | {wins[n][2]} |"
+        )
+        assert line in report, line
+
+
 def test_ray_runs_the_same_campaign_to_the_same_numbers(small, tmp_path):
     ray = pytest.importorskip("ray", reason="Ray has no wheel for this platform")
     campaign, out, _ = small

@@ -7,6 +7,9 @@
   ``final_t_m``, the error vs the controller's goal): quantiles and a histogram;
 - per grid axis (a varied key with few values): the metric's median and spread per value, and
   a box plot;
+- the estimators, per block: each one's median RMS deviation from ground truth over the runs,
+  and in how many runs it deviates least of all (translation, rotation, both) — which
+  estimator wins over many robots or noise draws, not over one;
 - when the robot varies (``truth.seed``): which calibration error drives the error at the
   checkpoint. Each run's deviations are drawn again from its scenario's truth spec (the draw is
   deterministic), the 3-D error vector is regressed on all of them (least squares), and each
@@ -196,6 +199,7 @@ def write_report(out: str | Path, campaign: Campaign) -> Path:
         levels = len(set(columns[c].tolist()))
         if c.startswith("param.") and c != "param.sample" and 1 < levels <= min(20, len(rows) - 1):
             lines += _axis_section(columns, c[len("param.") :], metric, label, out)
+    lines += _estimator_section(columns, ok)
     lines += _attribution_section(campaign, rows)
     path = out / "report.md"
     partial = path.with_name("report.md.partial")
@@ -204,6 +208,75 @@ def write_report(out: str | Path, campaign: Campaign) -> Path:
     with writing(path):
         partial.replace(path)
     return path
+
+
+def estimator_wins(columns: dict, ok: np.ndarray, block: str | None = None) -> dict:
+    """Per estimator: median RMS deviations and the runs in which it deviates least.
+
+    Args:
+        columns: the table's columns (``est.<name>.rms_t_m`` / ``rms_r_deg`` per estimator).
+        ok: (n,) the runs that ran.
+        block: only this block's runs (``None``: all).
+
+    Returns:
+        ``{"runs": n, "estimators": {name: {"rms_t_mm", "rms_r_deg" (medians), "best_t",
+        "best_r", "best_both" (run counts)}}}`` over the runs where every estimator has finite
+        RMS deviations (a strict minimum: a tie is nobody's win).
+    """
+    names = sorted({c.split(".")[1] for c in columns if c.startswith("est.") and
+                    c.endswith(".rms_t_m")})  # fmt: skip
+    keep = ok.copy()
+    if block is not None:
+        keep &= columns["block"] == block
+    if not names:
+        return {"runs": 0, "estimators": {}}
+    T = np.column_stack([columns[f"est.{n}.rms_t_m"] for n in names]).astype(float)
+    R = np.column_stack([columns[f"est.{n}.rms_r_deg"] for n in names]).astype(float)
+    keep &= np.isfinite(T).all(axis=1) & np.isfinite(R).all(axis=1)
+    T, R = T[keep], R[keep]
+
+    def strict_best(X: np.ndarray) -> np.ndarray:  # (runs, names): strictly below every other
+        return X < np.where(np.eye(len(names), dtype=bool)[None], np.inf, X[:, None, :]).min(2)
+
+    bt, br = strict_best(T), strict_best(R)
+    table = {
+        n: {
+            "rms_t_mm": float(np.median(T[:, i]) * 1e3) if len(T) else math.nan,
+            "rms_r_deg": float(np.median(R[:, i])) if len(R) else math.nan,
+            "best_t": int(bt[:, i].sum()),
+            "best_r": int(br[:, i].sum()),
+            "best_both": int((bt[:, i] & br[:, i]).sum()),
+        }
+        for i, n in enumerate(names)
+    }
+    return {"runs": int(keep.sum()), "estimators": table}
+
+
+def _estimator_section(columns: dict, ok: np.ndarray) -> list[str]:
+    """Which estimator deviates least, run by run, in each block."""
+    lines: list[str] = []
+    for block in sorted(set(columns["block"].tolist())):
+        wins = estimator_wins(columns, ok, block)
+        if len(wins["estimators"]) < 2 or not wins["runs"]:
+            continue
+        lines += [
+            f"## Estimators ({block}): which deviates least from ground truth",
+            "",
+            f"Over {wins['runs']} runs with every estimator valid: each one's median RMS "
+            "deviation over its run, and the runs in which it deviates less than every other "
+            "estimator.",
+            "",
+            "| estimator | median RMS translation | median RMS rotation | least in translation "
+            "| least in rotation | least in both |",
+            "|---|---|---|---|---|---|",
+        ]
+        lines += [
+            f"| {n} | {e['rms_t_mm']:.2f} mm | {e['rms_r_deg']:.3f}° | {e['best_t']} | "
+            f"{e['best_r']} | {e['best_both']} |"
+            for n, e in wins["estimators"].items()
+        ]
+        lines.append("")
+    return lines
 
 
 def _numeric(table, column: str) -> bool:
