@@ -5,8 +5,8 @@
 - the headline metric's distribution over the runs (``cp1.t_m``, the platform's true error at
   the first checkpoint — p1 in the open-loop runs — when the runs have checkpoints, else
   ``final_t_m``, the error vs the controller's goal): quantiles and a histogram;
-- per grid axis (a varied key with few values): the metric's median and spread per value, and
-  a box plot;
+- per grid axis (a varied key with few values, not a seed: a seed names a draw): the
+  metric's median and spread per value, and a box plot;
 - the estimators, per block: each one's median RMS deviation from ground truth over the runs,
   and in how many runs it deviates least of all (translation, rotation, both) — which
   estimator wins over many robots or noise draws, not over one;
@@ -115,7 +115,9 @@ def _figure(path: Path, draw) -> None:
 
 def _axis_section(columns: dict, key: str, metric: str, label: str, out: Path) -> list[str]:
     values = columns[f"param.{key}"]
-    levels = sorted(set(values.tolist()), key=str)
+    levels = set(values.tolist())
+    numeric = all(isinstance(v, int | float) for v in levels)
+    levels = sorted(levels) if numeric else sorted(levels, key=str)
     y = columns[metric] * 1e3
     lines = [f"### Effect of `{key}`", "", f"| {key} | runs | {label} |", "|---|---|---|"]
     groups = []
@@ -197,7 +199,13 @@ def write_report(out: str | Path, campaign: Campaign) -> Path:
     _figure(out / "distribution.png", hist)
     for c in table.column_names:  # grid axes: few values, each repeated
         levels = len(set(columns[c].tolist()))
-        if c.startswith("param.") and c != "param.sample" and 1 < levels <= min(20, len(rows) - 1):
+        seed = c.endswith("seed")  # a seed names a draw: its "effect" is the spread above
+        if (
+            c.startswith("param.")
+            and not seed
+            and c != "param.sample"
+            and 1 < levels <= min(20, len(rows) - 1)
+        ):
             lines += _axis_section(columns, c[len("param.") :], metric, label, out)
     lines += _estimator_section(columns, ok)
     lines += _attribution_section(campaign, rows)

@@ -196,8 +196,12 @@ def _rotation_reference(rep: dict, name: str) -> str:
         "there and the tag is anchored at its first detection from the filter's own pose, so "
         "none tells it the homing offset's rotation, which the control estimate keeps as it is. "
         f"Over the runs its rotation is no better than control's ({', '.join(rows)}, control "
-        "RMS / fused RMS): that it is slightly worse says its rotation noise from the tag or "
-        "the cables is under-modelled, a loss not explained further here."
+        "RMS / fused RMS). The filter's rotation is as uncertain as the geometry and "
+        "calibration errors the robot's tolerances allow, and it weighs its sensors by that; "
+        "the study has one robot, whose cable-based estimates happen to keep their rotation "
+        "error small. Robot by robot, over 20 robots built to the same tolerances: "
+        "campaigns/estimators_over_robots.toml (its report: "
+        "docs/estimators_over_robots/report.md)."
     )
 
 
