@@ -63,6 +63,8 @@ class FusedOptions:
         tension_noise_std: random error of a tension reading [N].
         damping_time: the cables' damping time η [s].
         taut_threshold: cables reading below this tension are not used [N].
+        hang_threshold: the prediction takes the platform to hang on the cables reading above
+            this [N]: above what a slack cable can read (0.24 N accuracy + 3 × 0.01 N noise).
         pixel_std: std of a detected corner [px].
         focal_px: the camera's focal length [px].
         tag_size: edge of the tag's black square [m].
@@ -70,9 +72,8 @@ class FusedOptions:
         gate_probability: Mahalanobis gate (χ² quantile) for each cable and each detection.
         use_tag: fuse tag detections.
         drum_consider: treat the drum scale errors as consider states (Schmidt): accounted
-            for, never estimated. Estimating them from the redundant cables learns the
-            encoders' quantisation (a floor: its error persists while a drum turns slowly)
-            as drum errors, and the filter grows overconfident.
+            for, never estimated. Estimated from the redundant cables, they would learn the
+            encoders' quantisation (a floor) as drum errors: the filter grew overconfident.
         exit_point_std: per-axis std of the exit points' calibration error [m]; with this or
             ``anchor_point_std`` above 0 the filter considers both (6m consider states).
         anchor_point_std: per-axis std of the anchor points' calibration error [m].
@@ -104,6 +105,7 @@ class FusedOptions:
     tension_noise_std: float = option(0.01, minimum=0.0, unit="N")
     damping_time: float = option(0.0005, minimum=0.0, unit="s")
     taut_threshold: float = option(1.0, minimum=0.0, unit="N")
+    hang_threshold: float = option(0.27, minimum=0.0, unit="N")
     pixel_std: float = option(1.0, minimum=0.0, exclusive=True, unit="px")
     focal_px: float = option(415.69219381653056, minimum=0.0, exclusive=True, unit="px")
     tag_size: float = option(0.04, minimum=0.0, exclusive=True, unit="m")
@@ -384,10 +386,9 @@ class FusedEstimator(Estimator):
         taut = self._taut(m)
         if dt > 0:
             moving = twist is not None and ff.finite(twist)
-            self.predict(
-                twist if moving else np.zeros(6), dt, m.cable_rates if moving else
-                np.zeros(self._m), taut,
-            )  # fmt: skip
+            hanging = ff.taut(m.tensions, m.tensions_clipped, self.options.hang_threshold)
+            self.predict(twist if moving else np.zeros(6), dt, m.cable_rates if moving else
+                         np.zeros(self._m), hanging)  # fmt: skip
         flags = self.update_cables(m, taut)
         if self.options.use_tag:
             flags |= self.update_tag(m)
