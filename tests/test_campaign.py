@@ -133,6 +133,31 @@ def test_the_report_counts_each_estimators_wins_run_by_run(small):
         assert line in report, line
 
 
+def test_each_block_compares_the_estimators_its_runs_report():
+    """A camera-off block has no image estimate: its runs still count, among the others."""
+    from cdpr_twin.campaign.report import estimator_wins
+
+    nan = np.nan
+    columns = {  # 2 camera-on runs, 2 camera-off runs (image absent), 1 failed run
+        "block": np.array(["on", "on", "off", "off", "off"], dtype=object),
+        "est.a.rms_t_m": np.array([1.0, 3.0, 2.0, 5.0, nan]),
+        "est.a.rms_r_deg": np.array([0.1, 0.1, 0.2, 0.5, nan]),
+        "est.b.rms_t_m": np.array([2.0, 2.0, 3.0, 4.0, nan]),
+        "est.b.rms_r_deg": np.array([0.2, 0.1, 0.1, 0.4, nan]),
+        "est.image.rms_t_m": np.array([0.5, 9.0, nan, nan, nan]),
+        "est.image.rms_r_deg": np.array([0.3, 0.3, nan, nan, nan]),
+    }
+    ok = np.array([True, True, True, True, False])
+    on, off = (estimator_wins(columns, ok, b) for b in ("on", "off"))
+    assert on["runs"] == 2 and sorted(on["estimators"]) == ["a", "b", "image"]
+    assert off["runs"] == 2 and sorted(off["estimators"]) == ["a", "b"]
+    assert [on["estimators"][n]["best_t"] for n in ("a", "b", "image")] == [0, 1, 1]
+    assert [on["estimators"][n]["best_r"] for n in ("a", "b", "image")] == [1, 0, 0]  # a tie
+    assert off["estimators"]["a"] | {} == {"rms_t_mm": 3500.0, "rms_r_deg": 0.35, "best_t": 1,
+                                           "best_r": 0, "best_both": 0}  # fmt: skip
+    assert off["estimators"]["b"]["best_r"] == 2 and off["estimators"]["b"]["best_both"] == 1
+
+
 def test_ray_runs_the_same_campaign_to_the_same_numbers(small, tmp_path):
     ray = pytest.importorskip("ray", reason="Ray has no wheel for this platform")
     campaign, out, _ = small

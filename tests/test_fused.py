@@ -153,6 +153,8 @@ def test_covariance_columns_and_ellipsoid_are_recorded(tmp_path):
 def test_fused_rejects_bad_options(twin, name):
     with pytest.raises(ValueError, match="pixel_std"):
         make_estimator(name, twin.nominal_geometry, pixel_std=-1.0)
+    with pytest.raises(ValueError, match="hang_threshold"):
+        make_estimator(name, twin.nominal_geometry, hang_threshold=2.0)  # taut_threshold 1 N
 
 
 @pytest.mark.parametrize("view", ["tilted", "face_on"])
@@ -260,8 +262,10 @@ def test_a_robot_hanging_on_a_weakly_taut_cable_keeps_the_filter_consistent(
     cables, one of them reading ≈ 0.6 N (two read their bias: slack). The prediction maps the
     geometry and drum errors into the motion only through the cables it takes the platform to
     hang on; counted from 1 N up it sees five, maps nothing, and its rotation error (2° of
-    drift) sits at NEES 40-80; counted from above what a slack cable can read (0.27 N), its
-    covariance holds that error (NEES, 6 dof and rotation, within χ² bounds)."""
+    drift) sits at NEES ≈ 40; counted from above what a slack cable can read (0.27 N), its
+    covariance holds that error: the run's mean NEES (6 dof, and rotation alone) below the
+    χ² 95 % quantile, and not vague (above the 5 % one). One autocorrelated run: the means are
+    a check of scale, not a χ² test (measured over run seeds 1-8: 5.8-9.1 vs 37-48)."""
     from scipy.stats import chi2
 
     from cdpr_twin.study.nees import run_errors
@@ -275,5 +279,6 @@ def test_a_robot_hanging_on_a_weakly_taut_cable_keeps_the_filter_consistent(
     nees = np.einsum("ki,kij,kj->k", err, np.linalg.inv(cov), err)
     rot = np.einsum("ki,kij,kj->k", err[:, 3:], np.linalg.inv(cov[:, 3:, 3:]), err[:, 3:])
     assert np.degrees(np.abs(err[:, 3:]).max()) > 1.5  # the drift is there either way
-    ok = nees.mean() < chi2.ppf(0.95, 6) and rot.max() < chi2.ppf(0.99, 3)
-    assert ok == consistent, (nees.mean(), rot.max())  # measured 6.7 / 7.2 and 44 / 81
+    ok = nees.mean() < chi2.ppf(0.95, 6) and rot.mean() < chi2.ppf(0.95, 3)
+    assert ok == consistent, (nees.mean(), rot.mean())  # measured 6.7 / 4.4 and 44 / 40
+    assert nees.mean() > chi2.ppf(0.05, 6)  # overconfident or not, never vague

@@ -62,9 +62,10 @@ class FusedOptions:
         length_noise_std: a floor under each reading's noise std [m].
         tension_noise_std: random error of a tension reading [N].
         damping_time: the cables' damping time η [s].
-        taut_threshold: cables reading below this tension are not used [N].
+        taut_threshold: the length updates use the cables reading above this tension [N].
         hang_threshold: the prediction takes the platform to hang on the cables reading above
-            this [N]: above what a slack cable can read (0.24 N accuracy + 3 × 0.01 N noise).
+            this [N] (≤ ``taut_threshold``): what a slack cable of the acrobot profile can read
+            (0.24 N accuracy + 3 × 0.01 N noise); a noisier sensor needs a higher one.
         pixel_std: std of a detected corner [px].
         focal_px: the camera's focal length [px].
         tag_size: edge of the tag's black square [m].
@@ -86,11 +87,10 @@ class FusedOptions:
         center_error_std_px: std of the calibrated cx, cy [px].
         distortion_error_std: std of each calibrated (k1, k2, p1, p2).
         lens: the calibrated lens (k1, k2, p1, p2), through which those errors act.
-        max_condition: the prediction maps the drums' errors into the pose through the taut
-            cables' Jacobian A (A⁺ ρ⊙l̇ dt) only while A's condition number is below this
-            (as the model-based estimators' ``max_condition``): a nearly singular taut set (at
-            a servo's start, condition ≈ 3·10⁴) turns a drum's 0.5 % into a 13 mm std growth
-            in one 40 ms step, against 0.3 mm with the guard.
+        max_condition: the prediction maps the drums' errors into the pose through the
+            Jacobian A of the cables holding the platform (A⁺ ρ⊙l̇ dt) only while A's condition
+            number is below this (as the model-based estimators'): a nearly singular set (at a
+            servo's start, ≈ 3·10⁴) turns a drum's 0.5 % into 13 mm of std in 40 ms (0.3 mm).
     """
 
     initial_position_std: float = option(0.001, minimum=0.0, unit="m")
@@ -133,6 +133,8 @@ class FusedOptions:
             raise OptionError("distortion_error_std", f"must be 4 finite numbers ≥ 0, got {d}")
         if len(self.lens) != 4 or not all(map(math.isfinite, self.lens)):
             raise OptionError("lens", f"must be 4 finite (k1, k2, p1, p2), got {self.lens}")
+        if not self.hang_threshold <= self.taut_threshold:
+            raise OptionError("hang_threshold", "must not exceed taut_threshold")
         if not self.max_condition >= 1.0:
             raise OptionError("max_condition", f"must be ≥ 1, got {self.max_condition}")
         if not self.gate_probability < 1.0:
@@ -212,7 +214,7 @@ class FusedEstimator(Estimator):
         """Propagate with the commanded twist ξ (F_p) over dt [s]; process noise added.
 
         The winches pay out (1 + ρ_i) times what they are commanded, so the platform moves by
-        ξ dt + A⁺ (ρ ⊙ l̇ dt) (A the taut cables' Jacobian): the prediction shares the drum
+        ξ dt + A⁺ (ρ ⊙ l̇ dt) (A the holding cables' Jacobian): the prediction shares the drum
         errors with the length readings, and the filter knows it.
 
         Args:

@@ -183,7 +183,7 @@ def fused_beats_each(rep: dict, name: str = "fused") -> Finding | None:
 
 
 def _rotation_reference(rep: dict, name: str) -> str:
-    """Why the filter's rotation cannot beat the control estimate's, with the runs' ratios."""
+    """Why the filter's rotation does not beat the control estimate's here, with the ratios."""
     rows = [
         f"{exp} {t['control']['rms_rotation_deg'] / t[name]['rms_rotation_deg']:.2f}×"
         for exp, t in rep.get("repetition_rms", {}).items()
@@ -198,8 +198,9 @@ def _rotation_reference(rep: dict, name: str) -> str:
         f"Over the runs its rotation is no better than control's ({', '.join(rows)}, control "
         "RMS / fused RMS). The filter's rotation is as uncertain as the geometry and "
         "calibration errors the robot's tolerances allow, and it weighs its sensors by that; "
-        "the study has one robot, whose cable-based estimates happen to keep their rotation "
-        "error small. Robot by robot, over 20 robots built to the same tolerances: "
+        "the study has one robot, whose control and cable-based estimates happen to keep "
+        "their rotation error small. Robot by robot, over 20 robots built to the same "
+        "tolerances: "
         "campaigns/estimators_over_robots.toml (its report: "
         "docs/estimators_over_robots/report.md)."
     )
