@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -236,17 +237,14 @@ def estimator_wins(columns: dict, ok: np.ndarray, block: str | None = None) -> d
     keep = ok.copy()
     if block is not None:
         keep &= columns["block"] == block
-    names = []
-    for c in sorted(columns):
-        if c.startswith("est.") and c.endswith(".rms_t_m"):
-            name = c[len("est.") : -len(".rms_t_m")]
-            t, r = columns[c][keep], columns[f"est.{name}.rms_r_deg"][keep]
-            if (
-                keep.any()
-                and np.isfinite(t.astype(float)).all()
-                and np.isfinite(r.astype(float)).all()
-            ):
-                names.append(name)
+
+    def reported(name: str) -> bool:  # by every run kept
+        t, r = columns[f"est.{name}.rms_t_m"][keep], columns[f"est.{name}.rms_r_deg"][keep]
+        return bool(np.isfinite(t.astype(float)).all() and np.isfinite(r.astype(float)).all())
+
+    column = re.compile(r"est\.(.+)\.rms_t_m")
+    candidates = [m.group(1) for c in sorted(columns) if (m := column.fullmatch(c))]
+    names = [n for n in candidates if reported(n)] if keep.any() else []
     if not names:
         return {"runs": 0, "estimators": {}}
     T = np.column_stack([columns[f"est.{n}.rms_t_m"][keep] for n in names]).astype(float)
