@@ -158,6 +158,30 @@ def test_each_block_compares_the_estimators_its_runs_report():
     assert off["estimators"]["b"]["best_r"] == 2 and off["estimators"]["b"]["best_both"] == 1
 
 
+def test_an_axis_effect_is_shown_within_each_cell_of_the_other_factors():
+    """Interactions: the axis's medians per block and per value of the other grid axis, each
+    computed here from the runs by hand; a failed run and another block's missing key are left
+    out."""
+    from cdpr_twin.campaign.report import axis_cells
+
+    nan = np.nan
+    columns = {  # block a varies f and g; block b varies f only (g missing); run 7 failed
+        "block": np.array(["a"] * 6 + ["b"] * 3, dtype=object),
+        "param.f": np.array([0.0, 0.0, 0.1, 0.1, 0.0, 0.1, 0.0, 0.1, 0.1]),
+        "param.g": np.array(["x", "x", "x", "x", "y", "y", None, None, None], dtype=object),
+        "final_t_m": np.array([1.0, 3.0, 5.0, 7.0, 2.0, 4.0, 6.0, nan, 8.0]) * 1e-3,
+        "final_r_deg": np.array([0.1, 0.3, 0.5, 0.7, 0.2, 0.4, 0.6, nan, 0.8]),
+    }
+    ok = np.array([True] * 7 + [False, True])
+    by_g = axis_cells(columns, ok, "f", ["block", "param.g"], "final_t_m")
+    assert by_g.keys() == {("a", "x"), ("a", "y")}  # block b has no g: no cell
+    assert by_g[("a", "x")] == {0.0: (2.0, 0.2, 2), 0.1: (6.0, 0.6, 2)}
+    assert by_g[("a", "y")] == {0.0: (2.0, 0.2, 1), 0.1: (4.0, 0.4, 1)}
+    by_block = axis_cells(columns, ok, "f", ["block"], "final_t_m")
+    assert by_block[("b",)] == {0.0: (6.0, 0.6, 1), 0.1: (8.0, 0.8, 1)}
+    assert by_block[("a",)][0.1] == (pytest.approx(5.0), pytest.approx(0.5), 3)
+
+
 def test_ray_runs_the_same_campaign_to_the_same_numbers(small, tmp_path):
     ray = pytest.importorskip("ray", reason="Ray has no wheel for this platform")
     campaign, out, _ = small

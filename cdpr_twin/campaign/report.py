@@ -18,6 +18,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import re
@@ -116,9 +117,7 @@ def _figure(path: Path, draw) -> None:
 
 def _axis_section(columns: dict, key: str, metric: str, label: str, out: Path) -> list[str]:
     values = columns[f"param.{key}"]
-    levels = set(values.tolist())
-    numeric = all(isinstance(v, int | float) for v in levels)
-    levels = sorted(levels) if numeric else sorted(levels, key=str)
+    levels = _levels(values)
     y = columns[metric] * 1e3
     lines = [f"### Effect of `{key}`", "", f"| {key} | runs | {label} |", "|---|---|---|"]
     groups = []
@@ -135,6 +134,76 @@ def _axis_section(columns: dict, key: str, metric: str, label: str, out: Path) -
 
     _figure(out / name, draw)
     return [*lines, "", f"![{key}]({name})", ""]
+
+
+def _levels(values: np.ndarray) -> list:
+    """A column's distinct values, numbers in numeric order (missing values left out).
+
+    A run without the key (another block's) has ``None`` or NaN there.
+    """
+    present = {v for v in values.tolist() if v is not None and v == v}
+    if all(isinstance(v, int | float) for v in present):
+        return sorted(present)
+    return sorted(present, key=str)
+
+
+def axis_cells(columns: dict, ok: np.ndarray, key: str, factors: list[str], metric: str) -> dict:
+    """An axis's effect within each combination of the other factors (interactions shown).
+
+    Args:
+        columns: the table's columns (``param.<key>``, the factors', ``metric`` and its rotation
+            twin ``…r_deg`` beside ``…t_m``).
+        ok: (n,) the runs that ran.
+        key: the axis (dotted scenario key).
+        factors: the other columns that split the runs (``block``, ``param.<other axis>``).
+        metric: the translation column (``cp1.t_m`` or ``final_t_m``).
+
+    Returns:
+        ``{cell: {level: (median translation [mm], median rotation [deg], runs)}}``, a cell
+        being the factors' values (a tuple, in ``factors`` order); medians over the runs that
+        ran with a finite metric.
+    """
+    values, t = columns[f"param.{key}"], columns[metric].astype(float)
+    r = columns[metric[: -len("t_m")] + "r_deg"].astype(float)
+    keep = ok & np.isfinite(t)
+    cells: dict = {}
+    for cell in itertools.product(*(_levels(columns[f][keep]) for f in factors)):
+        in_cell = keep.copy()
+        for f, v in zip(factors, cell, strict=True):
+            in_cell &= columns[f] == v
+        row = {
+            level: (float(np.median(t[sel]) * 1e3), float(np.median(r[sel])), int(sel.sum()))
+            for level in _levels(values[in_cell])
+            if (sel := in_cell & (values == level)).any()
+        }
+        if row:
+            cells[cell] = row
+    return cells
+
+
+def _interaction_section(columns: dict, ok: np.ndarray, key: str, others: list[str],
+                         metric: str) -> list[str]:  # fmt: skip
+    factors = (["block"] if len(_levels(columns["block"][ok])) > 1 else []) + others
+    if not factors:
+        return []
+    cells = axis_cells(columns, ok, key, factors, metric)
+    levels = _levels(columns[f"param.{key}"][ok])
+    heads = [f.removeprefix("param.") for f in factors]
+    lines = [
+        f"By {', '.join(f'`{h}`' for h in heads)}: median translation / rotation "
+        f"({'at p1' if metric.startswith('cp1') else 'final, vs the goal'}) and runs, per "
+        f"value of `{key}`:",
+        "",
+        "| " + " | ".join([*heads, *(str(v) for v in levels)]) + " |",
+        "|" + "---|" * (len(heads) + len(levels)),
+    ]
+    for cell, row in cells.items():
+        entries = [
+            f"{row[v][0]:.2f} mm / {row[v][1]:.3f}° ({row[v][2]})" if v in row else "–"
+            for v in levels
+        ]
+        lines.append("| " + " | ".join([*(str(c) for c in cell), *entries]) + " |")
+    return [*lines, ""]
 
 
 def _attribution_section(campaign: Campaign, rows: list[dict]) -> list[str]:
@@ -198,16 +267,18 @@ def write_report(out: str | Path, campaign: Campaign) -> Path:
         ax.set_ylabel("runs")
 
     _figure(out / "distribution.png", hist)
-    for c in table.column_names:  # grid axes: few values, each repeated
-        levels = len(set(columns[c].tolist()))
-        seed = c.endswith("seed")  # a seed names a draw: its "effect" is the spread above
-        if (
-            c.startswith("param.")
-            and not seed
-            and c != "param.sample"
-            and 1 < levels <= min(20, len(rows) - 1)
-        ):
-            lines += _axis_section(columns, c[len("param.") :], metric, label, out)
+    grid = [  # grid axes: few values, each repeated; a seed names a draw (its spread: above)
+        c
+        for c in table.column_names
+        if c.startswith("param.")
+        and not c.endswith("seed")
+        and c != "param.sample"
+        and 1 < len(_levels(columns[c])) <= min(20, len(rows) - 1)
+    ]
+    for c in grid:
+        lines += _axis_section(columns, c[len("param.") :], metric, label, out)
+        others = [o for o in grid if o != c]
+        lines += _interaction_section(columns, ok, c[len("param.") :], others, metric)
     lines += _estimator_section(columns, ok)
     lines += _attribution_section(campaign, rows)
     path = out / "report.md"
