@@ -3,6 +3,7 @@ row equal to its run's own summary.json, resumable after a kill, stoppable with 
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -182,6 +183,28 @@ def test_an_axis_effect_is_shown_within_each_cell_of_the_other_factors():
     assert by_block[("a",)][0.1] == (pytest.approx(5.0), pytest.approx(0.5), 3)
 
 
+def test_a_part_keeps_every_rows_columns_when_a_failed_run_comes_first(tmp_path):
+    """A failed run has no metrics; the runs written in the same part keep theirs."""
+    from cdpr_twin.campaign.table import ResultTable, flatten
+
+    fields = [
+        {"run_id": f"r{i}", "block": "b", "name": f"n{i}", "params": {"seed": i}} for i in (1, 2)
+    ]
+    est = {"max_translation_m": 1.0, "max_rotation_deg": 2.0, "rms_translation_m": 3.0,
+           "rms_rotation_deg": 4.0, "final_translation_m": 5.0, "final_rotation_deg": 6.0,
+           "invalid_updates": 7}  # fmt: skip
+    goal = {"translation_m": 0.5, "rotation_deg": 1.5}
+    ran = {"status": "converged", "final_error_vs_goal": goal, "estimators": {"control": est}}
+    table = ResultTable(tmp_path, every=10)
+    table.add(flatten(fields[0], None, error="ScenarioError: refused"))
+    table.add(flatten(fields[1], ran))
+    table.gather()
+    rows = load_table(tmp_path).to_pylist()
+    assert [r["ok"] for r in rows] == [False, True]
+    assert rows[1]["final_t_m"] == 0.5 and rows[1]["est.control.rms_r_deg"] == 4.0
+    assert rows[1]["est.control.invalid"] == 7 and rows[0]["est.control.rms_t_m"] is None
+
+
 def test_ray_runs_the_same_campaign_to_the_same_numbers(small, tmp_path):
     ray = pytest.importorskip("ray", reason="Ray has no wheel for this platform")
     campaign, out, _ = small
@@ -293,3 +316,18 @@ def test_the_paper_study_campaign_is_what_reproduce_runs():
         key = (t.block, t.params.get("estimators.in_loop"), t.params["seed"])
         assert _canonical(scenario_from_data(t.data, t.source)) == planned.pop(key), key
     assert not planned
+
+
+@pytest.mark.parametrize(
+    "study", sorted(p.parent.name for p in (ROOT / "docs").glob("*/campaign.json"))
+)
+def test_a_committed_campaign_report_is_what_its_table_gives(study, tmp_path):
+    """The reports under docs/ are recomputed from their committed tables by today's code."""
+    from cdpr_twin.campaign.report import write_report
+
+    committed = ROOT / "docs" / study
+    info = json.loads((committed / "campaign.json").read_text())
+    assert info["status"] == "completed" and info["table"] == f"docs/{study}/results.parquet"
+    copy = shutil.copytree(committed, tmp_path / study)
+    report = write_report(copy, load_campaign(ROOT / info["source"]))
+    assert report.read_text() == (committed / "report.md").read_text()

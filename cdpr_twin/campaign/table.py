@@ -125,7 +125,10 @@ class ResultTable:
         import pyarrow as pa
 
         path = self.parts / f"part-{self._next:05d}.parquet"
-        _write(pa.Table.from_pylist(self._rows), path)
+        # every row's columns (pyarrow's from_pylist would take the first row's: a failed run
+        # first in a part would drop the others' metrics); a column a row lacks is null there
+        names = list(dict.fromkeys(k for row in self._rows for k in row))
+        _write(pa.table({k: [row.get(k) for row in self._rows] for k in names}), path)
         self._next += 1
         self._rows = []
         self._flushed = time.monotonic()
