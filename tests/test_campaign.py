@@ -160,27 +160,29 @@ def test_each_block_compares_the_estimators_its_runs_report():
 
 
 def test_an_axis_effect_is_shown_within_each_cell_of_the_other_factors():
-    """Interactions: the axis's medians per block and per value of the other grid axis, each
-    computed here from the runs by hand; a failed run and another block's missing key are left
-    out."""
+    """Interactions: the axis's medians per block and per value of the other grid axes, each
+    computed here from the runs by hand; a failed run is left out, and a block without an axis
+    has its own cell ("–")."""
     from cdpr_twin.campaign.report import axis_cells
 
     nan = np.nan
-    columns = {  # block a varies f and g; block b varies f only (g missing); run 7 failed
+    columns = {  # block a varies f, g and h; block b varies f only; run 7 failed
         "block": np.array(["a"] * 6 + ["b"] * 3, dtype=object),
         "param.f": np.array([0.0, 0.0, 0.1, 0.1, 0.0, 0.1, 0.0, 0.1, 0.1]),
         "param.g": np.array(["x", "x", "x", "x", "y", "y", None, None, None], dtype=object),
-        "final_t_m": np.array([1.0, 3.0, 5.0, 7.0, 2.0, 4.0, 6.0, nan, 8.0]) * 1e-3,
-        "final_r_deg": np.array([0.1, 0.3, 0.5, 0.7, 0.2, 0.4, 0.6, nan, 0.8]),
+        "param.h": np.array([1.0, 1.0, 1.0, 1.0, 1.0, 1.0, nan, nan, nan]),  # as from Parquet
+        "final_t_m": np.array([1.0, 3.0, 5.0, 7.0, 2.0, 4.0, 6.0, 100.0, 8.0]) * 1e-3,
+        "final_r_deg": np.array([0.1, 0.3, 0.5, 0.7, 0.2, 0.4, 0.6, 10.0, 0.8]),
     }
     ok = np.array([True] * 7 + [False, True])
     by_g = axis_cells(columns, ok, "f", ["block", "param.g"], "final_t_m")
-    assert by_g.keys() == {("a", "x"), ("a", "y")}  # block b has no g: no cell
+    assert by_g.keys() == {("a", "x"), ("a", "y"), ("b", None)}
     assert by_g[("a", "x")] == {0.0: (2.0, 0.2, 2), 0.1: (6.0, 0.6, 2)}
     assert by_g[("a", "y")] == {0.0: (2.0, 0.2, 1), 0.1: (4.0, 0.4, 1)}
-    by_block = axis_cells(columns, ok, "f", ["block"], "final_t_m")
-    assert by_block[("b",)] == {0.0: (6.0, 0.6, 1), 0.1: (8.0, 0.8, 1)}
-    assert by_block[("a",)][0.1] == (pytest.approx(5.0), pytest.approx(0.5), 3)
+    assert by_g[("b", None)] == {0.0: (6.0, 0.6, 1), 0.1: (8.0, 0.8, 1)}  # not the failed 100
+    by_h = axis_cells(columns, ok, "f", ["block", "param.h"], "final_t_m")
+    assert by_h.keys() == {("a", 1.0), ("b", None)}
+    assert by_h[("a", 1.0)][0.1] == (pytest.approx(5.0), pytest.approx(0.5), 3)
 
 
 def test_a_part_keeps_every_rows_columns_when_a_failed_run_comes_first(tmp_path):
@@ -203,6 +205,17 @@ def test_a_part_keeps_every_rows_columns_when_a_failed_run_comes_first(tmp_path)
     assert [r["ok"] for r in rows] == [False, True]
     assert rows[1]["final_t_m"] == 0.5 and rows[1]["est.control.rms_r_deg"] == 4.0
     assert rows[1]["est.control.invalid"] == 7 and rows[0]["est.control.rms_t_m"] is None
+
+
+def test_an_axis_of_ints_and_floats_gathers_into_one_column(tmp_path):
+    """values = [0, 0.5]: parts typed int64 and double, one float column in the table."""
+    from cdpr_twin.campaign.table import ResultTable, flatten
+
+    table = ResultTable(tmp_path, every=1)
+    for i, v in enumerate((0, 0.5)):
+        table.add(flatten({"run_id": f"r{i}", "block": "b", "name": "n", "params": {"g": v}}, {}))
+    table.gather()
+    assert load_table(tmp_path).column("param.g").to_pylist() == [0.0, 0.5]
 
 
 def test_ray_runs_the_same_campaign_to_the_same_numbers(small, tmp_path):
@@ -318,9 +331,20 @@ def test_the_paper_study_campaign_is_what_reproduce_runs():
     assert not planned
 
 
-@pytest.mark.parametrize(
-    "study", sorted(p.parent.name for p in (ROOT / "docs").glob("*/campaign.json"))
-)
+def _committed_studies() -> list[str]:
+    """The campaign studies committed under docs/ (a run's untracked output is not one)."""
+    try:
+        out = subprocess.run(
+            ["git", "ls-files", "docs/*/campaign.json"], cwd=ROOT, capture_output=True,
+            text=True, check=True,
+        ).stdout  # fmt: skip
+        paths = [ROOT / p for p in out.split()]
+    except (OSError, subprocess.CalledProcessError):  # not a git checkout: what is there
+        paths = list((ROOT / "docs").glob("*/campaign.json"))
+    return sorted(p.parent.name for p in paths)
+
+
+@pytest.mark.parametrize("study", _committed_studies())
 def test_a_committed_campaign_report_is_what_its_table_gives(study, tmp_path):
     """The reports under docs/ are recomputed from their committed tables by today's code."""
     from cdpr_twin.campaign.report import write_report
@@ -328,6 +352,8 @@ def test_a_committed_campaign_report_is_what_its_table_gives(study, tmp_path):
     committed = ROOT / "docs" / study
     info = json.loads((committed / "campaign.json").read_text())
     assert info["status"] == "completed" and info["table"] == f"docs/{study}/results.parquet"
-    copy = shutil.copytree(committed, tmp_path / study)
+    copy = tmp_path / study  # the table only: the report is computed from it
+    shutil.copytree(committed / "parts", copy / "parts")
+    shutil.copy(committed / "results.parquet", copy)
     report = write_report(copy, load_campaign(ROOT / info["source"]))
     assert report.read_text() == (committed / "report.md").read_text()

@@ -326,5 +326,6 @@ def test_a_focal_length_error_shifts_a_nominal_goal_along_the_optical_axis_not_a
     z_goal = s.controller.options.goal_T_cam_tag[2, 3]
     predicted = delta * z_goal / (1 + delta)  # nearer the tag: down, the camera looks down
     assert shift[2] == pytest.approx(-predicted, rel=0.1)
+    assert np.hypot(shift[0], shift[1]) < 0.25 * predicted  # along the axis (measured 0.15)
     taught = ends["taught"]["final_error_vs_goal"]
     assert taught["translation_m"] < 0.25 * np.linalg.norm(shift) and taught["rotation_deg"] < 0.3

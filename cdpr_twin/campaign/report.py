@@ -160,17 +160,20 @@ def axis_cells(columns: dict, ok: np.ndarray, key: str, factors: list[str], metr
 
     Returns:
         ``{cell: {level: (median translation [mm], median rotation [deg], runs)}}``, a cell
-        being the factors' values (a tuple, in ``factors`` order); medians over the runs that
-        ran with a finite metric.
+        being the factors' values (a tuple, in ``factors`` order; ``None`` where the runs do
+        not have the factor: a block that does not vary that axis); medians over the runs
+        that ran with a finite metric.
     """
     values, t = columns[f"param.{key}"], columns[metric].astype(float)
     r = columns[metric[: -len("t_m")] + "r_deg"].astype(float)
     keep = ok & np.isfinite(t)
+    missing = {f: np.array([v is None or v != v for v in columns[f].tolist()]) for f in factors}
     cells: dict = {}
-    for cell in itertools.product(*(_levels(columns[f][keep]) for f in factors)):
+    levels = [_levels(columns[f][keep]) + [None][: int(missing[f][keep].any())] for f in factors]
+    for cell in itertools.product(*levels):
         in_cell = keep.copy()
         for f, v in zip(factors, cell, strict=True):
-            in_cell &= columns[f] == v
+            in_cell &= missing[f] if v is None else columns[f] == v
         row = {
             level: (float(np.median(t[sel]) * 1e3), float(np.median(r[sel])), int(sel.sum()))
             for level in _levels(values[in_cell])
@@ -202,7 +205,8 @@ def _interaction_section(columns: dict, ok: np.ndarray, key: str, others: list[s
             f"{row[v][0]:.2f} mm / {row[v][1]:.3f}° ({row[v][2]})" if v in row else "–"
             for v in levels
         ]
-        lines.append("| " + " | ".join([*(str(c) for c in cell), *entries]) + " |")
+        names = ["–" if c is None else str(c) for c in cell]
+        lines.append("| " + " | ".join([*names, *entries]) + " |")
     return [*lines, ""]
 
 

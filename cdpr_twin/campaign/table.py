@@ -165,7 +165,9 @@ def load_parts(parts: Path):
     tables = [pq.read_table(p) for p in sorted(Path(parts).glob("part-*.parquet"))]
     if not tables:
         raise OutputError(Path(parts), "no results yet")
-    return pa.concat_tables(tables, promote_options="default")
+    # permissive: an axis [0, 0.5] gives int64 parts and double parts (each part's types are
+    # its own rows'), merged as double
+    return pa.concat_tables(tables, promote_options="permissive")
 
 
 def load_table(out: str | Path):
