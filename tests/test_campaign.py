@@ -185,6 +185,19 @@ def test_an_axis_effect_is_shown_within_each_cell_of_the_other_factors():
     assert by_h[("a", 1.0)][0.1] == (pytest.approx(5.0), pytest.approx(0.5), 3)
 
 
+def test_the_report_says_why_runs_failed():
+    from cdpr_twin.campaign.report import _failure_section
+
+    columns = {
+        "name": np.array(["r1", "r2", "r3", "r4", "r5", "r6"], dtype=object),
+        "error": np.array(["", "E: a|b", "E: c", "E: a|b", "E: a|b", "E: a|b"], dtype=object),
+    }
+    lines = _failure_section(columns, np.array([True, False, False, False, False, False]))
+    assert lines[4] == "| 4 | E: a/b | `r2`, `r4`, `r5`, … |"  # most frequent first
+    assert lines[5] == "| 1 | E: c | `r3` |" and len(lines) == 7
+    assert _failure_section(columns, np.ones(6, bool)) == []
+
+
 def test_a_part_keeps_every_rows_columns_when_a_failed_run_comes_first(tmp_path):
     """A failed run has no metrics; the runs written in the same part keep theirs."""
     from cdpr_twin.campaign.table import ResultTable, flatten

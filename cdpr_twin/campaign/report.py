@@ -234,6 +234,20 @@ def _attribution_section(campaign: Campaign, rows: list[dict]) -> list[str]:
     return [*lines, ""]
 
 
+def _failure_section(columns: dict, ok: np.ndarray) -> list[str]:
+    """Why runs failed: each distinct error, its run count and the first runs' names."""
+    errors: dict[str, list[str]] = {}
+    for name, error in zip(columns["name"][~ok], columns["error"][~ok], strict=True):
+        errors.setdefault(str(error), []).append(str(name))
+    if not errors:
+        return []
+    lines = ["## Failed runs", "", "| runs | error | e.g. |", "|---|---|---|"]
+    for error, names in sorted(errors.items(), key=lambda kv: -len(kv[1])):
+        shown = ", ".join(f"`{n}`" for n in names[:3]) + (", …" if len(names) > 3 else "")
+        lines.append(f"| {len(names)} | {error.replace('|', '/')} | {shown} |")
+    return [*lines, ""]
+
+
 def write_report(out: str | Path, campaign: Campaign) -> Path:
     """Compute ``report.md`` and its figures from the campaign's table; returns its path."""
     out = Path(out)
@@ -285,6 +299,7 @@ def write_report(out: str | Path, campaign: Campaign) -> Path:
         lines += _interaction_section(columns, ok, c[len("param.") :], others, metric)
     lines += _estimator_section(columns, ok)
     lines += _attribution_section(campaign, rows)
+    lines += _failure_section(columns, ok)
     path = out / "report.md"
     partial = path.with_name("report.md.partial")
     with writing(partial):
