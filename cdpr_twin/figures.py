@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from cdpr_twin.metrics import sample_std
 from cdpr_twin.results import ordered_estimators
 from cdpr_twin.timeseries import Timeseries
 
@@ -150,7 +151,7 @@ def accuracy_bars(groups: dict[str, dict[str, list[float]]], path: Path) -> Path
         (b, "rotation_deg", 1.0, "rotation error [deg]"),
     ):
         means = [np.mean(groups[k][key]) * scale if groups[k][key] else np.nan for k in labels]
-        stds = [np.std(groups[k][key]) * scale if groups[k][key] else 0.0 for k in labels]
+        stds = [sample_std(groups[k][key]) * scale for k in labels]
         colors = ["#7f7f7f" if k.startswith("open") else "#1f77b4" for k in labels]
         ax.bar(x, means, yerr=stds, capsize=4, color=colors)
         for xi, k in zip(x, labels, strict=True):

@@ -16,6 +16,19 @@ from cdpr_twin.se3 import pose_distance, vector_from_pose
 from cdpr_twin.types import PoseEstimate
 
 
+def sample_std(values) -> float:
+    """The sample standard deviation (n − 1 in the denominator) of a spread over repetitions.
+
+    Args:
+        values: (n,) values.
+
+    Returns:
+        The std, 0.0 for fewer than two values (no spread measured).
+    """
+    x = np.asarray(values, dtype=float)
+    return float(x.std(ddof=1)) if x.size > 1 else 0.0
+
+
 def pose_error(T_a: np.ndarray, T_b: np.ndarray) -> dict:
     """JSON-ready distance between two poses (metres and degrees)."""
     dt, dr = pose_distance(T_a, T_b)

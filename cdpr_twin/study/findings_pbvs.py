@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from cdpr_twin.metrics import sample_std
 from cdpr_twin.study.verdicts import Finding, verdict
 
 
@@ -67,7 +68,7 @@ def repeatability(rep: dict) -> Finding | None:
     acc = rep.get("accuracy", {})
     if not ("open loop" in acc and "PBVS (all)" in acc):
         return None
-    spreads = {k: float(np.std(acc[k]["translation_m"])) for k in ("open loop", "PBVS (all)")}
+    spreads = {k: sample_std(acc[k]["translation_m"]) for k in ("open loop", "PBVS (all)")}
     counts = {k: len(acc[k]["translation_m"]) for k in spreads}
     decomposition = {k: _shares(g) for k, g in rep.get("spread", {}).items() if _shares(g)}
     if decomposition:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cdpr_twin.metrics import sample_std
 from cdpr_twin.results import load_summary, model_estimators
 from cdpr_twin.study.analysis import figure_runs, segment_ends
 from cdpr_twin.timeseries import Timeseries
@@ -145,8 +146,8 @@ def _accuracy(rep: dict) -> list[str]:
     for k, g in rep["accuracy"].items():
         t, r = np.array(g["translation_m"]), np.array(g["rotation_deg"])
         lines.append(
-            f"| {k} | {len(t)} | {_mm(t.mean())} ± {_mm(t.std())} | "
-            f"{r.mean():.3f}° ± {r.std():.3f}° |"
+            f"| {k} | {len(t)} | {_mm(t.mean())} ± {_mm(sample_std(t))} | "
+            f"{r.mean():.3f}° ± {sample_std(r):.3f}° |"
         )
     return lines
 

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cdpr_twin.metrics import sample_std
+
 PBVS_CONVERGED = "converged"
 """The status of a PBVS run that reached its goal (only those count for accuracy)."""
 
@@ -50,9 +52,9 @@ def _stats(values: list[dict]) -> dict:
     return {
         "n": len(t),
         "mean_translation_m": float(t.mean()),
-        "std_translation_m": float(t.std(ddof=1)) if len(t) > 1 else 0.0,
+        "std_translation_m": sample_std(t),
         "mean_rotation_deg": float(r.mean()),
-        "std_rotation_deg": float(r.std(ddof=1)) if len(r) > 1 else 0.0,
+        "std_rotation_deg": sample_std(r),
     }
 
 
