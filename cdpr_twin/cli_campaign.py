@@ -78,11 +78,7 @@ def campaign_command(args: argparse.Namespace) -> int:
     except KeyboardInterrupt as exc:
         progress.done()
         how, code = ("terminated", 143) if isinstance(exc, Terminated) else ("interrupted", 130)
-        print(
-            f"cdpr-twin: {how}; the finished runs are in {out}/results.parquet "
-            "(run again with --resume for the rest)",
-            file=sys.stderr,
-        )
+        print(f"cdpr-twin: {how}; {_what_was_kept(out)}", file=sys.stderr)
         return code
     progress.done()
     print(
@@ -93,11 +89,30 @@ def campaign_command(args: argparse.Namespace) -> int:
     return 1 if progress.failed else 0
 
 
+def _what_was_kept(out: Path) -> str:
+    """After a stop: where the finished runs are (``campaign.json`` says how many ran)."""
+    import json
+
+    from cdpr_twin.campaign.table import RESULTS
+
+    try:
+        ran = json.loads((out / "campaign.json").read_text(encoding="utf-8"))["ran_now"]
+    except (OSError, ValueError, KeyError):
+        ran = None
+    rest = "run again with --resume for the rest"
+    if not (out / RESULTS).exists():
+        return f"no run had finished, nothing was recorded in {out} ({rest})"
+    now = "" if ran is None else f"{ran} runs finished now; "
+    return f"{now}the table of the finished runs is {out / RESULTS} ({rest})"
+
+
 def add_campaign_parser(sub) -> None:
     """The ``campaign`` subcommand."""
+    from cdpr_twin.outputs import out_path
+
     cp = sub.add_parser("campaign", help="run a campaign file: many varied runs into one table")
     cp.add_argument("campaign", type=Path, help="campaign file (campaigns/*.toml)")
-    cp.add_argument("--out", type=Path, default=None, help="output directory (runs/<name>)")
+    cp.add_argument("--out", type=out_path, default=None, help="output directory (runs/<name>)")
     cp.add_argument("--workers", type=int, default=None, help="parallel runs (default: cores)")
     cp.add_argument("--resume", action="store_true", help="run only the runs not in the table")
     cp.add_argument(

@@ -6,6 +6,7 @@ inside what estimators and controllers see.
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
@@ -14,6 +15,9 @@ import numpy as np
 
 from cdpr_twin.se3 import pose_distance, vector_from_pose
 from cdpr_twin.types import PoseEstimate
+
+NON_FINITE_ESTIMATE = "non_finite_estimate"
+"""The flag counted for an estimate whose pose is not finite (no deviation is measured)."""
 
 
 def sample_std(values) -> float:
@@ -52,8 +56,18 @@ class DeviationTrack:
     count: int = 0
 
     def add(self, estimate: PoseEstimate, distance: tuple[float, float]) -> None:
-        """Account one estimate and its (translation [m], rotation [rad]) deviation."""
+        """Account one estimate and its (translation [m], rotation [rad]) deviation.
+
+        A non-finite estimate (a broken estimator's NaN pose) has no deviation to measure: it
+        counts as an invalid update, raises the flag :data:`NON_FINITE_ESTIMATE` and leaves the
+        final deviation NaN; the max and RMS are over the finite estimates.
+        """
         dt, dr = distance
+        if not (math.isfinite(dt) and math.isfinite(dr)):
+            self.invalid_updates += 1
+            self.flags.update({*estimate.flags, NON_FINITE_ESTIMATE})
+            self.final_translation = self.final_rotation = math.nan
+            return
         if dt > self.max_translation:
             self.max_translation, self.max_translation_time = dt, estimate.time
         if dr > self.max_rotation:

@@ -40,6 +40,8 @@ LOCK_NAME = ".lock"
 """The lock file in an output directory while a run writes it."""
 OUTPUT_NAMES = ("timeseries.csv", "recording.rrd", "summary.json")
 """The final names of a run's files (removed with ``*.partial`` when a new run starts)."""
+CAMPAIGN_FILES = ("campaign.json", "parts")
+"""What marks a campaign's directory (a run there is refused: it would mix into its table)."""
 
 
 class OutputDirError(Exception):
@@ -152,14 +154,27 @@ def _stale(owner: tuple[int, str] | None) -> bool:
 class OutputDir:
     """A run's claim on its output directory: :meth:`claim` it, then :meth:`release` it.
 
-    Attributes:
+    Args:
         path: the directory, or ``None`` (no outputs: claiming and releasing do nothing).
+        outputs: the final names of an earlier output that a claim removes (with ``*.partial``):
+            a run's by default.
+        foreign: names whose presence means the directory holds another command's outputs
+            (e.g. a run's in a campaign's directory): the claim is refused, nothing touched.
+
+    Attributes:
+        path: the directory, or ``None``.
         lock: its lock file, or ``None``.
     """
 
-    def __init__(self, path: Path | None) -> None:
+    def __init__(
+        self,
+        path: Path | None,
+        outputs: tuple[str, ...] = OUTPUT_NAMES,
+        foreign: tuple[str, ...] = (),
+    ) -> None:
         self.path = None if path is None else Path(path)
         self.lock = None if path is None else self.path / LOCK_NAME
+        self.outputs, self.foreign = outputs, foreign
         self._held = False
 
     def claim(self) -> None:
@@ -171,6 +186,11 @@ class OutputDir:
         """
         if self.path is None:
             return
+        if held := [n for n in self.foreign if (self.path / n).exists()]:
+            raise OutputDirError(
+                f"output directory {self.path} holds another command's outputs "
+                f"({', '.join(held)}); choose another directory"
+            )
         self._acquire()
         try:
             self._clear()
@@ -212,7 +232,7 @@ class OutputDir:
 
     def _clear(self) -> None:
         """Remove an earlier run's outputs: final names and ``*.partial``."""
-        stale = [self.path / n for n in OUTPUT_NAMES] + sorted(self.path.glob("*.partial"))
+        stale = [self.path / n for n in self.outputs] + sorted(self.path.glob("*.partial"))
         for path in stale:
             with writing(path):
                 path.unlink(missing_ok=True)
@@ -223,6 +243,21 @@ class OutputDir:
             self._held = False
             with contextlib.suppress(OSError):
                 self.lock.unlink()
+
+
+def out_path(text: str) -> Path:
+    """An ``--out`` argument as a path; an empty one (an unset shell variable) is refused.
+
+    ``Path("")`` is the current directory, whose unrelated files a claim would remove.
+
+    Raises:
+        argparse.ArgumentTypeError: ``text`` is empty or blank.
+    """
+    import argparse
+
+    if not text.strip():
+        raise argparse.ArgumentTypeError("is empty: give a directory (e.g. runs/my_run)")
+    return Path(text)
 
 
 @contextlib.contextmanager

@@ -33,7 +33,7 @@ from cdpr_twin.controllers.base import Controller
 from cdpr_twin.estimators.base import Estimator, update_order
 from cdpr_twin.events import EventSchedule, TagOcclusion
 from cdpr_twin.metrics import RunMetrics
-from cdpr_twin.outputs import OutputDir, OutputError, Terminated
+from cdpr_twin.outputs import CAMPAIGN_FILES, OutputDir, OutputError, Terminated
 from cdpr_twin.plugins import OptionError
 from cdpr_twin.procedure import homing, teach
 from cdpr_twin.record import SceneInfo
@@ -286,7 +286,7 @@ def run(
         OutputDirError: ``out_dir`` cannot be used or another run owns it (nothing touched).
         OutputError: an output could not be written (all left ``*.partial``, no summary).
     """
-    s, setup, owner = scenario, prepare(scenario), OutputDir(out_dir)
+    s, setup, owner = scenario, prepare(scenario), OutputDir(out_dir, foreign=CAMPAIGN_FILES)
     period = scenario.model.control_period
     try:
         owner.claim()  # the lock, then an earlier run's files removed

@@ -19,7 +19,13 @@ from cdpr_twin.campaign.executor import ExecutorError, run_local, run_ray
 from cdpr_twin.campaign.spec import Campaign, CampaignError, Task, load_campaign
 from cdpr_twin.campaign.table import RESULTS, ResultTable, load_table
 from cdpr_twin.campaign.worker import run_task
-from cdpr_twin.outputs import OutputDir, OutputDirError, write_json_atomic
+from cdpr_twin.outputs import (
+    OUTPUT_NAMES,
+    OutputDir,
+    OutputDirError,
+    Terminated,
+    write_json_atomic,
+)
 
 __all__ = [
     "Campaign",
@@ -63,7 +69,7 @@ def run_campaign(
         OutputDirError: ``out`` is in use, or holds results and ``resume`` is off.
         ExecutorError: Ray is asked for but cannot start.
     """
-    owner = OutputDir(out)
+    owner = OutputDir(out, outputs=(), foreign=OUTPUT_NAMES)  # a run's directory: refused
     owner.claim()
     try:
         # parts of ≤ 1/10 of the runs (≤ 20 rows): a kill loses at most that much work
@@ -73,6 +79,12 @@ def run_campaign(
             raise OutputDirError(
                 f"{out} already holds {len(done_ids)} runs of a campaign; pass --resume to run "
                 "only the missing ones, or choose another --out"
+            )
+        if strangers := done_ids - {t.run_id for t in campaign.tasks}:
+            raise OutputDirError(
+                f"{out} holds {len(strangers)} runs that campaign {campaign.name!r} does not "
+                "have (another campaign's, or this file's before an edit): resuming would mix "
+                "them into one table; choose another --out"
             )
         todo = [t for t in campaign.tasks if t.run_id not in done_ids]
         return _execute(campaign, out, table, todo, workers, ray_address, progress)
@@ -94,8 +106,8 @@ def _execute(campaign, out, table, todo, workers, ray_address, progress) -> dict
             n += 1
             if progress is not None:
                 progress(n, len(todo), row)
-    except KeyboardInterrupt:
-        status = "interrupted"
+    except KeyboardInterrupt as exc:
+        status = "terminated" if isinstance(exc, Terminated) else "interrupted"
         raise
     finally:
         if n or not (Path(out) / RESULTS).exists():

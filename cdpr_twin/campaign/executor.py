@@ -12,6 +12,9 @@ mode is gone), ``address`` joins an existing one.
 from __future__ import annotations
 
 import multiprocessing
+import os
+import threading
+import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any
@@ -31,7 +34,9 @@ def run_local(
     ctx = multiprocessing.get_context("spawn")
     pending: set = set()
     todo = iter(items)
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    with ProcessPoolExecutor(
+        max_workers=workers, mp_context=ctx, initializer=_exit_with, initargs=(os.getpid(),)
+    ) as pool:
         try:
             for item in todo:
                 pending.add(pool.submit(fn, item, *args))
@@ -44,8 +49,40 @@ def run_local(
         except BaseException:
             for f in pending:
                 f.cancel()
-            pool.shutdown(wait=False, cancel_futures=True)
+            _stop_workers(pool)  # a stop ends the runs under way, not after them
+            pool.shutdown(wait=True, cancel_futures=True)
             raise
+
+
+def _exit_with(parent: int) -> None:
+    """In a worker: end the process when its parent is gone (a killed campaign, SIGKILL).
+
+    A spawned worker outlives a parent killed without cleanup and would simulate on, at full
+    CPU, for nobody; a daemon thread polls the parent's pid once a second.
+    """
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
+def _stop_workers(pool: ProcessPoolExecutor) -> None:
+    """Terminate the pool's worker processes (their runs are abandoned, not recorded).
+
+    ``shutdown`` alone lets every run already handed to a worker finish (40 s for a PBVS run),
+    past a supervisor's grace period, and its row would be lost anyway. Python ≥ 3.14 has
+    ``terminate_workers``; before it, the pool's processes are only reachable by its private
+    ``_processes``.
+    """
+    terminate = getattr(pool, "terminate_workers", None)
+    if terminate is not None:
+        terminate()
+        return
+    for process in list((getattr(pool, "_processes", None) or {}).values()):
+        process.terminate()
 
 
 def run_ray(

@@ -1,0 +1,167 @@
+"""A campaign's directory is its own: a run's directory is not taken (nor a campaign's by a run),
+a resume never mixes two campaigns into one table, a stop ends the runs under way and says what
+was kept, a killed campaign leaves no worker simulating, and an empty ``--out`` is refused.
+Also: a broken estimator's NaN pose is counted, not measured."""
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from cdpr_twin.campaign import load_campaign, load_table, run_campaign
+from cdpr_twin.cli import main
+from cdpr_twin.metrics import NON_FINITE_ESTIMATE, DeviationTrack
+from cdpr_twin.outputs import OutputDirError
+from cdpr_twin.types import PoseEstimate
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _campaign(tmp_path: Path, name: str, duration: float, camera: bool, seeds=(1,)) -> Path:
+    path = tmp_path / f"{name}.toml"
+    path.write_text(
+        f'name = "{name}"\nscenario = "{ROOT}/scenarios/paper_open_loop.toml"\n\n'
+        f'[overrides]\n"sensors.camera" = {str(camera).lower()}\nduration = {duration}\n\n'
+        f'[[axes]]\nkey = "seed"\nvalues = {list(seeds)}\n'
+    )
+    return path
+
+
+def _run_files(directory: Path) -> dict[str, bytes]:
+    directory.mkdir(parents=True, exist_ok=True)
+    files = {"summary.json": b'{"status": "completed"}\n', "timeseries.csv": b"time\n0\n"}
+    for name, content in files.items():
+        (directory / name).write_bytes(content)
+    return files
+
+
+def test_a_campaign_refuses_a_runs_directory_and_leaves_the_run_intact(tmp_path, capsys):
+    files = _run_files(tmp_path / "a_run")
+    src = _campaign(tmp_path, "tiny", 0.2, camera=False)
+    for extra in ([], ["--resume"]):
+        assert main(["campaign", str(src), "--out", str(tmp_path / "a_run"), *extra]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "holds another command's outputs" in err and "\n" not in err
+    assert {p.name: p.read_bytes() for p in (tmp_path / "a_run").iterdir()} == files
+
+
+def test_a_run_refuses_a_campaigns_directory(tmp_path, capsys):
+    out = tmp_path / "a_campaign"
+    out.mkdir()
+    (out / "campaign.json").write_text('{"campaign": "x"}\n')
+    argv = ["run", "paper_open_loop", "--out", str(out), "--duration", "0.08", "--no-camera"]
+    assert main(argv) == 2
+    assert "holds another command's outputs (campaign.json)" in capsys.readouterr().err
+    assert [p.name for p in out.iterdir()] == ["campaign.json"]
+
+
+def test_resuming_with_another_campaign_is_refused_and_the_table_kept(tmp_path):
+    first = load_campaign(_campaign(tmp_path, "first", 0.2, camera=False))
+    out = tmp_path / "out"
+    assert run_campaign(first, out, workers=1)["ran_now"] == 1
+    table = load_table(out).to_pylist()
+    other = load_campaign(_campaign(tmp_path, "other", 0.12, camera=False, seeds=(1, 2)))
+    assert {t.run_id for t in other.tasks}.isdisjoint(t.run_id for t in first.tasks)
+    with pytest.raises(OutputDirError, match=r"does not have .* mix them into one table"):
+        run_campaign(other, out, workers=1, resume=True)
+    assert load_table(out).to_pylist() == table
+    # the same campaign with one more run resumes: the old rows are its own
+    grown = load_campaign(_campaign(tmp_path, "first", 0.2, camera=False, seeds=(1, 2)))
+    assert run_campaign(grown, out, workers=1, resume=True)["ran_now"] == 1
+    assert len(pq.read_table(out / "results.parquet")) == 2
+
+
+def test_an_empty_out_is_refused_not_taken_for_the_current_directory(tmp_path, capsys, monkeypatch):
+    src = _campaign(tmp_path, "tiny", 0.2, camera=False)
+    monkeypatch.chdir(tmp_path)  # were it taken, the campaign would write here
+    with pytest.raises(SystemExit) as exit_:
+        main(["campaign", str(src), "--out", ""])
+    assert exit_.value.code == 2 and "--out: is empty" in capsys.readouterr().err
+
+
+def _group_alive(pgid: int) -> bool:
+    """Whether a process of group ``pgid`` still runs (zombies awaiting their reaper do not)."""
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[2]) == pgid and fields[0] != "Z":  # after "comm)": state, ppid, pgrp
+            return True
+    return False
+
+
+def _start_slow_campaign(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
+    """Two 30 s camera-on runs on one worker (each many seconds of wall time)."""
+    src = _campaign(tmp_path, "slow", 30.0, camera=True, seeds=(1, 2))
+    out = tmp_path / "slow_out"
+    cmd = [sys.executable, "-m", "cdpr_twin", "campaign", str(src), "--out", str(out),
+           "--workers", "1"]  # fmt: skip
+    env = {**os.environ, "MUJOCO_GL": "egl"}
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env,
+        start_new_session=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 120
+    while not (out / ".lock").exists() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    time.sleep(6.0)  # the worker spawned, imported the package and started its first run
+    assert proc.poll() is None, proc.stderr.read()
+    return proc, out
+
+
+@pytest.mark.slow
+def test_sigterm_ends_the_runs_under_way_and_says_nothing_was_recorded(tmp_path):
+    proc, out = _start_slow_campaign(tmp_path)
+    t0 = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    try:
+        _, err = proc.communicate(timeout=60)
+        waited = time.monotonic() - t0
+    finally:
+        if _group_alive(proc.pid):
+            os.killpg(proc.pid, signal.SIGKILL)  # (the test fails below)
+    assert proc.returncode == 143, err
+    # before: the worker finished both queued runs (≈ 2 × 20 s), and neither was recorded
+    assert waited < 8.0, f"the campaign took {waited:.1f} s to stop"
+    assert "terminated; no run had finished, nothing was recorded" in err
+    assert json.loads((out / "campaign.json").read_text())["status"] == "terminated"
+    assert not (out / "results.parquet").exists()
+    time.sleep(0.5)
+    assert not _group_alive(proc.pid), "a worker process outlived the campaign"
+
+
+@pytest.mark.slow
+def test_a_killed_campaign_leaves_no_worker_simulating(tmp_path):
+    proc, _ = _start_slow_campaign(tmp_path)
+    os.kill(proc.pid, signal.SIGKILL)  # the parent alone, without any cleanup
+    proc.wait()
+    deadline = time.monotonic() + 10
+    while _group_alive(proc.pid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    alive = _group_alive(proc.pid)
+    if alive:
+        os.killpg(proc.pid, signal.SIGKILL)
+    assert not alive, "the spawned worker kept running after its campaign was killed"
+
+
+def test_a_nan_estimate_is_counted_invalid_not_dropped_from_the_deviations():
+    track = DeviationTrack()
+    T = np.eye(4)
+    track.add(PoseEstimate(0.04, T), (0.001, 0.002))
+    track.add(PoseEstimate(0.08, np.full((4, 4), np.nan)), (math.nan, math.nan))
+    track.add(PoseEstimate(0.12, T), (0.003, 0.001))
+    s = track.summary()
+    assert s["invalid_updates"] == 1 and s["flags"] == {NON_FINITE_ESTIMATE: 1}
+    assert s["max_translation_m"] == 0.003 and s["max_translation_time_s"] == 0.12
+    assert s["rms_translation_m"] == pytest.approx(math.sqrt((0.001**2 + 0.003**2) / 2))
+    track.add(PoseEstimate(0.16, np.full((4, 4), np.nan)), (math.nan, math.nan))
+    assert math.isnan(track.summary()["final_translation_m"])  # the last estimate: none
