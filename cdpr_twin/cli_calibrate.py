@@ -1,4 +1,9 @@
-"""``cdpr-twin calibrate SCENARIO``: self-calibrate the scenario's robot in the twin."""
+"""``cdpr-twin calibrate SCENARIO``: self-calibrate the scenario's robot in the twin.
+
+Bad input (options, the scenario, a start pose the robot cannot be homed at) is refused, exit
+2, before any directory is made or process started. A calibration that fails before writing
+anything leaves no output directory it created itself.
+"""
 
 from __future__ import annotations
 
@@ -11,31 +16,83 @@ from pathlib import Path
 import numpy as np
 
 
-def _calibrate(args: argparse.Namespace) -> int:
-    from cdpr_twin.calibrate.solver import CalibrationError
-    from cdpr_twin.outputs import OutputDir, OutputDirError, OutputError, Terminated, sigterm_raises
-    from cdpr_twin.scenario import ScenarioError, load_scenario
-    from cdpr_twin.sim import ModelError
+def _check_options(args: argparse.Namespace) -> None:
+    """The numbers on the command line, checked before anything runs.
 
-    started = time.perf_counter()
-    try:
+    Raises:
+        ScenarioError: naming the option and what it must be.
+    """
+    from cdpr_twin.scenario import ScenarioError
+
+    if args.poses < 12:
+        raise ScenarioError(f"--poses must be ≥ 12 (the unknowns need them), got {args.poses}")
+    if args.frames < 1:
+        raise ScenarioError(
+            f"--frames must be an integer ≥ 1 (readings averaged per pose), got {args.frames}"
+        )
+    if args.workers < 1:
+        raise ScenarioError(f"--workers must be ≥ 1, got {args.workers}")
+
+
+def _missing(out: Path) -> list[Path]:
+    """``out`` and its ancestors that do not exist yet (what claiming it creates), deepest first."""
+    made = []
+    while not out.exists() and out != out.parent:
+        made.append(out)
+        out = out.parent
+    return made
+
+
+def _remove_empty(made: list[Path]) -> None:
+    """Remove the directories this command created, deepest first, while they are empty."""
+    for path in made:
+        try:
+            path.rmdir()
+        except OSError:  # not empty (a partial file, another writer's file) or gone: keep it
+            return
+
+
+def _calibrate(args: argparse.Namespace) -> int:
+    from cdpr_twin.calibrate.acquire import check
+    from cdpr_twin.outputs import OutputDir, OutputDirError, OutputError
+    from cdpr_twin.scenario import ScenarioError, load_scenario
+
+    started, made = time.perf_counter(), []
+    try:  # everything checked before a directory is made or a process started
+        _check_options(args)
         s = load_scenario(args.scenario).with_overrides(seed=args.seed)
-        if args.poses < 12:
-            raise ScenarioError(f"--poses must be ≥ 12 (the unknowns need them), got {args.poses}")
-        if args.workers < 1:
-            raise ScenarioError(f"--workers must be ≥ 1, got {args.workers}")
         source = s.model.nominal or s.model.file.parent / "robot.toml"
         if not source.is_file():
             raise ScenarioError(
                 f"{s.source}: model: no robot description {source} beside the model file; "
                 'give one with [model] nominal = "robot.toml"'
             )
+        check(s)  # the robot builds, its start pose can be homed at (as `cdpr-twin run` checks)
         out = Path(args.out or Path("runs") / f"{s.name}_calibration")
+        made = _missing(out)
         owner = OutputDir(out)
         owner.claim()  # refuses a directory another calibration or run is writing
     except (ScenarioError, OutputDirError, OutputError) as exc:
+        _remove_empty(made)
         print(f"cdpr-twin calibrate: error: {exc}", file=sys.stderr)
         return 2
+    code = 1
+    try:
+        code = _guarded(args, s, source, out, started)
+    finally:
+        owner.release()
+        if code != 0:  # nothing written: no empty directory of ours is left behind
+            _remove_empty(made)
+    return code
+
+
+def _guarded(args, s, source: Path, out: Path, started: float) -> int:
+    """:func:`_solve_and_write`, its errors turned into one line and an exit code."""
+    from cdpr_twin.calibrate.solver import CalibrationError
+    from cdpr_twin.outputs import OutputError, Terminated, sigterm_raises
+    from cdpr_twin.scenario import ScenarioError
+    from cdpr_twin.sim import ModelError
+
     try:
         with sigterm_raises():
             return _solve_and_write(args, s, source, out, started)
@@ -49,8 +106,6 @@ def _calibrate(args: argparse.Namespace) -> int:
         term = isinstance(exc, Terminated)
         print(f"cdpr-twin calibrate: {'terminated' if term else 'interrupted'}", file=sys.stderr)
         return 143 if term else 130
-    finally:
-        owner.release()
 
 
 def _solve_and_write(args, s, source: Path, out: Path, started: float) -> int:
@@ -119,7 +174,7 @@ def add_parser(sub) -> None:
     p.add_argument("scenario", help="a scenario file, or a shipped scenario's name")
     p.add_argument("--out", help="output directory (default: runs/<name>_calibration)")
     p.add_argument("--poses", type=int, default=240, help="excitation poses (default 240)")
-    p.add_argument("--frames", type=int, default=4, help="readings averaged per pose")
+    p.add_argument("--frames", type=int, default=4, help="readings averaged per pose (≥ 1)")
     p.add_argument("--seed", type=int, help="run seed (sensor noise) instead of the file's")
     p.add_argument(
         "--workers",

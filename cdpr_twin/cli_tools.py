@@ -2,7 +2,8 @@
 
 - ``cdpr-twin scenarios list`` — the shipped scenarios, with their descriptions;
 - ``cdpr-twin scenarios copy NAME DIR`` — a shipped scenario copied into ``DIR`` to start one's
-  own (it names its robot, so it runs from anywhere);
+  own (it names its robot, so it runs from anywhere); the copy is written whole or not at all
+  (:func:`cdpr_twin.outputs.write_whole`), so a failed copy can simply be retried;
 - ``cdpr-twin view RUN_DIR`` — the run's ``recording.rrd`` in the Rerun viewer.
 """
 
@@ -92,11 +93,20 @@ def _scenarios(args: argparse.Namespace) -> int:
         for name in resources.scenarios():
             print(f"{name:20s} {_description(folder / f'{name}.toml')}")
         return 0
+    from cdpr_twin.outputs import OutputError
+
     try:
         target = resources.copy_scenario(args.name, args.dir)
     except resources.ResourceError as exc:
         print(f"cdpr-twin scenarios copy: error: {exc}", file=sys.stderr)
         return 2
+    except OutputError as exc:
+        print(
+            f"cdpr-twin scenarios copy: error: cannot write {exc.path}: {exc.cause}; nothing "
+            "was copied (free some space, or copy into another directory)",
+            file=sys.stderr,
+        )
+        return 1
     print(f"{target} (run it: cdpr-twin run {target})")
     return 0
 

@@ -4,11 +4,17 @@
 ``scene.xml`` (through ``mujoco.MjSpec``, :mod:`cdpr_twin.sim.generate`);
 ``cdpr-twin model workspace models/<robot>/robot.toml`` samples the wrench-feasible workspace
 (:mod:`cdpr_twin.workspace`) and draws it.
+
+Both check every input first (a bad ``--out`` or ``--spacing`` is a one-line error, exit 2)
+and write whole files only: ``<name>.partial`` first, renamed once complete (``model build``:
+both files complete before either is renamed); a failed write (disk full) is a one-line error,
+exit 1, that leaves the earlier files as they were.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -25,32 +31,85 @@ def robot_scenarios(robot: str) -> tuple[Path, Path]:
     return d / f"{prefix}_open_loop.toml", d / f"{prefix}_pbvs.toml"
 
 
+def _out_dir(description: Path, out: Path | None) -> Path:
+    """``model build``'s output directory, checked usable (not created).
+
+    Raises:
+        ValueError: it is not a directory, or cannot be written (the fix in the message).
+    """
+    out = Path(description).parent if out is None else Path(out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out}: exists and is not a directory; give a directory")
+    if out.is_dir() and not os.access(out, os.W_OK | os.X_OK):
+        raise ValueError(f"--out {out}: cannot write there (permission denied); give another")
+    return out
+
+
 def _build(args: argparse.Namespace) -> int:
-    from cdpr_twin.robot import RobotError
-    from cdpr_twin.sim.generate import build_files
+    from cdpr_twin.outputs import OutputError, write_whole
+    from cdpr_twin.robot import RobotError, load_robot
+    from cdpr_twin.sim.generate import model_texts
 
     try:
-        paths = build_files(args.description, args.out)
-    except (RobotError, ValueError) as exc:  # a bad description, an infeasible home pose
+        robot = load_robot(args.description)
+        out = _out_dir(args.description, args.out)
+        texts = model_texts(robot, out)
+        paths = (out / f"{robot.name}.xml", out / "scene.xml")
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ValueError(f"--out {out}: cannot create it: {exc.strerror or exc}") from None
+    except (RobotError, ValueError) as exc:  # a bad description or --out, an infeasible home
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
         return 2
+    try:
+        write_whole(dict(zip(paths, texts, strict=True)))  # both whole, or neither renamed
+    except OutputError as exc:
+        print(
+            f"cdpr-twin: error: cannot write {exc.path}: {exc.cause}; no half-written file is "
+            "left (free some space, or give another --out)",
+            file=sys.stderr,
+        )
+        return 1
     for p in paths:
         print(f"wrote {p}")
     return 0
 
 
 def _workspace(args: argparse.Namespace) -> int:
+    from cdpr_twin.outputs import OutputError
     from cdpr_twin.robot import RobotError, load_robot
-    from cdpr_twin.workspace import draw_workspace, geometry_of, sample_workspace
+    from cdpr_twin.workspace import (
+        draw_workspace,
+        figure_format,
+        geometry_of,
+        sample_workspace,
+        spacing_problem,
+    )
 
-    try:
+    out = args.out or Path(args.description).parent / "workspace.png"
+    try:  # every input checked before the (long) sampling
         robot = load_robot(args.description)
-    except RobotError as exc:
+        geom = geometry_of(robot)
+        if problem := spacing_problem(geom, args.spacing):
+            raise ValueError(f"--spacing {args.spacing:g}: {problem}")
+        try:
+            figure_format(out)
+        except ValueError as exc:  # its message starts with the path
+            raise ValueError(f"--out {exc}") from None
+    except (RobotError, ValueError) as exc:
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
         return 2
-    ws = sample_workspace(geometry_of(robot), spacing=args.spacing)
-    out = args.out or Path(args.description).parent / "workspace.png"
-    draw_workspace(ws, out, title=robot.name)
+    ws = sample_workspace(geom, spacing=args.spacing)
+    try:
+        draw_workspace(ws, out, title=robot.name)
+    except OutputError as exc:
+        print(
+            f"cdpr-twin: error: cannot write {exc.path}: {exc.cause}; an earlier figure is kept "
+            "(free some space, or give another --out)",
+            file=sys.stderr,
+        )
+        return 1
     print(
         f"{ws.feasible.sum()} of {ws.feasible.size} grid points wrench-feasible "
         f"({100 * ws.feasible.mean():.1f} %, spacing {ws.spacing:g} m, tensions "
@@ -69,6 +128,10 @@ def add_parser(sub) -> None:
     build.set_defaults(func=_build)
     ws = msub.add_parser("workspace", help="sample and draw the wrench-feasible workspace")
     ws.add_argument("description", type=Path, help="models/<robot>/robot.toml")
-    ws.add_argument("--spacing", type=float, default=0.05, help="grid spacing [m]")
-    ws.add_argument("--out", type=Path, default=None, help="figure (default: beside it)")
+    ws.add_argument(
+        "--spacing", type=float, default=0.05, help="grid spacing [m] (at most 1e6 grid points)"
+    )
+    ws.add_argument(
+        "--out", type=Path, default=None, help="figure, .png/.pdf/.svg… (default: beside it)"
+    )
     ws.set_defaults(func=_workspace)

@@ -109,6 +109,40 @@ def write_json_atomic(path: Path, data: dict) -> None:
         os.replace(tmp, path)
 
 
+def write_whole(files: dict[Path, str | bytes]) -> None:
+    """Write files whole: each as ``<name>.partial`` (flushed, ``fsync``'ed), then all renamed.
+
+    Every file is complete before the first is renamed, so a final name never holds a
+    half-written file. On failure the ``*.partial`` files are removed (a retry starts clean)
+    and the files not yet renamed keep what they held. Text is written as UTF-8.
+
+    Args:
+        files: final path → its whole content; their directories must exist.
+
+    Raises:
+        OutputError: a file cannot be written (disk full, permission),
+            naming it and the cause.
+    """
+    started: list[Path] = []
+    try:
+        for path, data in files.items():
+            started.append(tmp := partial_of(path))
+            with writing(tmp), tmp.open("wb") as f:
+                f.write(data.encode("utf-8") if isinstance(data, str) else data)
+                f.flush()
+                os.fsync(f.fileno())
+        for path in files:
+            with writing(path):
+                os.replace(partial_of(path), path)
+    except BaseException:
+        for tmp in started:
+            with contextlib.suppress(OSError):
+                tmp.unlink(missing_ok=True)
+        raise
+    for directory in {path.parent for path in files}:
+        fsync_dir(directory)
+
+
 @contextlib.contextmanager
 def _guard(directory: Path) -> Iterator[None]:
     """An exclusive ``flock`` of the directory: lock checks and takeovers, one at a time."""

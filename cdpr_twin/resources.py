@@ -12,7 +12,6 @@ install alike. Only the standard library is imported here.
 from __future__ import annotations
 
 import importlib.resources
-import shutil
 from pathlib import Path
 
 _CHECKOUT = Path(__file__).resolve().parent.parent
@@ -125,15 +124,23 @@ def copy_scenario(name: str, dest: str | Path) -> Path:
         The new file's path.
 
     Raises:
-        ResourceError: for an unknown name, an existing file, or an unwritable directory.
+        ResourceError: for an unknown name, an existing file, or an unusable directory.
+        cdpr_twin.outputs.OutputError: the copy cannot be written (disk full); nothing is left.
     """
+    from cdpr_twin.outputs import write_whole
+
     source = _shipped_scenario(name)
     target = Path(dest) / source.name
+    if target.parent.exists() and not target.parent.is_dir():
+        raise ResourceError(f"{target.parent} is not a directory; give a directory")
     if target.exists():
         raise ResourceError(f"{target} exists; remove it or copy into another directory")
+    data = source.read_bytes()  # a shipped file: unreadable only in a broken installation
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(source, target)
     except OSError as exc:
-        raise ResourceError(f"cannot write {target}: {exc.strerror}") from None
+        raise ResourceError(
+            f"cannot create {target.parent}: {exc.strerror or exc}; copy into another directory"
+        ) from None
+    write_whole({target: data})  # whole or not at all: a failed copy can be retried
     return target

@@ -5,10 +5,18 @@ platform's weight there: W τ = w_g with W = Aᵀ (6 × m, the pulley model's ca
 :func:`is_feasible` decides it with one linear program (HiGHS); :func:`sample_workspace` does
 so on a grid of positions at one orientation, inside the frame; :func:`check_waypoints` is what
 scenario validation uses; :func:`draw_workspace` draws a sampled workspace.
+
+Bad input is refused before any work: :func:`spacing_problem` says why a grid spacing cannot
+be used (not a finite positive number, no grid point in the frame, more than
+:data:`MAX_POINTS` points) and :func:`figure_format` why a figure path cannot be written. A
+figure is written whole or not at all (``<name>.partial``, then renamed).
 """
 
 from __future__ import annotations
 
+import contextlib
+import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -107,6 +115,49 @@ class Workspace:
         return np.stack([self.xs[i], self.ys[j], self.zs[k]], axis=1)
 
 
+MAX_POINTS = 1_000_000
+"""The most grid points :func:`sample_workspace` takes (one linear program, ≈ 1 ms, each)."""
+
+
+def _grid_box(geom: CdprGeometry) -> tuple[np.ndarray, np.ndarray]:
+    """The box the grid covers: the frame's inner box, below the lowest exit point."""
+    return geom.frame_min, np.minimum(geom.frame_max, geom.a_base[:, 2].min())
+
+
+def _grid_points(lo: np.ndarray, hi: np.ndarray, spacing: float) -> float:
+    """The number of grid points (``np.arange``'s lengths, ``inf`` if huge), without a grid."""
+    with np.errstate(over="ignore", divide="ignore"):
+        n = np.ceil((hi - (lo + spacing / 2)) / spacing)
+    return float(np.prod(np.maximum(n, 0.0)))
+
+
+def spacing_problem(geom: CdprGeometry, spacing: float) -> str | None:
+    """Why a grid spacing cannot sample ``geom``'s workspace, with the fix, or ``None``.
+
+    It must be a finite number > 0, leave at least one grid point in the frame (be below twice
+    the frame's smallest inner extent) and give at most :data:`MAX_POINTS` points.
+    """
+    if not (math.isfinite(spacing) and spacing > 0):
+        return "is not a grid spacing: give a finite number > 0 [m], e.g. 0.05"
+    lo, hi = _grid_box(geom)
+    n = _grid_points(lo, hi, spacing)
+    if n == 0:
+        extent = float((hi - lo).min())
+        return (
+            f"leaves no grid point inside the frame: give less than {2 * extent:g} m (twice "
+            f"the frame's smallest inner extent, {extent:g} m)"
+        )
+    if n > MAX_POINTS:
+        least = math.ceil((float(np.prod(hi - lo)) / MAX_POINTS) ** (1 / 3) * 1e4) / 1e4
+        while _grid_points(lo, hi, least) > MAX_POINTS:
+            least += 1e-4
+        return (
+            f"gives {n:.3g} grid points, more than {MAX_POINTS:,} (about 1 ms each): give at "
+            f"least {round(least, 4):g} m"
+        )
+    return None
+
+
 def sample_workspace(
     geom: CdprGeometry, spacing: float = 0.05, rotation: np.ndarray | None = None
 ) -> Workspace:
@@ -119,11 +170,14 @@ def sample_workspace(
 
     Returns:
         The sampled :class:`Workspace`.
+
+    Raises:
+        ValueError: the spacing cannot be used (:func:`spacing_problem`).
     """
-    if not spacing > 0:
-        raise ValueError(f"spacing must be > 0 m, got {spacing}")
+    if problem := spacing_problem(geom, spacing):
+        raise ValueError(f"spacing {spacing:g} m {problem}")
     R = np.eye(3) if rotation is None else np.asarray(rotation, dtype=float)
-    lo, hi = geom.frame_min, np.minimum(geom.frame_max, geom.a_base[:, 2].min())
+    lo, hi = _grid_box(geom)
     axes = [np.arange(lo[k] + spacing / 2, hi[k], spacing) for k in range(3)]
     inside = np.zeros(tuple(len(a) for a in axes), dtype=bool)
     feasible = np.zeros_like(inside)
@@ -157,18 +211,58 @@ def infeasible_reason(geom: CdprGeometry) -> str:
     )
 
 
+def figure_format(path: str | Path) -> str:
+    """The format a figure at ``path`` is written in (its extension), checked writable.
+
+    Raises:
+        ValueError: naming the path, the problem and the fix: a directory, a missing parent
+            directory, or an extension matplotlib cannot write.
+    """
+    import shutil
+
+    import matplotlib
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    path = Path(path)
+    kinds = FigureCanvasBase.get_supported_filetypes()
+    fmt = path.suffix[1:].lower()
+    if path.is_dir():
+        raise ValueError(f"{path} is a directory; give a file name, e.g. {path / 'workspace.png'}")
+    if not path.parent.is_dir():
+        missing = "is not a directory" if path.parent.exists() else "does not exist"
+        raise ValueError(f"{path}: {path.parent} {missing}; give a file in an existing directory")
+    if fmt not in kinds:
+        raise ValueError(
+            f"{path}: cannot write a figure as {path.suffix or 'a file without an extension'}; "
+            f"end the name in one of {', '.join(f'.{k}' for k in sorted(kinds))} (e.g. .png)"
+        )
+    if fmt == "pgf" and shutil.which(matplotlib.rcParams["pgf.texsystem"]) is None:
+        tex = matplotlib.rcParams["pgf.texsystem"]
+        raise ValueError(f"{path}: .pgf needs {tex}, not found; end the name in .png, .pdf or .svg")
+    return fmt
+
+
 def draw_workspace(ws: Workspace, path: str | Path, title: str = "") -> Path:
     """Draw a sampled workspace: feasible points in 3D, and the feasible area per height.
 
+    The figure is written whole or not at all: as ``<name>.partial``, ``fsync``'ed, then
+    renamed (an existing file is replaced); on failure the partial file is removed.
+
     Args:
         ws: the sampled workspace.
-        path: PNG file to write.
+        path: the figure to write; its extension is the format (``.png``, ``.pdf``, ``.svg``…).
         title: figure title (the robot's name).
 
     Returns:
         The path written.
+
+    Raises:
+        ValueError: ``path`` cannot hold a figure (:func:`figure_format`).
+        cdpr_twin.outputs.OutputError: writing it failed (disk full…), naming it and the cause.
     """
     from matplotlib.figure import Figure
+
+    fmt = figure_format(path)
 
     fig = Figure(figsize=(10, 4.5))
     ax = fig.add_subplot(1, 2, 1, projection="3d")
@@ -186,6 +280,23 @@ def draw_workspace(ws: Workspace, path: str | Path, title: str = "") -> Path:
     a2.set_title(f"{lo:g} N ≤ τ ≤ {hi:g} N, grid {ws.spacing:g} m", fontsize=9)
     a2.legend(fontsize=8)
     fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    return path
+    _save(fig, Path(path), fmt)
+    return Path(path)
+
+
+def _save(fig, path: Path, fmt: str) -> None:
+    """``fig`` into ``path`` through ``<path>.partial``: never a half-written figure."""
+    from cdpr_twin.outputs import partial_of, writing
+
+    tmp = partial_of(path)
+    try:
+        with writing(tmp), tmp.open("wb") as f:
+            fig.savefig(f, dpi=110, format=fmt)
+            f.flush()
+            os.fsync(f.fileno())
+        with writing(path):
+            os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
+        raise

@@ -186,8 +186,12 @@ def record(s: Scenario, poses: list[np.ndarray], frames: int = 4, workers: int =
             depend on it).
 
     Raises:
-        ScenarioError: the scenario's robot cannot be built, or has no camera.
+        ScenarioError: the scenario's robot cannot be built, has no camera, or its start pose
+            cannot be homed at.
+        ValueError: ``frames`` < 1.
     """
+    if frames < 1:
+        raise ValueError(f"frames must be ≥ 1 (readings averaged per pose), got {frames}")
     if not s.sensors.camera:
         raise ScenarioError(f"{s.source}: sensors.camera: calibration needs the camera; set true")
     started = time.perf_counter()
@@ -234,21 +238,14 @@ def _in_processes(items: list, workers: int, s: Scenario, frames: int) -> list[t
         return [f.result() for f in futures]
 
 
-def _ignore_sigint() -> None:
-    """In a worker: Ctrl-C is the parent's to handle (it ends the workers)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+def _build(s: Scenario) -> tuple:
+    """The scenario's simulated robot and its nominal model, as a segment records them.
 
-
-def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tuple:
-    """Record one segment of the tour from homing.
-
-    Returns:
-        (index, rows, true poses, simulated time, (true geometry, true tag, drum scales,
-        intrinsics error, nominal robot, detector)).
+    Raises:
+        ScenarioError: the robot cannot be built, or has no camera or tag.
     """
-    from cdpr_twin.sim import ModelError, Sensors, build_robot
+    from cdpr_twin.sim import ModelError, build_robot
 
-    index, poses = item
     try:
         physics, nominal, _ = build_robot(
             s.model.file,
@@ -262,6 +259,55 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
         raise ScenarioError(f"{s.source}: model: {exc}") from None
     if nominal.T_base_tag is None or nominal.intrinsics is None:
         raise ScenarioError(f"{s.source}: model: the robot needs a camera and a tag to calibrate")
+    return physics, nominal
+
+
+def _reset_at_start(s: Scenario, physics, settle_time: float) -> None:
+    """Home: the true robot at the start pose moved by the homing offset (as a run does).
+
+    Raises:
+        ScenarioError: it is outside the frame or no tension distribution holds it there
+            (``cdpr-twin run``'s message for the same file).
+    """
+    offset, true_start = homing(s)
+    try:
+        physics.reset(true_start, settle_time=settle_time)
+    except ValueError as exc:  # outside the frame, or an InfeasibleTensionError
+        where = "start.pose" if offset is None else "start.pose (moved by its homing offset)"
+        raise ScenarioError(f"{s.source}: {where}: {exc}") from None
+
+
+def check(s: Scenario) -> None:
+    """What would stop the recording, checked in this process before any worker starts.
+
+    The camera is on, the robot builds and has a camera and a tag, and its true start pose
+    (the homing offset applied) is inside the frame and held by a tension distribution.
+
+    Raises:
+        ScenarioError: naming the file and the field at fault, as ``cdpr-twin run`` does.
+    """
+    if not s.sensors.camera:
+        raise ScenarioError(f"{s.source}: sensors.camera: calibration needs the camera; set true")
+    physics, _ = _build(s)
+    _reset_at_start(s, physics, settle_time=0.0)
+
+
+def _ignore_sigint() -> None:
+    """In a worker: Ctrl-C is the parent's to handle (it ends the workers)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tuple:
+    """Record one segment of the tour from homing.
+
+    Returns:
+        (index, rows, true poses, simulated time, (true geometry, true tag, drum scales,
+        intrinsics error, nominal robot, detector)).
+    """
+    from cdpr_twin.sim import Sensors
+
+    index, poses = item
+    physics, nominal = _build(s)
     period = s.model.control_period
     seed = (
         s.seed if index == 0 else int(np.random.SeedSequence([s.seed, index]).generate_state(1)[0])
@@ -272,8 +318,7 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
     )  # fmt: skip
     g = nominal.geometry
     try:
-        _, true_start = homing(s)
-        physics.reset(true_start)
+        _reset_at_start(s, physics, settle_time=0.3)
         sensors.home(s.start_pose)
         rows, truth, here = [], [], s.start_pose
         for T in poses:

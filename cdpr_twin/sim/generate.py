@@ -323,14 +323,16 @@ def build_files(description: str | Path, out_dir: str | Path | None = None) -> t
 
     Raises:
         RobotError: for a bad description.
+        cdpr_twin.outputs.OutputError: a file cannot be written; no half-written file is left.
     """
+    from cdpr_twin.outputs import write_whole
+
     r = load_robot(description)
     out = Path(description).parent if out_dir is None else Path(out_dir)
     texts = model_texts(r, out)
     out.mkdir(parents=True, exist_ok=True)
     paths = (out / f"{r.name}.xml", out / "scene.xml")
-    for path, text in zip(paths, texts, strict=True):
-        path.write_text(text, encoding="utf-8")
+    write_whole(dict(zip(paths, texts, strict=True)))  # both whole, or neither renamed
     return paths
 
 
