@@ -168,11 +168,15 @@ def _print(cal, extra: dict, robot: Path, report: Path) -> None:
 
 def add_parser(sub) -> None:
     """Add ``calibrate`` to the command's subparsers."""
+    from cdpr_twin.outputs import out_path
+
     p = sub.add_parser(
         "calibrate", help="self-calibrate a scenario's robot; write a calibrated robot.toml"
     )
     p.add_argument("scenario", help="a scenario file, or a shipped scenario's name")
-    p.add_argument("--out", help="output directory (default: runs/<name>_calibration)")
+    p.add_argument(
+        "--out", type=out_path, help="output directory (default: runs/<name>_calibration)"
+    )
     p.add_argument("--poses", type=int, default=240, help="excitation poses (default 240)")
     p.add_argument("--frames", type=int, default=4, help="readings averaged per pose (≥ 1)")
     p.add_argument("--seed", type=int, help="run seed (sensor noise) instead of the file's")
