@@ -11,9 +11,21 @@ import numpy as np
 
 from cdpr_twin import model_cli, se3
 from cdpr_twin.cli_campaign import add_campaign_parser
+from cdpr_twin.outputs import out_path
 
 P0 = (0.112, -0.032, 0.301, -12.0, -10.0, 0.0)
 """The paper's start pose ᵇp_p0 [m, deg]."""
+TRACEBACK_HELP = "on an unexpected error (e.g. a plugin's bug), also print its traceback"
+REPRODUCE_DOC = (
+    "Run the paper's study into --out: runs/<run>/, runs.json, fig*.png, report.json, report.md "
+    "(last). The directory is locked as a run's: a second writer is refused (exit 2). Before any "
+    "run starts, an earlier study's report.md, report.json, runs.json, figures, *.partial and "
+    "runs under runs/ are removed (give another --out to keep them). Every file is written as "
+    "<name>.partial, then renamed. Ctrl-C/SIGTERM stops the workers (exit 130/143), keeping the "
+    "finished runs, without a report. Exit 0 done, 1 a run or a write failed, 2 bad options or "
+    "--out in use."
+)
+"""``cdpr-twin reproduce --help``'s description: what the study writes, and what it removes."""
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -119,8 +131,8 @@ def _print_ends(s: dict) -> None:
         )
 
 
-def _failure(exc: BaseException, out: Path) -> int:
-    """Print a run's failure in one line on stderr; returns the exit code."""
+def _failure(exc: BaseException, out: Path, show_traceback: bool = False) -> int:
+    """Print a run's failure (a plugin's bug too) in one line on stderr; returns the exit code."""
     from cdpr_twin.outputs import OutputDirError, OutputError, Terminated
     from cdpr_twin.scenario import ScenarioError
 
@@ -131,28 +143,46 @@ def _failure(exc: BaseException, out: Path) -> int:
         code = 1
     elif isinstance(exc, KeyboardInterrupt):
         how, code = ("terminated", 143) if isinstance(exc, Terminated) else ("interrupted", 130)
-        try:  # this run's summary, or an earlier run's (stopped before it wrote anything)
-            ours = json.loads((out / "summary.json").read_text())["status"] == how
-        except (OSError, ValueError, KeyError, TypeError):
-            ours = False
         message = (
             f'{how}; partial outputs (flushed, marked "{how}") in {out}'
-            if ours
+            if _status(out) == how
             else f"{how} before any output was written"
         )
     else:
-        message = f"the run failed: {exc} (outputs up to the failure are in {out})"
-        code = 1
+        where = (
+            f"its outputs, up to the failure, are in {out}"
+            if _status(out).startswith("failed")
+            else "no output was written"
+        )
+        what, hint = _unexpected(exc, show_traceback)
+        message, code = f"the run failed: {what}; {where}{hint}", 1
     print(f"cdpr-twin: {message}", file=sys.stderr)
     return code
 
 
+def _status(out: Path) -> str:
+    """The status in ``out``'s ``summary.json`` (this run's, or an earlier one's), or ``""``."""
+    try:
+        return str(json.loads((out / "summary.json").read_text())["status"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return ""
+
+
+def _unexpected(exc: BaseException, show_traceback: bool) -> tuple[str, str]:
+    """An unexpected exception in one line, and a hint: ``--traceback`` prints the traceback."""
+    if show_traceback:
+        import traceback
+
+        traceback.print_exc()
+    hint = "" if show_traceback else " (--traceback prints where it was raised)"
+    return f"{type(exc).__name__}: {' '.join(str(exc).split())}", hint
+
+
 def _run(args: argparse.Namespace) -> int:
     from cdpr_twin.cli_tools import live_url
-    from cdpr_twin.outputs import OutputDirError, OutputError, sigterm_raises
+    from cdpr_twin.outputs import sigterm_raises
     from cdpr_twin.runner import run
     from cdpr_twin.scenario import ScenarioError, load_scenario
-    from cdpr_twin.sim import SimulationError
 
     try:
         if args.spawn and args.connect is not None:
@@ -174,10 +204,9 @@ def _run(args: argparse.Namespace) -> int:
     try:
         with sigterm_raises():
             result = run(scenario, out, progress=progress, spawn=args.spawn, connect=connect)
-    except (ScenarioError, OutputDirError, OutputError, SimulationError, ValueError,
-            KeyboardInterrupt) as exc:  # fmt: skip
+    except (Exception, KeyboardInterrupt) as exc:  # a plugin's bug too: one line, not a trace
         progress.done()
-        return _failure(exc, out)
+        return _failure(exc, out, args.traceback)
     progress.done()
     s = result.summary
     print(
@@ -193,38 +222,37 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _reproduce(args: argparse.Namespace) -> int:
-    from cdpr_twin.study import reproduce
+    from cdpr_twin import study
+    from cdpr_twin.outputs import sigterm_raises
+    from cdpr_twin.realism import RUN_SOURCES
 
-    if args.workers is not None and args.workers < 1:
-        print("cdpr-twin: error: --workers must be ≥ 1", file=sys.stderr)
-        return 2
-    failed = []
+    count, failed = [0, 0], []  # runs finished, planned
 
-    def progress(done: int, total: int, record: dict) -> None:
-        mark = "ok" if record["ok"] else "FAILED"
+    def progress(n: int, total: int, record: dict) -> None:
+        count[0] = n
         if not record["ok"]:
             failed.append(record)
-        print(f"[{done:3d}/{total}] {record['name']}: {mark} ({record['status']})", file=sys.stderr)
+        mark = "ok" if record["ok"] else "FAILED"
+        print(f"[{n:3d}/{total}] {record['name']}: {mark} ({record['status']})", file=sys.stderr)
 
     try:
-        from cdpr_twin.realism import RUN_SOURCES
-
-        rep = reproduce(
-            args.out,
-            args.workers,
-            args.runs_scale,
-            args.duration,
-            progress,
-            decompose=RUN_SOURCES if args.decompose else (),
-            other_goal=args.other_goal,
-            scenarios=model_cli.robot_scenarios(args.robot),
-        )
-    except ValueError as exc:
-        print(f"cdpr-twin: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"cdpr-twin: interrupted; finished runs are in {args.out}/runs", file=sys.stderr)
-        return 130
+        with sigterm_raises():
+            try:  # every option and every run's scenario, before anything runs or is touched
+                workers = study.check_workers(args.workers)
+                specs = study.study_runs(
+                    args.runs_scale,
+                    args.duration,
+                    model_cli.robot_scenarios(args.robot),
+                    decompose=RUN_SOURCES if args.decompose else (),
+                    other_goal=args.other_goal,
+                )
+            except ValueError as exc:  # a ScenarioError too
+                print(f"cdpr-twin: error: {exc}", file=sys.stderr)
+                return 2
+            count[1] = len(specs)
+            rep = study.reproduce_runs(args.out, specs, workers, progress)
+    except (Exception, KeyboardInterrupt) as exc:
+        return _study_failure(exc, args, (count[0], count[1]))
     print(
         f"{rep['runs']['ok']}/{rep['runs']['total']} runs in {rep['wall_time_s'] / 60:.1f} min;"
         f" report: {args.out}/report.md"
@@ -234,6 +262,30 @@ def _reproduce(args: argparse.Namespace) -> int:
     for r in failed:
         print(f"failed: {r['name']}: {r['status']}", file=sys.stderr)
     return 0 if not failed else 1
+
+
+def _study_failure(exc: BaseException, args: argparse.Namespace, finished: tuple[int, int]) -> int:
+    """Print why ``reproduce`` stopped (``finished``: runs done, of) in one line; the exit code."""
+    from cdpr_twin.outputs import OutputDirError, OutputError, Terminated
+
+    out, (n, total) = args.out, finished
+    stopped = "" if n == total else "the runs under way were stopped, "
+    left = f"{n} of {total} runs had finished (in {out}/runs); no report was written"
+    if not total:  # stopped while checking the options: nothing was touched
+        left = f"nothing was written in {out}"
+    if isinstance(exc, OutputDirError):
+        message, code = f"error: {exc}", 2
+    elif isinstance(exc, OutputError):
+        message = f"cannot write {exc.path}: {exc.cause}; it is left *.partial and {left}"
+        code = 1
+    elif isinstance(exc, KeyboardInterrupt):
+        how, code = ("terminated", 143) if isinstance(exc, Terminated) else ("interrupted", 130)
+        message = f"{how}; {stopped}{left} (run reproduce again for one)"
+    else:
+        what, hint = _unexpected(exc, args.traceback)
+        message, code = f"reproduce failed: {what}; {left}{hint}", 1
+    print(f"cdpr-twin: {message}", file=sys.stderr)
+    return code
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -263,7 +315,10 @@ def _parser() -> argparse.ArgumentParser:
         "scenario", help="scenario file, or a shipped one's name (cdpr-twin scenarios list)"
     )
     runp.add_argument(
-        "--out", type=Path, default=None, help="output directory (default: runs/<scenario name>)"
+        "--out",
+        type=out_path,
+        default=None,
+        help="output directory (default: runs/<scenario name>)",
     )
     runp.add_argument("--seed", type=int, default=None, help="run seed (sensor noise)")
     runp.add_argument("--in-loop", default=None, help="estimator closing the loop")
@@ -282,6 +337,7 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         help="realism profile instead of the scenario's (its [realism] overrides are dropped)",
     )
+    runp.add_argument("--traceback", action="store_true", help=TRACEBACK_HELP)
     runp.set_defaults(func=_run)
     _reproduce_parser(sub)
     model_cli.add_parser(sub)  # cdpr-twin model build|workspace
@@ -296,10 +352,14 @@ def _parser() -> argparse.ArgumentParser:
 
 def _reproduce_parser(sub) -> None:
     """The ``reproduce`` subcommand's arguments."""
-    rep = sub.add_parser("reproduce", help="run the paper's study: runs, figures, report")
+    rep = sub.add_parser(
+        "reproduce",
+        help="run the paper's study: runs, figures, report",
+        description=REPRODUCE_DOC,
+    )
     rep.add_argument(
         "--out",
-        type=Path,
+        type=out_path,
         default=Path("runs") / "reproduce",
         help="output directory (default: runs/reproduce)",
     )
@@ -325,6 +385,7 @@ def _reproduce_parser(sub) -> None:
         help="also run PBVS (control in the loop) with this goal",
     )
     rep.add_argument("--robot", choices=model_cli.STUDY_ROBOTS, default="acrobot", help="robot")
+    rep.add_argument("--traceback", action="store_true", help=TRACEBACK_HELP)
     rep.set_defaults(func=_reproduce)
 
 

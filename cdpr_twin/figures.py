@@ -10,12 +10,14 @@ Estimators the paper does not have get colours from :data:`EXTRA_COLORS`, their 
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
 
 from cdpr_twin.metrics import sample_std
+from cdpr_twin.outputs import partial_of, writing
 from cdpr_twin.results import ordered_estimators
 from cdpr_twin.timeseries import Timeseries
 
@@ -67,7 +69,18 @@ def _key(label: str) -> str:
 
 
 def _save(fig: Figure, path: Path) -> Path:
-    fig.savefig(path, dpi=DPI)
+    """Save whole: into ``<path>.partial`` (format from ``path``'s suffix), then renamed.
+
+    Raises:
+        cdpr_twin.outputs.OutputError: the write failed (disk full); ``path`` is not touched.
+    """
+    tmp = partial_of(path)
+    with writing(tmp), tmp.open("wb") as f:
+        fig.savefig(f, dpi=DPI, format=Path(path).suffix.lstrip(".") or "png")
+        f.flush()
+        os.fsync(f.fileno())
+    with writing(path):
+        os.replace(tmp, path)
     return path
 
 

@@ -47,6 +47,7 @@ def test_reproduce_writes_every_artefact(small):
     report = (out / "report.md").read_text()
     assert all(f"({n}.png)" in report for n in ("fig5a", "fig5b", "fig7a", "fig7b", "fig8"))
     assert (out / "runs" / "open_loop_seed1" / "recording.rrd").exists()
+    assert not list(out.glob("*.partial")) and not (out / ".lock").exists()  # whole, released
 
 
 @pytest.mark.slow

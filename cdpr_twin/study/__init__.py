@@ -9,7 +9,8 @@ the others are kept.
 
 Modules: :mod:`.plan` (which runs, and running them), :mod:`.analysis` (every number, from the
 run files), :mod:`.findings` (the paper's claims and their verdicts), :mod:`.report` (figures
-and ``report.md``).
+and ``report.md``), :mod:`.files` (the directory's promises: one study at a time, an earlier
+study's files removed first, every file written whole).
 """
 
 from __future__ import annotations
@@ -18,9 +19,19 @@ import multiprocessing
 import time
 from pathlib import Path
 
+from cdpr_twin.outputs import OutputDir
 from cdpr_twin.study.analysis import accuracy_at_p1, analyse
+from cdpr_twin.study.files import clear_earlier_study
 from cdpr_twin.study.findings import FINDINGS, Finding, evaluate
-from cdpr_twin.study.plan import Progress, RunSpec, Scenarios, extra_runs, plan, run_study
+from cdpr_twin.study.plan import (
+    Progress,
+    RunSpec,
+    Scenarios,
+    extra_runs,
+    plan,
+    run_study,
+    spec_scenario,
+)
 from cdpr_twin.study.report import make_figures, write_report
 
 __all__ = [
@@ -30,13 +41,58 @@ __all__ = [
     "Scenarios",
     "accuracy_at_p1",
     "analyse",
+    "check_workers",
     "evaluate",
     "make_figures",
     "plan",
     "reproduce",
+    "reproduce_runs",
     "run_study",
+    "study_runs",
     "write_report",
 ]
+
+
+def study_runs(
+    runs_scale: float = 1.0,
+    duration: float | None = None,
+    scenarios: Scenarios | tuple[str | Path, str | Path] | None = None,
+    decompose: tuple[str, ...] = (),
+    other_goal: str | None = None,
+) -> list[RunSpec]:
+    """The study's runs, each checked: its scenario loaded with its overrides (no file touched).
+
+    Args:
+        runs_scale: factor on the repetition counts (at least one run each).
+        duration: duration override of every run [s], or ``None``.
+        scenarios: the (open-loop, PBVS) scenario files; default the paper's.
+        decompose: per-run sources of variation to switch off in turn (extra runs).
+        other_goal: a second PBVS goal (``"nominal"``/``"taught"``) for the control runs.
+
+    Raises:
+        ValueError: an option is invalid (``runs_scale``), or a run's scenario is
+            (:class:`~cdpr_twin.scenario.ScenarioError`: a scenario file, ``duration``, a
+            ``decompose`` source or ``other_goal``).
+    """
+    scenarios = Scenarios(*scenarios) if scenarios is not None else Scenarios()
+    specs = plan(runs_scale, duration, scenarios.open_loop, scenarios.pbvs)
+    specs += extra_runs(specs, decompose, other_goal)
+    for spec in specs:
+        spec_scenario(spec)  # raises before any run starts, not in every run
+    return specs
+
+
+def check_workers(workers: int | None) -> int:
+    """The number of parallel runs: ``workers``, or one per CPU when ``None``.
+
+    Raises:
+        ValueError: ``workers`` is not an integer ≥ 1.
+    """
+    if workers is None:
+        return max(1, multiprocessing.cpu_count())
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"--workers must be an integer ≥ 1 (parallel runs), got {workers}")
+    return workers
 
 
 def reproduce(
@@ -51,6 +107,9 @@ def reproduce(
 ) -> dict:
     """Run the study and write ``runs/``, ``runs.json``, figures, ``report.json``, ``report.md``.
 
+    Every option and every run's scenario is checked before anything runs or any file is
+    touched (:func:`study_runs`); then :func:`reproduce_runs`.
+
     Args:
         out: output directory (created).
         workers: parallel runs (default: one per CPU).
@@ -64,16 +123,44 @@ def reproduce(
 
     Returns:
         The report numbers (as in ``report.json``), plus ``"wall_time_s"``.
+
+    Raises:
+        ValueError: an option or a run's scenario is invalid (nothing touched).
+        OutputDirError: ``out`` cannot be used, or another study or run owns it.
+        OutputError: a file cannot be written (it is left ``*.partial``).
     """
-    scenarios = Scenarios(*scenarios) if scenarios is not None else Scenarios()
-    workers = workers or max(1, multiprocessing.cpu_count())
-    specs = plan(runs_scale, duration, scenarios.open_loop, scenarios.pbvs)
-    specs += extra_runs(specs, decompose, other_goal)
-    start = time.perf_counter()
-    out.mkdir(parents=True, exist_ok=True)
-    records = run_study(specs, out, workers, progress)
-    rep = analyse(out, records)
-    figs = make_figures(out, rep, records)
-    wall = time.perf_counter() - start
-    write_report(out, rep, figs, wall)
+    workers = check_workers(workers)
+    specs = study_runs(runs_scale, duration, scenarios, decompose, other_goal)
+    return reproduce_runs(out, specs, workers, progress)
+
+
+def reproduce_runs(
+    out: Path, specs: list[RunSpec], workers: int, progress: Progress | None = None
+) -> dict:
+    """Claim ``out``, remove an earlier study's files, run ``specs``, write the report.
+
+    The directory's promises are :mod:`.files`': its lock held throughout (a second writer is
+    refused), the earlier study's report, figures, ``runs.json`` and runs removed before any
+    run starts, each file written whole, ``report.md`` last. A stop (Ctrl-C, SIGTERM) ends the
+    workers and leaves the runs that finished, without ``runs.json`` or a report.
+
+    Returns:
+        The report numbers (as in ``report.json``), plus ``"wall_time_s"``.
+
+    Raises:
+        OutputDirError: ``out`` cannot be used, or another study or run owns it.
+        OutputError: a file cannot be written (it is left ``*.partial``).
+    """
+    owner = OutputDir(out)
+    owner.claim()  # the lock, then an earlier run's files (and *.partial) removed
+    try:
+        clear_earlier_study(out)
+        start = time.perf_counter()
+        records = run_study(specs, out, workers, progress)
+        rep = analyse(out, records)
+        figs = make_figures(out, rep, records)
+        wall = time.perf_counter() - start
+        write_report(out, rep, figs, wall)
+    finally:
+        owner.release()
     return {**rep, "wall_time_s": wall}

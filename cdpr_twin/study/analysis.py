@@ -8,7 +8,6 @@ run's ``timeseries.csv``, the robot from the scenario file the runs were made wi
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,6 +22,7 @@ from cdpr_twin.results import (
     value_at,
 )
 from cdpr_twin.se3 import pose_distance, pose_from_vector
+from cdpr_twin.study.files import write_json
 from cdpr_twin.study.findings import evaluate
 from cdpr_twin.study.plan import PBVS_SCENARIO
 from cdpr_twin.study.robot_numbers import model_physics, payloads, robot_errors
@@ -270,7 +270,7 @@ def _realism(scenario_file: str | Path) -> tuple[dict, str]:
 
 
 def analyse(out: Path, records: list[dict]) -> dict:
-    """Every number of the report, from the runs' files. Writes ``report.json``.
+    """Every number of the report, from the runs' files. Writes ``report.json`` (whole).
 
     Args:
         out: the study's output directory.
@@ -303,5 +303,5 @@ def analyse(out: Path, records: list[dict]) -> dict:
     rep["robot"] = {**robot_errors(_robot_scenario(records)), "payload_kg": payloads(records)}
     rep["realism"], rep["pbvs_goal"] = _realism(_robot_scenario(records))
     rep["findings"] = evaluate(rep)
-    (out / "report.json").write_text(json.dumps(rep, indent=2) + "\n", encoding="utf-8")
+    write_json(out / "report.json", rep)
     return rep

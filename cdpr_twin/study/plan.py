@@ -7,8 +7,9 @@ in turn, so an estimator added to the scenario file gets its own runs.
 
 from __future__ import annotations
 
-import json
+import contextlib
 import math
+import signal
 import traceback
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
@@ -25,6 +26,8 @@ OPEN_LOOP_RUNS = 10
 """Open-loop repetitions of the paper's Fig. 8."""
 PBVS_RUNS_PER_ESTIMATOR = 5
 """PBVS repetitions per in-loop estimator (Fig. 8: 30 runs for 6 estimators)."""
+MAX_RUNS_SCALE = 100.0
+"""The largest ``runs_scale`` (1000 open-loop runs): beyond it, a typo rather than a study."""
 
 Progress = Callable[[int, int, dict], None]
 """``progress(done, total, record)``, called as each run ends."""
@@ -91,13 +94,16 @@ def plan(
         pbvs: the PBVS scenario file; one set of runs per estimator it lists.
 
     Raises:
-        ValueError: ``runs_scale`` is not a positive number.
+        ValueError: ``runs_scale`` is not a number in (0, :data:`MAX_RUNS_SCALE`].
         cdpr_twin.scenario.ScenarioError: a scenario file is invalid.
     """
     from cdpr_twin.scenario import load_scenario
 
-    if not (math.isfinite(runs_scale) and runs_scale > 0):
-        raise ValueError(f"--runs-scale must be > 0, got {runs_scale}")
+    if not (math.isfinite(runs_scale) and 0 < runs_scale <= MAX_RUNS_SCALE):
+        raise ValueError(
+            f"--runs-scale must be > 0 and ≤ {MAX_RUNS_SCALE:g}, got {runs_scale} "
+            "(1 is the paper's counts, 0.1 a quick check)"
+        )
     n_open = max(1, round(OPEN_LOOP_RUNS * runs_scale))
     n_pbvs = max(1, round(PBVS_RUNS_PER_ESTIMATOR * runs_scale))
     ol, pb = str(open_loop), str(pbvs)
@@ -159,9 +165,14 @@ def spec_scenario(spec: RunSpec):
 
 
 def _run_one(spec: RunSpec, runs_dir: str) -> dict:
-    """Worker (a spawned process): run one spec; never raise, report instead."""
+    """Worker (a spawned process): run one spec; never raise, report instead.
+
+    Ctrl-C is ignored here: the terminal sends it to the worker too, and the study stops its
+    workers itself (SIGTERM), cancelling the queued runs.
+    """
     from cdpr_twin.runner import run
 
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     out = Path(runs_dir) / spec.name
     try:
         result = run(spec_scenario(spec), out, record_rrd=spec.record_rrd)
@@ -185,22 +196,33 @@ def _run_one(spec: RunSpec, runs_dir: str) -> dict:
 def run_study(
     specs: list[RunSpec], out: Path, workers: int, progress: Progress | None = None
 ) -> list[dict]:
-    """Run every spec in ``workers`` spawned processes; writes ``runs.json``.
+    """Run every spec in ``workers`` spawned processes; writes ``runs.json`` (whole).
+
+    A stop (Ctrl-C, SIGTERM as :class:`~cdpr_twin.outputs.Terminated`) or any error ends the
+    workers and cancels the queued runs before it propagates; no ``runs.json`` is written.
 
     Returns:
         One record per run, in the order of ``specs``: the spec's fields, ``ok``, ``status``,
         ``dir`` (the run's output directory), and ``wall_time_s`` or ``traceback``.
+
+    Raises:
+        OutputError: ``runs/`` or ``runs.json`` cannot be written.
     """
     from cdpr_twin.campaign.executor import run_local  # the one engine of parallel runs
+    from cdpr_twin.outputs import writing
+    from cdpr_twin.study.files import write_json
 
     runs_dir = out / "runs"
-    runs_dir.mkdir(parents=True, exist_ok=True)
+    with writing(runs_dir):
+        runs_dir.mkdir(parents=True, exist_ok=True)
     records = []
-    for done, record in enumerate(run_local(_run_one, specs, workers, str(runs_dir)), 1):
-        records.append(record)
-        if progress is not None:
-            progress(done, len(specs), record)
+    # closed on leaving, however: a stop raised here (in progress) ends the workers too
+    with contextlib.closing(run_local(_run_one, specs, workers, str(runs_dir))) as results:
+        for done, record in enumerate(results, 1):
+            records.append(record)
+            if progress is not None:
+                progress(done, len(specs), record)
     order = {s.name: i for i, s in enumerate(specs)}
     records.sort(key=lambda r: order[r["name"]])
-    (out / "runs.json").write_text(json.dumps(records, indent=2) + "\n", encoding="utf-8")
+    write_json(out / "runs.json", records)
     return records

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +9,7 @@ import numpy as np
 from cdpr_twin.metrics import sample_std
 from cdpr_twin.results import load_summary, model_estimators
 from cdpr_twin.study.analysis import figure_runs, segment_ends
+from cdpr_twin.study.files import FIGURES, write_json, write_text
 from cdpr_twin.timeseries import Timeseries
 
 PAPER_PBVS = {
@@ -26,7 +26,13 @@ NOT_IN_PAPER = "—"
 
 
 def make_figures(out: Path, rep: dict, records: list[dict]) -> list[Path]:
-    """Fig. 5a/5b, 7a/7b and 8 into ``out``, from the seed-1 runs and the report's accuracy."""
+    """Fig. 5a/5b, 7a/7b and 8 into ``out``, from the seed-1 runs and the report's accuracy.
+
+    Each is written whole (``<name>.png.partial``, then renamed: :mod:`cdpr_twin.figures`).
+
+    Raises:
+        OutputError: a figure cannot be written (it is left ``*.partial``).
+    """
     from cdpr_twin import figures
 
     open_loop, pbvs = figure_runs(records)
@@ -234,13 +240,17 @@ def _excess(mv: dict) -> str:
 
 
 def write_report(out: Path, rep: dict, figures: list[Path], wall_time_s: float) -> Path:
-    """``report.md``: the paper's numbers beside the twin's, and the findings with verdicts."""
+    """``report.md``: the paper's numbers beside the twin's, and the findings with verdicts.
+
+    Written whole (``report.md.partial``, then renamed), after everything else of the study.
+
+    Raises:
+        OutputError: it cannot be written (it is left ``*.partial``).
+    """
     lines = [*_intro(rep, wall_time_s), *_findings(rep), *_paper_table(rep), *_accuracy(rep)]
     lines += _estimator_table(rep) + _spread(rep)
     lines += ["", "## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figures]
-    path = out / "report.md"
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    return path
+    return write_text(out / "report.md", "\n".join(lines) + "\n")
 
 
 def rerender(out: Path, rep: dict, wall_time_s: float) -> Path:
@@ -253,8 +263,6 @@ def rerender(out: Path, rep: dict, wall_time_s: float) -> Path:
     from cdpr_twin.study.findings import evaluate
 
     rep = {**rep, "findings": evaluate({k: v for k, v in rep.items() if k != "findings"})}
-    text = json.dumps(rep, indent=2) + "\n"  # the findings' texts, as report.md now says them
-    (out / "report.json").write_text(text, encoding="utf-8")
-    names = ("fig5a", "fig5b", "fig7a", "fig7b", "fig8")
-    figures = [out / f"{n}.png" for n in names if (out / f"{n}.png").is_file()]
+    write_json(out / "report.json", rep)  # the findings' texts, as report.md now says them
+    figures = [out / f"{n}.png" for n in FIGURES if (out / f"{n}.png").is_file()]
     return write_report(out, rep, figures, wall_time_s)

@@ -1,0 +1,83 @@
+"""The study's own files: each written whole, and an earlier study's removed before a new one.
+
+The study directory keeps the promises of a run's directory (:mod:`cdpr_twin.outputs`):
+
+1. **One writer.** ``reproduce`` claims the directory with the run's lock
+   (:class:`~cdpr_twin.outputs.OutputDir`): a second study on it is refused, touching nothing.
+2. **One study's files.** Right after the claim, before any run starts, the earlier study's
+   outputs are removed: :data:`STUDY_FILES` (its report, figures and ``runs.json``), every
+   ``*.partial`` and its run directories under ``runs/`` (the ones named as the study names
+   its runs; another directory there is left alone). Nothing of an earlier study is left to
+   look like the new one's, even when the new one is stopped or fails; keep an earlier study
+   by giving the new one another ``--out``.
+3. **Whole files only.** Each file is written as ``<name>.partial``, flushed and ``fsync``'ed,
+   then renamed to its final name (the directory ``fsync``'ed); ``report.md`` is written last.
+   An ``OSError`` (a full disk) is an :class:`~cdpr_twin.outputs.OutputError` naming the file;
+   what was written stays ``*.partial`` (the next study removes it), no final name is left
+   truncated.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import re
+from pathlib import Path
+from typing import Any
+
+from cdpr_twin.outputs import OutputDir, fsync_dir, partial_of, writing
+
+FIGURES = ("fig5a", "fig5b", "fig7a", "fig7b", "fig8")
+"""The study's figures (``<name>.png``)."""
+STUDY_FILES = ("report.md", "report.json", "runs.json", *(f"{n}.png" for n in FIGURES))
+"""The final names of a study's own files (beside its ``runs/``)."""
+RUN_NAME = re.compile(r"(open_loop|pbvs_.+)_seed\d+(_without_.+|_goal_.+)?")
+"""How the study names its runs (:func:`cdpr_twin.study.plan.plan`, ``extra_runs``)."""
+
+
+def write_text(path: Path, text: str) -> Path:
+    """Write ``text`` to ``<path>.partial``, flushed and ``fsync``'ed, then rename it to ``path``.
+
+    Raises:
+        OutputError: the write failed (disk full, permission); ``path`` is not touched.
+    """
+    tmp = partial_of(path)
+    with writing(tmp), tmp.open("w", encoding="utf-8") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+    with writing(path):
+        os.replace(tmp, path)
+    fsync_dir(path.parent)
+    return path
+
+
+def write_json(path: Path, data: Any) -> Path:
+    """``data`` as indented JSON, written whole (:func:`write_text`)."""
+    return write_text(path, json.dumps(data, indent=2) + "\n")
+
+
+def clear_earlier_study(out: Path) -> None:
+    """Remove an earlier study's files from ``out`` (claimed by this study); see the module doc.
+
+    A run directory under ``runs/`` is claimed as a run would claim it (an earlier run's
+    files removed, refused while a live run holds it), then removed if nothing else is in it.
+
+    Raises:
+        OutputDirError: a run directory under ``runs/`` is in use by a live run.
+        OutputError: a file cannot be removed.
+    """
+    for path in [out / n for n in STUDY_FILES] + sorted(out.glob("*.partial")):
+        with writing(path):
+            path.unlink(missing_ok=True)
+    runs = out / "runs"
+    if not runs.is_dir():
+        return
+    for run_dir in sorted(runs.iterdir()):
+        if run_dir.is_dir() and not run_dir.is_symlink() and RUN_NAME.fullmatch(run_dir.name):
+            owner = OutputDir(run_dir)
+            owner.claim()  # the lock, then the run's files (and *.partial) removed
+            owner.release()
+            with contextlib.suppress(OSError):  # something else is in it: not the study's
+                run_dir.rmdir()
