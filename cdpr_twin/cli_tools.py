@@ -31,15 +31,22 @@ def live_url(address: str) -> str:
         ValueError: for anything else, saying what to give.
     """
     if address.isdigit():
-        return f"rerun+http://127.0.0.1:{address}/proxy"
+        return f"rerun+http://127.0.0.1:{_port(address)}/proxy"
     if address.startswith(LIVE_SCHEMES):
         return address
     host, _, port = address.rpartition(":")
     if "://" not in address and host and port.isdigit():
-        return f"rerun+http://{host}:{port}/proxy"
+        return f"rerun+http://{host}:{_port(port)}/proxy"
     raise ValueError(
         f"--connect {address!r}: give a port, host:port or a URL rerun+http://host:port/proxy"
     )
+
+
+def _port(digits: str) -> int:
+    """A TCP port number from its digits (1…65535), else a ``ValueError`` saying so."""
+    if not 1 <= int(digits) <= 65535:
+        raise ValueError(f"--connect: port {digits} is not a TCP port: give one in 1…65535")
+    return int(digits)
 
 
 def viewer_command(run_dir: Path) -> list[str]:

@@ -289,6 +289,19 @@ class EventSchedule:
                 event.apply(self.physics, self.sensors)
             self.fired.append((self.physics.time, event, "end" if ending else "start"))
 
+    @property
+    def pending(self) -> list[dict]:
+        """What has not fired (yet): each start or end still due, as ``summary.json`` says it.
+
+        A run that ends before an event's time (e.g. ``--duration`` shortened it) never fires
+        it; the summary lists it under ``events_not_reached`` instead of saying nothing.
+        """
+        return [
+            {"due_s": t, "kind": e.kind, "phase": "end" if ending else "start", "at": e.at}
+            | e.fields()
+            for t, ending, _, e in self._pending
+        ]
+
     def take(self) -> list[tuple[float, Event, str]]:
         """What fired since the last call."""
         new = self.fired[self._taken :]

@@ -209,10 +209,33 @@ def _assemble(s: Scenario, physics, sensors, nominal) -> RunSetup:
         physics.add_hook(events)
     monitor = _monitor(s, physics)
     goal = controller.goal_pose(nominal.T_base_tag)
+    if goal is not None and shown_view is None:  # a goal the nominal model predicts: reachable?
+        _check_goal(s, nominal.geometry, goal)
     return RunSetup(
         s, physics, sensors, nominal, estimators, order, controller, goal, events, monitor,
         true_start, offset, shown_view,
     )  # fmt: skip
+
+
+def _check_goal(s: Scenario, geometry, goal: np.ndarray) -> None:
+    """Refuse a goal view the nominal robot could only reach outside its workspace.
+
+    Such a goal cannot be reached: the run would go on to its time limit (or stop on a fault).
+
+    Raises:
+        ScenarioError: the goal pose leaves the frame or is not wrench-feasible.
+    """
+    from cdpr_twin.se3 import vector_from_pose
+    from cdpr_twin.workspace import infeasible_reason, is_feasible
+
+    where = f"{s.source}: controller: its goal puts the platform at "
+    where += f"{vector_from_pose(goal).round(4).tolist()}, which"
+    try:
+        geometry.check_pose_inside(goal, "goal pose")
+    except ValueError as exc:
+        raise ScenarioError(f"{where} is outside the frame: {exc}") from None
+    if not is_feasible(geometry, goal):
+        raise ScenarioError(f"{where} {infeasible_reason(geometry)}")
 
 
 def _monitor(s: Scenario, physics):

@@ -68,6 +68,8 @@ def summarize(setup, metrics: RunMetrics, status: str, tally: Tally) -> dict:
         out["tension_clipped_readings"] = tally.clipped.tolist()
     if setup.events.fired:
         out["events"] = [e.as_dict(t, phase) for t, e, phase in setup.events.fired]
+    if pending := setup.events.pending:  # the run ended first: said, not silently dropped
+        out["events_not_reached"] = pending
     if tally.faults:
         out["faults"] = [f.as_dict() for f in tally.faults]
     return out

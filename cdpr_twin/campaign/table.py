@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from cdpr_twin.outputs import OutputError, fsync_dir, partial_of, writing
+from cdpr_twin.outputs import OutputDirError, OutputError, fsync_dir, partial_of, writing
 
 PARTS = "parts"
 RESULTS = "results.parquet"
@@ -105,11 +105,9 @@ class ResultTable:
 
     def done_ids(self) -> set[str]:
         """Run ids already in the table (their runs ended, ran or failed)."""
-        import pyarrow.parquet as pq
-
         ids: set[str] = set()
         for path in self._files():
-            ids.update(pq.read_table(path, columns=["run_id"]).column("run_id").to_pylist())
+            ids.update(read_parquet(path, ["run_id"]).column("run_id").to_pylist())
         return ids
 
     def add(self, row: dict) -> None:
@@ -157,12 +155,30 @@ def _write(table, path: Path) -> None:
         fsync_dir(path.parent)
 
 
-def load_parts(parts: Path):
-    """Every part file of a table, as one ``pyarrow.Table`` (columns unified; missing: null)."""
+def read_parquet(path: Path, columns: list[str] | None = None):
+    """One Parquet file of a campaign's table, as a ``pyarrow.Table``.
+
+    Raises:
+        OutputDirError: it is not a readable Parquet file (damaged after it was written: parts
+            are renamed only when whole), naming it and the fix.
+    """
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    tables = [pq.read_table(p) for p in sorted(Path(parts).glob("part-*.parquet"))]
+    try:
+        return pq.read_table(path, columns=columns)
+    except (pa.ArrowException, OSError) as exc:
+        raise OutputDirError(
+            f"{path} is not a readable Parquet file ({str(exc).splitlines()[0]}); delete it "
+            "and run with --resume to run its runs again"
+        ) from None
+
+
+def load_parts(parts: Path):
+    """Every part file of a table, as one ``pyarrow.Table`` (columns unified; missing: null)."""
+    import pyarrow as pa
+
+    tables = [read_parquet(p) for p in sorted(Path(parts).glob("part-*.parquet"))]
     if not tables:
         raise OutputError(Path(parts), "no results yet")
     # permissive: an axis [0, 0.5] gives int64 parts and double parts (each part's types are
@@ -175,9 +191,7 @@ def load_table(out: str | Path):
 
     Reads ``results.parquet`` when the campaign ended, else the parts written so far.
     """
-    import pyarrow.parquet as pq
-
     out = Path(out)
     if (out / RESULTS).is_file():
-        return pq.read_table(out / RESULTS)
+        return read_parquet(out / RESULTS)
     return load_parts(out / PARTS)

@@ -1,0 +1,59 @@
+"""Inputs that used to pass silently: an unreachable PBVS goal, events a run never reaches, a
+port that is not one, a damaged part of a campaign's table."""
+
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from cdpr_twin.campaign.spec import set_dotted
+from cdpr_twin.campaign.table import load_table, read_parquet
+from cdpr_twin.cli_tools import live_url
+from cdpr_twin.outputs import OutputDirError
+from cdpr_twin.runner import prepare, run
+from cdpr_twin.scenario import ScenarioError, load_scenario, scenario_from_data
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _pbvs(**changes):
+    source = ROOT / "scenarios" / "paper_pbvs.toml"
+    data = tomllib.loads(source.read_text())
+    for key, value in changes.items():
+        set_dotted(data, key, value)
+    return scenario_from_data(data, source)
+
+
+def test_a_pbvs_goal_the_nominal_robot_cannot_reach_is_refused():
+    # the tag seen 5 m away: the platform would have to be 5 m below it, under the floor
+    s = _pbvs(**{"controller.goal_tag_pose_visp": [0.0, 0.0, 5.0, 180, 0, 180]})
+    with pytest.raises(ScenarioError, match=r"its goal puts the platform at .* outside the frame"):
+        prepare(s)
+
+
+def test_the_papers_goal_is_accepted():
+    prepare(_pbvs()).close()
+
+
+def test_an_event_the_run_does_not_reach_is_listed_in_the_summary():
+    s = load_scenario("fault_cable_break").with_overrides(duration=0.2, camera=False)
+    summary = run(s, None).summary
+    assert "events" not in summary
+    [pending] = summary["events_not_reached"]
+    assert (pending["kind"], pending["due_s"], pending["cable"]) == ("cable_break", 26.0, 2)
+
+
+@pytest.mark.parametrize("address", ["0", "99999", "host:70000"])
+def test_a_port_out_of_range_is_refused(address):
+    with pytest.raises(ValueError, match="not a TCP port"):
+        live_url(address)
+
+
+def test_a_damaged_part_of_a_campaign_table_is_a_one_line_error(tmp_path):
+    parts = tmp_path / "parts"
+    parts.mkdir()
+    (parts / "part-00000.parquet").write_bytes(b"PAR1 not really parquet")
+    with pytest.raises(OutputDirError, match=r"part-00000\.parquet is not a readable Parquet"):
+        load_table(tmp_path)
+    with pytest.raises(OutputDirError, match="delete it and run with --resume"):
+        read_parquet(parts / "part-00000.parquet", ["run_id"])
