@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -131,8 +132,8 @@ def _print_ends(s: dict) -> None:
         )
 
 
-def _failure(exc: BaseException, out: Path, show_traceback: bool = False) -> int:
-    """Print a run's failure (a plugin's bug too) in one line on stderr; returns the exit code."""
+def _failure(exc: BaseException, out: Path, show_traceback: bool, since: float) -> int:
+    """Print a run's failure (a plugin's bug too) in one line; ``since``: the command's start."""
     from cdpr_twin.outputs import OutputDirError, OutputError, Terminated
     from cdpr_twin.scenario import ScenarioError
 
@@ -145,13 +146,13 @@ def _failure(exc: BaseException, out: Path, show_traceback: bool = False) -> int
         how, code = ("terminated", 143) if isinstance(exc, Terminated) else ("interrupted", 130)
         message = (
             f'{how}; partial outputs (flushed, marked "{how}") in {out}'
-            if _status(out) == how
-            else f"{how} before any output was written"
+            if _status(out, since) == how
+            else f"{how} before this run saved any output in {out}"
         )
     else:
         where = (
             f"its outputs, up to the failure, are in {out}"
-            if _status(out).startswith("failed")
+            if _status(out, since).startswith("failed")
             else "no output was written"
         )
         what, hint = _unexpected(exc, show_traceback)
@@ -160,9 +161,11 @@ def _failure(exc: BaseException, out: Path, show_traceback: bool = False) -> int
     return code
 
 
-def _status(out: Path) -> str:
-    """The status in ``out``'s ``summary.json`` (this run's, or an earlier one's), or ``""``."""
+def _status(out: Path, since: float = 0.0) -> str:
+    """The status in ``out``'s ``summary.json`` written since ``since`` (this run's), or ``""``."""
     try:
+        if (out / "summary.json").stat().st_mtime < since:
+            return ""  # an earlier run's: this one stopped before it claimed the directory
         return str(json.loads((out / "summary.json").read_text())["status"])
     except (OSError, ValueError, KeyError, TypeError):
         return ""
@@ -200,13 +203,13 @@ def _run(args: argparse.Namespace) -> int:
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
         return 2
     out = args.out if args.out is not None else Path("runs") / scenario.name
-    progress = _Progress(scenario.name)
+    progress, since = _Progress(scenario.name), time.time()
     try:
         with sigterm_raises():
             result = run(scenario, out, progress=progress, spawn=args.spawn, connect=connect)
     except (Exception, KeyboardInterrupt) as exc:  # a plugin's bug too: one line, not a trace
         progress.done()
-        return _failure(exc, out, args.traceback)
+        return _failure(exc, out, args.traceback, since)
     progress.done()
     s = result.summary
     print(

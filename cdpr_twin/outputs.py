@@ -295,6 +295,28 @@ def out_path(text: str) -> Path:
 
 
 @contextlib.contextmanager
+def shielded() -> Iterator[None]:
+    """Within: SIGINT and SIGTERM are ignored, so that a stop's outputs are completed.
+
+    A run that is stopping completes, renames and commits its files in well under a second;
+    a second Ctrl-C (or SIGTERM) during that used to interrupt it, leaving ``*.partial`` files
+    and the lock. SIGKILL still stops it. In another thread than the main one (where signals
+    cannot be handled) it does nothing.
+    """
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+@contextlib.contextmanager
 def sigterm_raises() -> Iterator[None]:
     """Within: SIGTERM raises :class:`Terminated`; the previous handler is restored on leaving.
 

@@ -33,7 +33,7 @@ from cdpr_twin.controllers.base import Controller
 from cdpr_twin.estimators.base import Estimator, update_order
 from cdpr_twin.events import EventSchedule, TagOcclusion
 from cdpr_twin.metrics import RunMetrics
-from cdpr_twin.outputs import CAMPAIGN_FILES, OutputDir, OutputError, Terminated
+from cdpr_twin.outputs import CAMPAIGN_FILES, OutputDir, OutputError, Terminated, shielded
 from cdpr_twin.plugins import OptionError
 from cdpr_twin.procedure import homing, teach
 from cdpr_twin.record import SceneInfo
@@ -333,12 +333,13 @@ def run(
         raise
     finally:
         wall = time.perf_counter() - started
-        try:
-            summary = summarize(setup, metrics, status, tally)
-            recorders.close(summary, commit)
-        finally:
-            setup.close()
-            owner.release()
+        with shielded():  # a second Ctrl-C or SIGTERM cannot leave the outputs half-saved
+            try:
+                summary = summarize(setup, metrics, status, tally)
+                recorders.close(summary, commit)
+            finally:
+                setup.close()
+                owner.release()
     return RunResult(summary, wall, out_dir)
 
 

@@ -1,6 +1,9 @@
 """Inputs that used to pass silently: an unreachable PBVS goal, events a run never reaches, a
 port that is not one, a damaged part of a campaign's table."""
 
+import json
+import os
+import signal
 import tomllib
 from pathlib import Path
 
@@ -57,3 +60,48 @@ def test_a_damaged_part_of_a_campaign_table_is_a_one_line_error(tmp_path):
         load_table(tmp_path)
     with pytest.raises(OutputDirError, match="delete it and run with --resume"):
         read_parquet(parts / "part-00000.parquet", ["run_id"])
+
+
+def test_a_second_ctrl_c_while_a_stopped_run_saves_cannot_leave_it_half_saved(
+    tmp_path, monkeypatch
+):
+    from cdpr_twin import recorders
+
+    close = recorders.Recorders.close
+
+    def close_under_fire(self, summary, commit=True):
+        os.kill(os.getpid(), signal.SIGINT)  # the impatient user's second Ctrl-C
+        return close(self, summary, commit)
+
+    def stop(fraction, t):
+        raise KeyboardInterrupt  # the first Ctrl-C, at the first tick
+
+    monkeypatch.setattr(recorders.Recorders, "close", close_under_fire)
+    s = load_scenario("paper_open_loop").with_overrides(duration=0.2, camera=False)
+    with pytest.raises(KeyboardInterrupt):
+        run(s, tmp_path / "out", progress=stop)
+    files = sorted(p.name for p in (tmp_path / "out").iterdir())
+    assert files == ["recording.rrd", "summary.json", "timeseries.csv"]
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["status"] == "interrupted"
+
+
+def test_a_stop_before_the_run_claims_its_directory_does_not_claim_an_earlier_runs_files(
+    tmp_path, monkeypatch, capsys
+):
+    from cdpr_twin import runner
+    from cdpr_twin.cli import main
+    from cdpr_twin.outputs import Terminated
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "summary.json").write_text('{"status": "terminated"}\n')  # an earlier run's
+    os.utime(out / "summary.json", (0, 0))
+
+    def prepare(scenario):
+        raise Terminated()  # SIGTERM while the robot is being built
+
+    monkeypatch.setattr(runner, "prepare", prepare)
+    assert main(["run", "paper_open_loop", "--out", str(out), "--no-camera"]) == 143
+    err = capsys.readouterr().err
+    assert "terminated before this run saved any output" in err and "partial" not in err
