@@ -202,6 +202,10 @@ def _assemble(s: Scenario, physics, sensors, nominal) -> RunSetup:
         except OptionError as exc:
             raise ScenarioError(f"{src}: events[{i}].{exc.field}: {exc.problem}") from None
     controller, estimators = _build_plugins(s, nominal.geometry)
+    try:
+        controller.check_period(s.model.control_period)
+    except OptionError as exc:
+        raise ScenarioError(f"{src}: controller.{exc.field}: {exc.problem}") from None
     order = _update_order(estimators, s)
     shown_view = teach(s, physics, sensors, controller)  # before events can act
     events = EventSchedule(s.events, physics, sensors)

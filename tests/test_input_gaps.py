@@ -105,3 +105,11 @@ def test_a_stop_before_the_run_claims_its_directory_does_not_claim_an_earlier_ru
     assert main(["run", "paper_open_loop", "--out", str(out), "--no-camera"]) == 143
     err = capsys.readouterr().err
     assert "terminated before this run saved any output" in err and "partial" not in err
+
+
+def test_an_open_loop_segment_shorter_than_a_control_tick_is_refused():
+    source = ROOT / "scenarios" / "paper_open_loop.toml"
+    data = tomllib.loads(source.read_text())
+    set_dotted(data, "controller.durations", [0.001, 5.0, 10.0])  # was skipped: 326 mm off p1
+    with pytest.raises(ScenarioError, match=r"durations\[0\]: 0.001 s is shorter than one"):
+        prepare(scenario_from_data(data, source).with_overrides(camera=False))

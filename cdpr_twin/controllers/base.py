@@ -70,6 +70,13 @@ class Controller(ABC):
             cdpr_twin.plugins.OptionError: naming the option at fault.
         """
 
+    def check_period(self, period: float) -> None:  # noqa: B027  (optional hook)
+        """Check the task against the control period [s] it will run at, before a run starts.
+
+        Raises:
+            cdpr_twin.plugins.OptionError: naming the option at fault.
+        """
+
     def teach(self, show: Callable[[np.ndarray], Measurement]) -> None:  # noqa: B027
         """Learn the task by being shown, once before the run (optional hook: nothing to learn).
 

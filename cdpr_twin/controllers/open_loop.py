@@ -141,6 +141,21 @@ class OpenLoopController(Controller):
             if not is_feasible(self.geometry, w):
                 raise OptionError(f"waypoints[{i}]", f"{where} {infeasible_reason(self.geometry)}")
 
+    def check_period(self, period: float) -> None:
+        """Each segment lasts at least one control period (a shorter one would be skipped).
+
+        Raises:
+            OptionError: naming the segment (``durations[i]``, from 0).
+        """
+        for i, d in enumerate(self.durations):
+            if d < period * (1 - 1e-9):
+                raise OptionError(
+                    f"durations[{i}]",
+                    f"{d:g} s is shorter than one control period ({period:g} s): the twist is "
+                    f"sampled once per period, so the segment would be skipped; make it ≥ "
+                    f"{period:g} s",
+                )
+
     @property
     def total_duration(self) -> float:
         """Duration of the whole trajectory [s]."""
