@@ -71,9 +71,10 @@ def _demo(args: argparse.Namespace) -> int:
 class _Progress:
     """A one-line progress bar on stderr (a line per 10 % when stderr is not a terminal)."""
 
-    def __init__(self, label: str, stream=sys.stderr) -> None:
-        self.label, self.stream = label, stream
-        self.tty = stream.isatty()
+    def __init__(self, label: str, stream=None) -> None:
+        self.label = label
+        self.stream = sys.stderr if stream is None else stream  # now: not the import's
+        self.tty = self.stream.isatty()
         self._last = -1
 
     def __call__(self, fraction: float, t: float) -> None:

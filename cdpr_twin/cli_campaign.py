@@ -14,8 +14,10 @@ class CampaignProgress:
     A terminal gets a redrawn line; a log gets a line per 10 % of the runs.
     """
 
-    def __init__(self, label: str, stream=sys.stderr) -> None:
-        self.label, self.stream, self.tty = label, stream, stream.isatty()
+    def __init__(self, label: str, stream=None) -> None:
+        self.label = label
+        self.stream = sys.stderr if stream is None else stream  # now: not the import's
+        self.tty = self.stream.isatty()
         self.start, self.failed, self._decile = time.perf_counter(), 0, -1
 
     def __call__(self, done: int, total: int, row: dict) -> None:

@@ -121,11 +121,16 @@ class CdprGeometry:
         T = check_rigid(T_base_platform, what)
         b = self.b_platform @ T[:3, :3].T + T[:3, 3]
         outside = np.any((b < self.frame_min) | (b > self.frame_max), axis=1)
-        if np.any(outside) or T[2, 3] >= self.a_base[:, 2].min():
+        at = f"{what} at position {np.round(T[:3, 3], 4).tolist()} m"
+        if np.any(outside):
             raise ValueError(
-                f"{what} at position {np.round(T[:3, 3], 4).tolist()} m puts anchor points "
-                f"{(np.flatnonzero(outside) + 1).tolist()} outside the frame "
-                f"{np.round(self.frame_min, 3).tolist()}…{np.round(self.frame_max, 3).tolist()} m"
-                " (or above the exit points); choose a pose inside the workspace"
+                f"{at} puts anchor points {(np.flatnonzero(outside) + 1).tolist()} outside the "
+                f"frame {np.round(self.frame_min, 3).tolist()}…"
+                f"{np.round(self.frame_max, 3).tolist()} m; choose a pose inside the workspace"
+            )
+        if T[2, 3] >= (z_exit := self.a_base[:, 2].min()):
+            raise ValueError(
+                f"{at} is not below the lowest exit point (z = {z_exit:.3f} m), where a "
+                "suspended robot's platform hangs; choose a lower pose, or check the exit points"
             )
         return T

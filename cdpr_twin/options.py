@@ -137,14 +137,17 @@ class OptionReader:
             raise self.fail(key, f"must be a table [{key}], got {v!r}")
         return OptionReader(self.source, v, f"{self.where}.{key}" if self.where else key)
 
-    def done(self) -> None:
-        """Refuse keys nobody asked for (typos)."""
+    def done(self, known: tuple[str, ...] = ()) -> None:
+        """Refuse keys nobody asked for (typos).
+
+        Args:
+            known: the keys the table may hold besides those read (optional fields left out),
+                listed in the error.
+        """
         unknown = sorted(set(self.table) - self.used)
         if unknown:
-            raise self.fail(
-                unknown[0],
-                f"unknown field; known fields here: {', '.join(sorted(self.used)) or 'none'}",
-            )
+            fields = ", ".join(sorted(self.used | set(known))) or "none"
+            raise self.fail(unknown[0], f"unknown field; known fields here: {fields}")
 
 
 def _read_field(r: OptionReader, f: dataclasses.Field, hint: Any) -> Any:
@@ -212,7 +215,7 @@ def read_options(
             continue
         kwargs[f.name] = _read_field(r, f, hints[f.name])
     r.used.update(skip)
-    r.done()
+    r.done(tuple(spec_of(f).file_key(f.name) for f in dataclasses.fields(cls)))
     return kwargs
 
 

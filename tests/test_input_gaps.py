@@ -113,3 +113,21 @@ def test_an_open_loop_segment_shorter_than_a_control_tick_is_refused():
     set_dotted(data, "controller.durations", [0.001, 5.0, 10.0])  # was skipped: 326 mm off p1
     with pytest.raises(ScenarioError, match=r"durations\[0\]: 0.001 s is shorter than one"):
         prepare(scenario_from_data(data, source).with_overrides(camera=False))
+
+
+def test_an_unknown_optional_field_lists_the_fields_it_could_be():
+    source = ROOT / "scenarios" / "paper_open_loop.toml"
+    data = tomllib.loads(source.read_text())
+    set_dotted(data, "realism.camera.exposure_ms", 4.0)  # was: "known fields here: none"
+    with pytest.raises(ScenarioError, match=r"exposure_ms: unknown field; known .*exposure_s"):
+        scenario_from_data(data, source)
+
+
+def test_a_platform_above_its_exit_points_is_said_so():
+    source = ROOT / "scenarios" / "paper_open_loop.toml"
+    data = tomllib.loads(source.read_text())
+    set_dotted(data, "truth.exit_point_std", 5.0)  # exit points metres off: some below p0
+    s = scenario_from_data(data, source).with_overrides(camera=False)
+    with pytest.raises(ScenarioError, match="is not below the lowest exit point") as error:
+        prepare(s)
+    assert "anchor points []" not in str(error.value)  # was: "puts anchor points [] outside"
