@@ -129,15 +129,51 @@ def _update_order(estimators: dict[str, Estimator], s: Scenario) -> tuple[str, .
         raise ScenarioError(f"{s.source}: estimators: {exc}") from None
 
 
-def _build_plugins(scenario: Scenario, geom) -> tuple[Controller, dict[str, Estimator]]:
+def _controller(scenario: Scenario, geom) -> Controller:
+    """The scenario's controller for the nominal geometry, checked against its control period."""
     src = scenario.source
     cls = plugins.lookup("controller", scenario.controller.type)
     try:
         controller = cls(geom, scenario.controller.options)
+        controller.check_period(scenario.model.control_period)
     except OptionError as exc:
         raise ScenarioError(f"{src}: controller.{exc.field}: {exc.problem}") from None
     except Exception as exc:  # a plugin's own failure: name it, no traceback
         raise ScenarioError(f"{src}: controller: {type(exc).__name__}: {exc}") from None
+    return controller
+
+
+def check_task(scenario: Scenario, nominals: dict | None = None) -> None:
+    """Refuse what :func:`prepare` would refuse about the task, without building the twin.
+
+    The controller against the nominal robot (waypoints, segment durations, the goal); a
+    campaign checks each of its runs so before any starts (the nominal robot built once per
+    model: ``nominals`` caches it).
+
+    Raises:
+        ScenarioError: naming the file and field at fault.
+    """
+    from cdpr_twin.sim import ModelError, nominal_robot
+
+    s, nominals = scenario, {} if nominals is None else nominals
+    m = s.model
+    key = (str(m.file), str(m.nominal), float(m.payload), tuple(np.ravel(m.payload_com).tolist()))
+    if key not in nominals:
+        try:
+            nominals[key] = nominal_robot(m.file, m.nominal, (m.payload, m.payload_com))
+        except ModelError as exc:
+            raise ScenarioError(f"{s.source}: model.file: {exc}") from None
+        except ValueError as exc:
+            raise ScenarioError(f"{s.source}: model: {exc}") from None
+    nominal = nominals[key]
+    goal = _controller(s, nominal.geometry).goal_pose(nominal.T_base_tag)
+    if goal is not None:
+        _check_goal(s, nominal.geometry, goal)
+
+
+def _build_plugins(scenario: Scenario, geom) -> tuple[Controller, dict[str, Estimator]]:
+    src = scenario.source
+    controller = _controller(scenario, geom)
     estimators = {}
     for name in scenario.estimators.names:
         est_cls = plugins.lookup("estimator", name)
@@ -202,10 +238,6 @@ def _assemble(s: Scenario, physics, sensors, nominal) -> RunSetup:
         except OptionError as exc:
             raise ScenarioError(f"{src}: events[{i}].{exc.field}: {exc.problem}") from None
     controller, estimators = _build_plugins(s, nominal.geometry)
-    try:
-        controller.check_period(s.model.control_period)
-    except OptionError as exc:
-        raise ScenarioError(f"{src}: controller.{exc.field}: {exc.problem}") from None
     order = _update_order(estimators, s)
     shown_view = teach(s, physics, sensors, controller)  # before events can act
     events = EventSchedule(s.events, physics, sensors)

@@ -165,3 +165,17 @@ def test_a_nan_estimate_is_counted_invalid_not_dropped_from_the_deviations():
     assert s["rms_translation_m"] == pytest.approx(math.sqrt((0.001**2 + 0.003**2) / 2))
     track.add(PoseEstimate(0.16, np.full((4, 4), np.nan)), (math.nan, math.nan))
     assert math.isnan(track.summary()["final_translation_m"])  # the last estimate: none
+
+
+def test_a_waypoint_outside_the_frame_through_an_axis_is_refused_before_any_run(tmp_path):
+    from cdpr_twin.campaign import CampaignError
+
+    p1, p0 = [0.284, -0.197, 0.08, 0, 0, 0], [0.1, 0.0, 0.3, 0, 0, 0]
+    good, bad = [p1, [0.284, -0.197, 0.25, 0, 0, 0], p0], [p1, [0.284, -0.197, 2.5, 0, 0, 0], p0]
+    path = tmp_path / "axis.toml"
+    path.write_text(
+        f'name = "axis"\nscenario = "{ROOT}/scenarios/paper_open_loop.toml"\n\n'
+        f'[[axes]]\nkey = "controller.waypoints"\nvalues = [{good}, {bad}]\n'
+    )
+    with pytest.raises(CampaignError, match=r"waypoints\[1\].* is outside the frame"):
+        load_campaign(path)  # was: a failed row, after the runs before it had run

@@ -227,9 +227,10 @@ def _swap_in_loop(data: dict, base: dict) -> None:
 
 
 def _tasks(source: Path, block: _Block, seed: int, where: str) -> list[Task]:
+    from cdpr_twin.runner import check_task
     from cdpr_twin.scenario import ScenarioError, scenario_from_data
 
-    out = []
+    out, nominals, checked = [], {}, set()
     points = itertools.product(*(a["values"] for a in block.grid))
     for p, point in enumerate(points):
         for sample in range(block.samples):
@@ -246,7 +247,11 @@ def _tasks(source: Path, block: _Block, seed: int, where: str) -> list[Task]:
             if IN_LOOP in changes and "estimators.passive" not in changes:
                 _swap_in_loop(data, block.base)
             try:
-                scenario_from_data(data, block.scenario)
+                scenario = scenario_from_data(data, block.scenario)
+                task_key = json.dumps([data.get("model"), data.get("controller")], default=str)
+                if task_key not in checked:  # the robot and the task: the twin's own checks
+                    check_task(scenario, nominals)  # (truth draws and seeds do not change them)
+                    checked.add(task_key)
             except ScenarioError as exc:
                 varied = ", ".join(f"{k} = {_label(v)}" for k, v in params.items()) or "none"
                 raise _fail(source, f"{where.rstrip('.') or 'run'} ({varied})", str(exc)) from None

@@ -19,7 +19,7 @@ from cdpr_twin.sim.model import ModelError, build_model, cable_count, read_geome
 from cdpr_twin.sim.monitor import Fault, FaultKind, Monitor, MonitorLimits, robot_limits
 from cdpr_twin.sim.physics import Physics, SimulationError, StepHook
 from cdpr_twin.sim.sensors import NominalRobot, Sensors
-from cdpr_twin.sim.twin import Twin, build_robot
+from cdpr_twin.sim.twin import Twin, build_robot, nominal_robot
 
 __all__ = [
     "DeviationSpec",
@@ -38,6 +38,7 @@ __all__ = [
     "build_model",
     "build_robot",
     "cable_count",
+    "nominal_robot",
     "read_geometry",
     "robot_limits",
 ]

@@ -105,6 +105,34 @@ def _set_timestep(model: mujoco.MjModel, timestep: float | None) -> None:
     model.opt.timestep = float(timestep)
 
 
+def nominal_robot(
+    model_path: str | Path | None = None,
+    nominal_path: str | Path | None = None,
+    payload: tuple[float, np.ndarray] = (0.0, np.zeros(3)),
+) -> NominalRobot:
+    """What the robot's software believes (as :func:`build_robot` gives it), without a twin.
+
+    Enough to check a task against the nominal robot (a campaign's runs, before any starts).
+
+    Raises:
+        ModelError: when the model file is missing, malformed or not a cable robot.
+    """
+    return _nominal(model_path, nominal_path, payload)[2]
+
+
+def _nominal(model_path, nominal_path, payload) -> tuple[Path, object, NominalRobot]:
+    try:
+        path = resources.robot_model(model_path)
+    except resources.ResourceError as exc:
+        raise ModelError(str(exc)) from None
+    nominal_model = build_model(path)
+    add_payload(nominal_model, payload[0], np.asarray(payload[1], dtype=float), str(path))
+    nominal = _nominal_robot(nominal_model)
+    if nominal_path is not None:
+        nominal = nominal_from_description(nominal_path, nominal)
+    return path, nominal_model, nominal
+
+
 def build_robot(
     model_path: str | Path | None = None,
     deviations: DeviationSpec | TruthDeviations | None = None,
@@ -135,16 +163,8 @@ def build_robot(
         ModelError: when the model file is missing, malformed or not a cable robot.
         ValueError: for a bad timestep or refresh interval.
     """
-    try:
-        path = resources.robot_model(model_path)
-    except resources.ResourceError as exc:
-        raise ModelError(str(exc)) from None
+    path, nominal_model, nominal = _nominal(model_path, nominal_path, payload)
     robot_seed = deviations.seed if isinstance(deviations, DeviationSpec) else 0
-    nominal_model = build_model(path)
-    add_payload(nominal_model, payload[0], np.asarray(payload[1], dtype=float), str(path))
-    nominal = _nominal_robot(nominal_model)
-    if nominal_path is not None:
-        nominal = nominal_from_description(nominal_path, nominal)
     n = cable_count(nominal_model)
     if isinstance(deviations, DeviationSpec):
         deviations = deviations.draw(n)
