@@ -63,7 +63,7 @@ def campaign_command(args: argparse.Namespace) -> int:
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
         return 2
     out = args.out if args.out is not None else Path("runs") / campaign.name
-    progress = CampaignProgress(campaign.name)
+    progress, since = CampaignProgress(campaign.name), time.time()
     ray = False if args.ray is None else (args.ray or True)
     try:
         with sigterm_raises():
@@ -80,7 +80,7 @@ def campaign_command(args: argparse.Namespace) -> int:
     except KeyboardInterrupt as exc:
         progress.done()
         how, code = ("terminated", 143) if isinstance(exc, Terminated) else ("interrupted", 130)
-        print(f"cdpr-twin: {how}; {_what_was_kept(out)}", file=sys.stderr)
+        print(f"cdpr-twin: {how}; {_what_was_kept(out, since)}", file=sys.stderr)
         return code
     progress.done()
     print(
@@ -91,21 +91,23 @@ def campaign_command(args: argparse.Namespace) -> int:
     return 1 if progress.failed else 0
 
 
-def _what_was_kept(out: Path) -> str:
-    """After a stop: where the finished runs are (``campaign.json`` says how many ran)."""
+def _what_was_kept(out: Path, since: float) -> str:
+    """After a stop: what this command recorded (``campaign.json`` written since ``since``)."""
     import json
 
-    from cdpr_twin.campaign.table import RESULTS
+    from cdpr_twin.campaign.table import PARTS, RESULTS
 
+    rest = "run again with --resume for the rest"
     try:
+        if (out / "campaign.json").stat().st_mtime < since:
+            raise ValueError  # an earlier campaign's: this one stopped before it ran anything
         ran = json.loads((out / "campaign.json").read_text(encoding="utf-8"))["ran_now"]
     except (OSError, ValueError, KeyError):
-        ran = None
-    rest = "run again with --resume for the rest"
-    if not (out / RESULTS).exists():
-        return f"no run had finished, nothing was recorded in {out} ({rest})"
-    now = "" if ran is None else f"{ran} runs finished now; "
-    return f"{now}the table of the finished runs is {out / RESULTS} ({rest})"
+        ran = 0
+    table = out / RESULTS if (out / RESULTS).exists() else out / PARTS
+    if not ran:
+        return f"no run finished now; {out} holds what it held before ({rest})"
+    return f"{ran} runs finished now and are recorded in {table} ({rest})"
 
 
 def add_campaign_parser(sub) -> None:

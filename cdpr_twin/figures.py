@@ -10,14 +10,13 @@ Estimators the paper does not have get colours from :data:`EXTRA_COLORS`, their 
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
 
 from cdpr_twin.metrics import sample_std
-from cdpr_twin.outputs import partial_of, writing
+from cdpr_twin.outputs import save_figure
 from cdpr_twin.results import ordered_estimators
 from cdpr_twin.timeseries import Timeseries
 
@@ -74,14 +73,7 @@ def _save(fig: Figure, path: Path) -> Path:
     Raises:
         cdpr_twin.outputs.OutputError: the write failed (disk full); ``path`` is not touched.
     """
-    tmp = partial_of(path)
-    with writing(tmp), tmp.open("wb") as f:
-        fig.savefig(f, dpi=DPI, format=Path(path).suffix.lstrip(".") or "png")
-        f.flush()
-        os.fsync(f.fileno())
-    with writing(path):
-        os.replace(tmp, path)
-    return path
+    return save_figure(fig, Path(path), dpi=DPI, format=Path(path).suffix.lstrip(".") or "png")
 
 
 def trajectories_3d(curves: dict[str, np.ndarray], title: str, path: Path) -> Path:

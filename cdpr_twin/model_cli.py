@@ -46,24 +46,20 @@ def _out_dir(description: Path, out: Path | None) -> Path:
 
 
 def _build(args: argparse.Namespace) -> int:
-    from cdpr_twin.outputs import OutputError, write_whole
-    from cdpr_twin.robot import RobotError, load_robot
-    from cdpr_twin.sim.generate import model_texts
+    from cdpr_twin.outputs import OutputError
+    from cdpr_twin.robot import RobotError
+    from cdpr_twin.sim.generate import build_files
 
     try:
-        robot = load_robot(args.description)
         out = _out_dir(args.description, args.out)
-        texts = model_texts(robot, out)
-        paths = (out / f"{robot.name}.xml", out / "scene.xml")
-        try:
-            out.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise ValueError(f"--out {out}: cannot create it: {exc.strerror or exc}") from None
+        paths = build_files(args.description, out)  # both whole, or neither renamed
     except (RobotError, ValueError) as exc:  # a bad description or --out, an infeasible home
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
         return 2
-    try:
-        write_whole(dict(zip(paths, texts, strict=True)))  # both whole, or neither renamed
+    except OSError as exc:  # the directory cannot be created
+        print(f"cdpr-twin: error: --out {out}: cannot create it: {exc.strerror or exc}",
+              file=sys.stderr)  # fmt: skip
+        return 2
     except OutputError as exc:
         print(
             f"cdpr-twin: error: cannot write {exc.path}: {exc.cause}; no half-written file is "

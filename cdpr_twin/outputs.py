@@ -33,6 +33,7 @@ import json
 import os
 import signal
 import socket
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -42,6 +43,8 @@ OUTPUT_NAMES = ("timeseries.csv", "recording.rrd", "summary.json")
 """The final names of a run's files (removed with ``*.partial`` when a new run starts)."""
 CAMPAIGN_FILES = ("campaign.json", "parts")
 """What marks a campaign's directory (a run there is refused: it would mix into its table)."""
+STUDY_FILES = ("runs.json",)
+"""What marks a ``reproduce`` study's directory (a run or campaign there is refused)."""
 
 
 class OutputDirError(Exception):
@@ -92,14 +95,23 @@ def partial_of(path: Path) -> Path:
     return path.with_name(path.name + ".partial")
 
 
-def write_json_partial(path: Path, data: dict) -> Path:
-    """Write JSON to ``<path>.partial``, flushed and ``fsync``'ed; returns that path."""
+def write_partial(path: Path, data: str | bytes) -> Path:
+    """Write ``data`` (text: UTF-8) to ``<path>.partial``, flushed and ``fsync``'ed; its path.
+
+    Raises:
+        OutputError: the write failed (disk full, permission), naming the partial file.
+    """
     tmp = partial_of(path)
-    with writing(tmp), tmp.open("w", encoding="utf-8") as f:
-        f.write(json.dumps(data, indent=2, sort_keys=False) + "\n")
+    with writing(tmp), tmp.open("wb") as f:
+        f.write(data.encode("utf-8") if isinstance(data, str) else data)
         f.flush()
         os.fsync(f.fileno())
     return tmp
+
+
+def write_json_partial(path: Path, data: dict) -> Path:
+    """Write JSON to ``<path>.partial``, flushed and ``fsync``'ed; returns that path."""
+    return write_partial(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
 
 
 def write_json_atomic(path: Path, data: dict) -> None:
@@ -107,6 +119,49 @@ def write_json_atomic(path: Path, data: dict) -> None:
     tmp = write_json_partial(path, data)
     with writing(path):
         os.replace(tmp, path)
+
+
+def write_atomic(path: Path, data: str | bytes) -> Path:
+    """Write ``data`` whole: ``<path>.partial`` (``fsync``'ed), renamed, the directory synced.
+
+    Raises:
+        OutputError: the write failed (disk full, permission); ``path`` is not touched and
+            what was written is left ``*.partial`` (the next claim of the directory removes it).
+    """
+    tmp = write_partial(path, data)
+    with writing(path):
+        os.replace(tmp, path)
+    fsync_dir(path.parent)
+    return path
+
+
+def save_figure(fig, path: Path, keep_partial: bool = True, **savefig) -> Path:
+    """A matplotlib figure saved whole: into ``<path>.partial``, then renamed.
+
+    Args:
+        fig: the figure.
+        path: its final name.
+        keep_partial: on failure leave the ``*.partial`` (a run's or study's directory, cleared
+            by its next claim) or remove it (a single file in a user's directory).
+        **savefig: ``Figure.savefig``'s options; give ``format`` (the partial name has none).
+
+    Raises:
+        OutputError: the write failed; ``path`` is not touched.
+    """
+    tmp = partial_of(path)
+    try:
+        with writing(tmp), tmp.open("wb") as f:
+            fig.savefig(f, **savefig)
+            f.flush()
+            os.fsync(f.fileno())
+        with writing(path):
+            os.replace(tmp, path)
+    except BaseException:
+        if not keep_partial:
+            with contextlib.suppress(OSError):
+                tmp.unlink(missing_ok=True)
+        raise
+    return path
 
 
 def write_whole(files: dict[Path, str | bytes]) -> None:
@@ -126,11 +181,8 @@ def write_whole(files: dict[Path, str | bytes]) -> None:
     started: list[Path] = []
     try:
         for path, data in files.items():
-            started.append(tmp := partial_of(path))
-            with writing(tmp), tmp.open("wb") as f:
-                f.write(data.encode("utf-8") if isinstance(data, str) else data)
-                f.flush()
-                os.fsync(f.fileno())
+            started.append(partial_of(path))
+            write_partial(path, data)
         for path in files:
             with writing(path):
                 os.replace(partial_of(path), path)
@@ -296,24 +348,30 @@ def out_path(text: str) -> Path:
 
 @contextlib.contextmanager
 def shielded() -> Iterator[None]:
-    """Within: SIGINT and SIGTERM are ignored, so that a stop's outputs are completed.
+    """Within: SIGINT and SIGTERM are held off, so that the outputs being saved are completed.
 
-    A run that is stopping completes, renames and commits its files in well under a second;
-    a second Ctrl-C (or SIGTERM) during that used to interrupt it, leaving ``*.partial`` files
-    and the lock. SIGKILL still stops it. In another thread than the main one (where signals
-    cannot be handled) it does nothing.
+    A run completes, renames and commits its files in well under a second; a (second) Ctrl-C
+    or SIGTERM during that used to interrupt it, leaving ``*.partial`` files and the lock. A
+    signal that came is delivered when the block ends normally, to the handler it was meant for
+    (a stop already under way absorbs it). SIGKILL still stops it. In another thread than the
+    main one (where signals cannot be handled) it does nothing.
     """
     import threading
 
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, signal.SIGTERM)}
+    held: list[int] = []
+    previous = {}
     try:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, lambda signum, frame: held.append(signum))
         yield
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+    if held and sys.exc_info()[1] is None:  # (in a stop's clean-up, the stop absorbs it)
+        signal.raise_signal(held[0])  # now, to the handler it was meant for (a worker: exit)
 
 
 @contextlib.contextmanager

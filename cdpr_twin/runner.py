@@ -33,8 +33,16 @@ from cdpr_twin.controllers.base import Controller
 from cdpr_twin.estimators.base import Estimator, update_order
 from cdpr_twin.events import EventSchedule, TagOcclusion
 from cdpr_twin.metrics import RunMetrics
-from cdpr_twin.outputs import CAMPAIGN_FILES, OutputDir, OutputError, Terminated, shielded
+from cdpr_twin.outputs import (
+    CAMPAIGN_FILES,
+    STUDY_FILES,
+    OutputDir,
+    OutputError,
+    Terminated,
+    shielded,
+)
 from cdpr_twin.plugins import OptionError
+from cdpr_twin.preflight import check_goal, controller_for
 from cdpr_twin.procedure import homing, teach
 from cdpr_twin.record import SceneInfo
 from cdpr_twin.recorders import Recorders
@@ -129,51 +137,9 @@ def _update_order(estimators: dict[str, Estimator], s: Scenario) -> tuple[str, .
         raise ScenarioError(f"{s.source}: estimators: {exc}") from None
 
 
-def _controller(scenario: Scenario, geom) -> Controller:
-    """The scenario's controller for the nominal geometry, checked against its control period."""
-    src = scenario.source
-    cls = plugins.lookup("controller", scenario.controller.type)
-    try:
-        controller = cls(geom, scenario.controller.options)
-        controller.check_period(scenario.model.control_period)
-    except OptionError as exc:
-        raise ScenarioError(f"{src}: controller.{exc.field}: {exc.problem}") from None
-    except Exception as exc:  # a plugin's own failure: name it, no traceback
-        raise ScenarioError(f"{src}: controller: {type(exc).__name__}: {exc}") from None
-    return controller
-
-
-def check_task(scenario: Scenario, nominals: dict | None = None) -> None:
-    """Refuse what :func:`prepare` would refuse about the task, without building the twin.
-
-    The controller against the nominal robot (waypoints, segment durations, the goal); a
-    campaign checks each of its runs so before any starts (the nominal robot built once per
-    model: ``nominals`` caches it).
-
-    Raises:
-        ScenarioError: naming the file and field at fault.
-    """
-    from cdpr_twin.sim import ModelError, nominal_robot
-
-    s, nominals = scenario, {} if nominals is None else nominals
-    m = s.model
-    key = (str(m.file), str(m.nominal), float(m.payload), tuple(np.ravel(m.payload_com).tolist()))
-    if key not in nominals:
-        try:
-            nominals[key] = nominal_robot(m.file, m.nominal, (m.payload, m.payload_com))
-        except ModelError as exc:
-            raise ScenarioError(f"{s.source}: model.file: {exc}") from None
-        except ValueError as exc:
-            raise ScenarioError(f"{s.source}: model: {exc}") from None
-    nominal = nominals[key]
-    goal = _controller(s, nominal.geometry).goal_pose(nominal.T_base_tag)
-    if goal is not None:
-        _check_goal(s, nominal.geometry, goal)
-
-
 def _build_plugins(scenario: Scenario, geom) -> tuple[Controller, dict[str, Estimator]]:
     src = scenario.source
-    controller = _controller(scenario, geom)
+    controller = controller_for(scenario, geom)
     estimators = {}
     for name in scenario.estimators.names:
         est_cls = plugins.lookup("estimator", name)
@@ -246,32 +212,11 @@ def _assemble(s: Scenario, physics, sensors, nominal) -> RunSetup:
     monitor = _monitor(s, physics)
     goal = controller.goal_pose(nominal.T_base_tag)
     if goal is not None and shown_view is None:  # a goal the nominal model predicts: reachable?
-        _check_goal(s, nominal.geometry, goal)
+        check_goal(s, nominal.geometry, goal)
     return RunSetup(
         s, physics, sensors, nominal, estimators, order, controller, goal, events, monitor,
         true_start, offset, shown_view,
     )  # fmt: skip
-
-
-def _check_goal(s: Scenario, geometry, goal: np.ndarray) -> None:
-    """Refuse a goal view the nominal robot could only reach outside its workspace.
-
-    Such a goal cannot be reached: the run would go on to its time limit (or stop on a fault).
-
-    Raises:
-        ScenarioError: the goal pose leaves the frame or is not wrench-feasible.
-    """
-    from cdpr_twin.se3 import vector_from_pose
-    from cdpr_twin.workspace import infeasible_reason, is_feasible
-
-    where = f"{s.source}: controller: its goal puts the platform at "
-    where += f"{vector_from_pose(goal).round(4).tolist()}, which"
-    try:
-        geometry.check_pose_inside(goal, "goal pose")
-    except ValueError as exc:
-        raise ScenarioError(f"{where} is outside the frame: {exc}") from None
-    if not is_feasible(geometry, goal):
-        raise ScenarioError(f"{where} {infeasible_reason(geometry)}")
 
 
 def _monitor(s: Scenario, physics):
@@ -342,19 +287,12 @@ def run(
 
     Raises:
         ScenarioError: the scenario cannot run (before any output is written).
-        OutputDirError: ``out_dir`` cannot be used or another run owns it (nothing touched).
+        OutputDirError: ``out_dir`` cannot be used, another run owns it, or it is a campaign's
+            or a study's (nothing touched).
         OutputError: an output could not be written (all left ``*.partial``, no summary).
     """
-    s, setup, owner = scenario, prepare(scenario), OutputDir(out_dir, foreign=CAMPAIGN_FILES)
-    period = scenario.model.control_period
-    try:
-        owner.claim()  # the lock, then an earlier run's files removed
-        metrics = RunMetrics(s.estimators.names, setup.controller.checkpoints(s.duration), period)
-        recorders = _recorders(setup, out_dir, record_rrd, spawn, connect)
-    except BaseException:
-        setup.close()
-        owner.release()
-        raise
+    setup = prepare(scenario)
+    owner, metrics, recorders = _claim(setup, out_dir, record_rrd, spawn, connect)
     tally, status, commit, started = Tally(), "running", True, time.perf_counter()
     try:
         status = _loop(setup, metrics, recorders, progress, tally)
@@ -377,6 +315,21 @@ def run(
                 setup.close()
                 owner.release()
     return RunResult(summary, wall, out_dir)
+
+
+def _claim(setup: RunSetup, out_dir, record_rrd, spawn, connect) -> tuple:
+    """The claimed output directory, the metrics and the recorders (nothing held on failure)."""
+    s = setup.scenario
+    owner = OutputDir(out_dir, foreign=CAMPAIGN_FILES + STUDY_FILES)  # (else emptied, mixed)
+    try:
+        owner.claim()  # the lock, then an earlier run's files removed
+        checkpoints = setup.controller.checkpoints(s.duration)
+        metrics = RunMetrics(s.estimators.names, checkpoints, s.model.control_period)
+        return owner, metrics, _recorders(setup, out_dir, record_rrd, spawn, connect)
+    except BaseException:
+        setup.close()
+        owner.release()
+        raise
 
 
 def start(setup: RunSetup) -> None:

@@ -14,9 +14,7 @@ figure is written whole or not at all (``<name>.partial``, then renamed).
 
 from __future__ import annotations
 
-import contextlib
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -286,17 +284,6 @@ def draw_workspace(ws: Workspace, path: str | Path, title: str = "") -> Path:
 
 def _save(fig, path: Path, fmt: str) -> None:
     """``fig`` into ``path`` through ``<path>.partial``: never a half-written figure."""
-    from cdpr_twin.outputs import partial_of, writing
+    from cdpr_twin.outputs import save_figure
 
-    tmp = partial_of(path)
-    try:
-        with writing(tmp), tmp.open("wb") as f:
-            fig.savefig(f, dpi=110, format=fmt)
-            f.flush()
-            os.fsync(f.fileno())
-        with writing(path):
-            os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink(missing_ok=True)
-        raise
+    save_figure(fig, path, keep_partial=False, dpi=110, format=fmt)

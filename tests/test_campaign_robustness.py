@@ -131,8 +131,8 @@ def test_sigterm_ends_the_runs_under_way_and_says_nothing_was_recorded(tmp_path)
             os.killpg(proc.pid, signal.SIGKILL)  # (the test fails below)
     assert proc.returncode == 143, err
     # before: the worker finished both queued runs (≈ 2 × 20 s), and neither was recorded
-    assert waited < 8.0, f"the campaign took {waited:.1f} s to stop"
-    assert "terminated; no run had finished, nothing was recorded" in err
+    assert waited < 12.0, f"the campaign took {waited:.1f} s to stop"
+    assert "terminated; no run finished now" in err
     assert json.loads((out / "campaign.json").read_text())["status"] == "terminated"
     assert not (out / "results.parquet").exists()
     time.sleep(0.5)

@@ -28,9 +28,9 @@ def _pbvs(**changes):
 
 
 def test_a_pbvs_goal_the_nominal_robot_cannot_reach_is_refused():
-    # the tag seen 5 m away: the platform would have to be 5 m below it, under the floor
+    # the tag seen 5 m away: the platform would be 5 m above it (z = 4.99 m), out of the frame
     s = _pbvs(**{"controller.goal_tag_pose_visp": [0.0, 0.0, 5.0, 180, 0, 180]})
-    with pytest.raises(ScenarioError, match=r"its goal puts the platform at .* outside the frame"):
+    with pytest.raises(ScenarioError, match=r"its goal .* puts the platform .* outside the frame"):
         prepare(s)
 
 
@@ -131,3 +131,54 @@ def test_a_platform_above_its_exit_points_is_said_so():
     with pytest.raises(ScenarioError, match="is not below the lowest exit point") as error:
         prepare(s)
     assert "anchor points []" not in str(error.value)  # was: "puts anchor points [] outside"
+
+
+def test_a_signal_during_a_completed_runs_save_is_delivered_once_the_files_are_whole(
+    tmp_path, monkeypatch
+):
+    from cdpr_twin import recorders
+
+    close = recorders.Recorders.close
+
+    def close_under_fire(self, summary, commit=True):
+        os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C just as the finished run saves
+        return close(self, summary, commit)
+
+    monkeypatch.setattr(recorders.Recorders, "close", close_under_fire)
+    s = load_scenario("paper_open_loop").with_overrides(duration=0.2, camera=False)
+    with pytest.raises(KeyboardInterrupt):  # held off, not lost
+        run(s, tmp_path / "out")
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["status"] == "completed"
+    assert not list((tmp_path / "out").glob("*.partial")) and not (tmp_path / "out/.lock").exists()
+
+
+@pytest.mark.parametrize(
+    ("marker", "command"),
+    [
+        ("summary.json", "reproduce"),  # a single run's directory: reproduce emptied it
+        ("campaign.json", "reproduce"),
+        ("runs.json", "campaign"),  # a study's: a campaign overwrote its report.md
+        ("runs.json", "run"),
+    ],
+)
+def test_a_command_refuses_another_commands_directory(tmp_path, capsys, marker, command):
+    from cdpr_twin.cli import main
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / marker).write_text("{}\n")
+    (out / "report.md").write_text("someone's report\n")
+    campaign = tmp_path / "c.toml"
+    campaign.write_text(
+        f'name = "c"\nscenario = "{ROOT}/scenarios/paper_open_loop.toml"\n\n'
+        '[overrides]\n"sensors.camera" = false\nduration = 0.2\n'
+    )
+    argv = {
+        "reproduce": ["reproduce", "--out", str(out), "--duration", "0.2", "--runs-scale", "0.01"],
+        "campaign": ["campaign", str(campaign), "--out", str(out)],
+        "run": ["run", "paper_open_loop", "--out", str(out), "--duration", "0.2", "--no-camera"],
+    }[command]
+    assert main(argv) == 2
+    assert f"holds another command's outputs ({marker})" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == sorted([marker, "report.md"])
+    assert (out / "report.md").read_text() == "someone's report\n"

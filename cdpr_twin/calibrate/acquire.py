@@ -31,6 +31,7 @@ import numpy as np
 
 from cdpr_twin.calibrate.excitation import tag_in_view
 from cdpr_twin.calibrate.problem import Detector, Observations
+from cdpr_twin.campaign.executor import stop_workers
 from cdpr_twin.controllers.open_loop import Segment
 from cdpr_twin.kinematics import cable_lengths
 from cdpr_twin.procedure import homing
@@ -228,11 +229,7 @@ def _in_processes(items: list, workers: int, s: Scenario, frames: int) -> list[t
             for f in as_completed(futures):
                 f.result()  # raises the segment's error (BrokenProcessPool: a worker died)
         except BaseException:
-            if hasattr(pool, "terminate_workers"):  # Python ≥ 3.14
-                pool.terminate_workers()
-            else:
-                for proc in list(getattr(pool, "_processes", {}).values()):
-                    proc.terminate()
+            stop_workers(pool)
             pool.shutdown(wait=False, cancel_futures=True)
             raise
         return [f.result() for f in futures]

@@ -21,6 +21,7 @@ from cdpr_twin.campaign.table import RESULTS, ResultTable, load_table
 from cdpr_twin.campaign.worker import run_task
 from cdpr_twin.outputs import (
     OUTPUT_NAMES,
+    STUDY_FILES,
     OutputDir,
     OutputDirError,
     Terminated,
@@ -69,7 +70,8 @@ def run_campaign(
         OutputDirError: ``out`` is in use, or holds results and ``resume`` is off.
         ExecutorError: Ray is asked for but cannot start.
     """
-    owner = OutputDir(out, outputs=(), foreign=OUTPUT_NAMES)  # a run's directory: refused
+    # a single run's or a study's directory is refused (it would be emptied or mixed)
+    owner = OutputDir(out, outputs=(), foreign=OUTPUT_NAMES + STUDY_FILES)
     owner.claim()
     try:
         # parts of ≤ 1/10 of the runs (≤ 20 rows): a kill loses at most that much work

@@ -49,7 +49,7 @@ def run_local(
         except BaseException:
             for f in pending:
                 f.cancel()
-            _stop_workers(pool)  # a stop ends the runs under way, not after them
+            stop_workers(pool)  # a stop ends the runs under way, not after them
             pool.shutdown(wait=True, cancel_futures=True)
             raise
 
@@ -69,20 +69,26 @@ def _exit_with(parent: int) -> None:
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
-def _stop_workers(pool: ProcessPoolExecutor) -> None:
-    """Terminate the pool's worker processes (their runs are abandoned, not recorded).
+def stop_workers(pool: ProcessPoolExecutor) -> None:
+    """End the pool's worker processes now (their tasks are abandoned, not recorded).
 
-    ``shutdown`` alone lets every run already handed to a worker finish (40 s for a PBVS run),
-    past a supervisor's grace period, and its row would be lost anyway. Python ≥ 3.14 has
-    ``terminate_workers``; before it, the pool's processes are only reachable by its private
-    ``_processes``.
+    ``shutdown`` alone lets every task already handed to a worker finish (40 s for a PBVS run),
+    past a supervisor's grace period. Python ≥ 3.14 has ``terminate_workers``; before it, the
+    pool's processes are only reachable by its private ``_processes``. A worker still alive 2 s
+    after SIGTERM (e.g. one that held it off to finish saving, then took its next task) is
+    killed.
     """
     terminate = getattr(pool, "terminate_workers", None)
     if terminate is not None:
         terminate()
         return
-    for process in list((getattr(pool, "_processes", None) or {}).values()):
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    for process in processes:
         process.terminate()
+    for process in processes:
+        process.join(timeout=2.0)
+        if process.is_alive():
+            process.kill()
 
 
 def run_ray(

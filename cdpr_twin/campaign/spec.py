@@ -227,7 +227,7 @@ def _swap_in_loop(data: dict, base: dict) -> None:
 
 
 def _tasks(source: Path, block: _Block, seed: int, where: str) -> list[Task]:
-    from cdpr_twin.runner import check_task
+    from cdpr_twin.preflight import check_task
     from cdpr_twin.scenario import ScenarioError, scenario_from_data
 
     out, nominals, checked = [], {}, set()

@@ -152,8 +152,8 @@ class OpenLoopController(Controller):
                 raise OptionError(
                     f"durations[{i}]",
                     f"{d:g} s is shorter than one control period ({period:g} s): the twist is "
-                    f"sampled once per period, so the segment would be skipped; make it ≥ "
-                    f"{period:g} s",
+                    "sampled once per period, so the segment would be skipped; make it longer "
+                    "(a run refuses a segment faster than the winches can pay out)",
                 )
 
     @property

@@ -19,7 +19,7 @@ import multiprocessing
 import time
 from pathlib import Path
 
-from cdpr_twin.outputs import OutputDir
+from cdpr_twin.outputs import CAMPAIGN_FILES, OUTPUT_NAMES, OutputDir
 from cdpr_twin.study.analysis import accuracy_at_p1, analyse
 from cdpr_twin.study.files import clear_earlier_study
 from cdpr_twin.study.findings import FINDINGS, Finding, evaluate
@@ -126,7 +126,8 @@ def reproduce(
 
     Raises:
         ValueError: an option or a run's scenario is invalid (nothing touched).
-        OutputDirError: ``out`` cannot be used, or another study or run owns it.
+        OutputDirError: ``out`` cannot be used, another study or run owns it, or it holds a
+            single run's or a campaign's outputs.
         OutputError: a file cannot be written (it is left ``*.partial``).
     """
     workers = check_workers(workers)
@@ -148,11 +149,13 @@ def reproduce_runs(
         The report numbers (as in ``report.json``), plus ``"wall_time_s"``.
 
     Raises:
-        OutputDirError: ``out`` cannot be used, or another study or run owns it.
+        OutputDirError: ``out`` cannot be used, another study or run owns it, or it holds a
+            single run's or a campaign's outputs.
         OutputError: a file cannot be written (it is left ``*.partial``).
     """
-    owner = OutputDir(out)
-    owner.claim()  # the lock, then an earlier run's files (and *.partial) removed
+    # a single run's or a campaign's directory is refused (it would be emptied or mixed)
+    owner = OutputDir(out, outputs=(), foreign=OUTPUT_NAMES + CAMPAIGN_FILES)
+    owner.claim()  # the lock, then *.partial removed
     try:
         clear_earlier_study(out)
         start = time.perf_counter()

@@ -21,12 +21,11 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
 import re
 from pathlib import Path
 from typing import Any
 
-from cdpr_twin.outputs import OutputDir, fsync_dir, partial_of, writing
+from cdpr_twin.outputs import OutputDir, write_atomic, writing
 
 FIGURES = ("fig5a", "fig5b", "fig7a", "fig7b", "fig8")
 """The study's figures (``<name>.png``)."""
@@ -37,20 +36,14 @@ RUN_NAME = re.compile(r"(open_loop|pbvs_.+)_seed\d+(_without_.+|_goal_.+)?")
 
 
 def write_text(path: Path, text: str) -> Path:
-    """Write ``text`` to ``<path>.partial``, flushed and ``fsync``'ed, then rename it to ``path``.
+    """Write ``text`` whole (:func:`cdpr_twin.outputs.write_atomic`).
+
+    A failure leaves ``*.partial`` and ``path`` untouched.
 
     Raises:
-        OutputError: the write failed (disk full, permission); ``path`` is not touched.
+        OutputError: the write failed (disk full, permission).
     """
-    tmp = partial_of(path)
-    with writing(tmp), tmp.open("w", encoding="utf-8") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    with writing(path):
-        os.replace(tmp, path)
-    fsync_dir(path.parent)
-    return path
+    return write_atomic(path, text)
 
 
 def write_json(path: Path, data: Any) -> Path:

@@ -1,0 +1,78 @@
+"""Checks of a scenario's task against the nominal robot, before anything runs.
+
+What :func:`cdpr_twin.runner.prepare` refuses about the controller (its options against the
+nominal geometry, its control period, the goal it servos to) without building the twin, so
+that a campaign can check every run before the first starts (:func:`check_task`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cdpr_twin import plugins
+from cdpr_twin.controllers.base import Controller
+from cdpr_twin.plugins import OptionError
+from cdpr_twin.scenario import Scenario, ScenarioError
+
+
+def controller_for(scenario: Scenario, geom) -> Controller:
+    """The scenario's controller for the nominal geometry, checked against its control period."""
+    src = scenario.source
+    cls = plugins.lookup("controller", scenario.controller.type)
+    try:
+        controller = cls(geom, scenario.controller.options)
+        controller.check_period(scenario.model.control_period)
+    except OptionError as exc:
+        raise ScenarioError(f"{src}: controller.{exc.field}: {exc.problem}") from None
+    except Exception as exc:  # a plugin's own failure: name it, no traceback
+        raise ScenarioError(f"{src}: controller: {type(exc).__name__}: {exc}") from None
+    return controller
+
+
+def check_task(scenario: Scenario, nominals: dict | None = None) -> None:
+    """Refuse what ``runner.prepare`` would refuse about the task, without building the twin.
+
+    The controller against the nominal robot (waypoints, segment durations, the goal); a
+    campaign checks each of its runs so before any starts (the nominal robot built once per
+    model: ``nominals`` caches it).
+
+    Raises:
+        ScenarioError: naming the file and field at fault.
+    """
+    from cdpr_twin.sim import ModelError, nominal_robot
+
+    s, nominals = scenario, {} if nominals is None else nominals
+    m = s.model
+    key = (str(m.file), str(m.nominal), float(m.payload), tuple(np.ravel(m.payload_com).tolist()))
+    if key not in nominals:
+        try:
+            nominals[key] = nominal_robot(m.file, m.nominal, (m.payload, m.payload_com))
+        except ModelError as exc:
+            raise ScenarioError(f"{s.source}: model.file: {exc}") from None
+        except ValueError as exc:
+            raise ScenarioError(f"{s.source}: model: {exc}") from None
+    nominal = nominals[key]
+    goal = controller_for(s, nominal.geometry).goal_pose(nominal.T_base_tag)
+    if goal is not None:
+        check_goal(s, nominal.geometry, goal)
+
+
+def check_goal(s: Scenario, geometry, goal: np.ndarray) -> None:
+    """Refuse a goal view the nominal robot could only reach outside its workspace.
+
+    Such a goal cannot be reached: the run would go on to its time limit (or stop on a fault).
+
+    Raises:
+        ScenarioError: the goal pose leaves the frame or is not wrench-feasible.
+    """
+    from cdpr_twin.se3 import vector_from_pose
+    from cdpr_twin.workspace import infeasible_reason, is_feasible
+
+    where = f"{s.source}: controller: its goal (the view it servos to, or the pose it is "
+    where += f"taught at) puts the platform at {vector_from_pose(goal).round(4).tolist()}, which"
+    try:
+        geometry.check_pose_inside(goal, "goal pose")
+    except ValueError as exc:
+        raise ScenarioError(f"{where} is outside the frame: {exc}") from None
+    if not is_feasible(geometry, goal):
+        raise ScenarioError(f"{where} {infeasible_reason(geometry)}")
