@@ -183,7 +183,7 @@ def _unexpected(exc: BaseException, show_traceback: bool) -> tuple[str, str]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from cdpr_twin.cli_tools import live_url
+    from cdpr_twin.cli_tools import live_url, run_notes
     from cdpr_twin.outputs import sigterm_raises
     from cdpr_twin.runner import run
     from cdpr_twin.scenario import ScenarioError, load_scenario
@@ -204,6 +204,8 @@ def _run(args: argparse.Namespace) -> int:
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
         return 2
     out = args.out if args.out is not None else Path("runs") / scenario.name
+    for note in run_notes(scenario, args.spawn):
+        print(f"cdpr-twin: note: {note}", file=sys.stderr)
     progress, since = _Progress(scenario.name), time.time()
     try:
         with sigterm_raises():

@@ -10,6 +10,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 import tomllib
@@ -40,6 +41,32 @@ def live_url(address: str) -> str:
     raise ValueError(
         f"--connect {address!r}: give a port, host:port or a URL rerun+http://host:port/proxy"
     )
+
+
+def run_notes(scenario, spawn: bool) -> list[str]:
+    """What a run will do that its command line may not say.
+
+    A duration rounded to whole control ticks; a viewer that cannot open (``--spawn``).
+
+    Args:
+        scenario: the run's scenario (:class:`cdpr_twin.scenario.Scenario`).
+        spawn: ``--spawn`` was given.
+    """
+    notes = []
+    period = scenario.model.control_period
+    ticks = round(scenario.duration / period)
+    if abs(ticks * period - scenario.duration) > 1e-9:
+        notes.append(
+            f"duration {scenario.duration:g} s runs {ticks} control ticks of {period:g} s, "
+            f"{ticks * period:g} s"
+        )
+    if spawn and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        notes.append(
+            "--spawn: no display (DISPLAY and WAYLAND_DISPLAY unset), so no viewer can open; "
+            "the run goes on and writes recording.rrd (open it later with cdpr-twin view, or "
+            "stream to a viewer elsewhere with --connect)"
+        )
+    return notes
 
 
 def _port(digits: str) -> int:

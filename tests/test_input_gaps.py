@@ -182,3 +182,18 @@ def test_a_command_refuses_another_commands_directory(tmp_path, capsys, marker, 
     assert f"holds another command's outputs ({marker})" in capsys.readouterr().err
     assert sorted(p.name for p in out.iterdir()) == sorted([marker, "report.md"])
     assert (out / "report.md").read_text() == "someone's report\n"
+
+
+def test_a_run_says_when_its_duration_is_rounded_or_its_viewer_cannot_open(monkeypatch):
+    from cdpr_twin.cli_tools import run_notes
+
+    s = load_scenario("paper_open_loop")
+    assert run_notes(s.with_overrides(duration=1.04), spawn=False) == []
+    [note] = run_notes(s.with_overrides(duration=0.059), spawn=False)
+    assert note == "duration 0.059 s runs 1 control ticks of 0.04 s, 0.04 s"
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    [note] = run_notes(s, spawn=True)
+    assert note.startswith("--spawn: no display")
+    monkeypatch.setenv("DISPLAY", ":0")
+    assert run_notes(s, spawn=True) == []
