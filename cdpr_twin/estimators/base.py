@@ -84,7 +84,8 @@ class EncoderWatch:
     def __init__(self, window: int = 25, threshold: float = 0.005) -> None:
         self.window, self.threshold = window, threshold
         self._last: tuple[float, np.ndarray] | None = None
-        self._diffs: list[np.ndarray] = []
+        self._diffs: np.ndarray | None = None  # (window, m): the last ones, oldest first
+        self._n = 0
 
     def check(self, m: Measurement) -> tuple[int, ...]:
         """Add one measurement; the cables (from 0) whose encoders disagree with the commands."""
@@ -92,10 +93,15 @@ class EncoderWatch:
         if last is None or m.command is None:
             return ()
         dt = m.time - last[0]
-        self._diffs.append(m.cable_lengths - last[1] - m.command.cable_rates * dt)
-        if len(self._diffs) > self.window:
-            self._diffs.pop(0)
-        total = np.sum(self._diffs, axis=0)
+        diff = m.cable_lengths - last[1] - m.command.cable_rates * dt
+        if self._diffs is None:
+            self._diffs = np.empty((self.window, diff.size))
+        if self._n < self.window:
+            self._n += 1
+        else:  # the oldest drops out; the rows stay in time order (the same sum, bit for bit)
+            self._diffs[:-1] = self._diffs[1:]
+        self._diffs[self._n - 1] = diff
+        total = self._diffs[: self._n].sum(axis=0)
         return tuple(int(i) for i in np.flatnonzero(np.abs(total) > self.threshold))
 
 
