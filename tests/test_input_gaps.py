@@ -197,3 +197,23 @@ def test_a_run_says_when_its_duration_is_rounded_or_its_viewer_cannot_open(monke
     assert note.startswith("--spawn: no display")
     monkeypatch.setenv("DISPLAY", ":0")
     assert run_notes(s, spawn=True) == []
+
+
+def test_a_sigterm_as_the_run_ends_says_its_outputs_are_complete(tmp_path, monkeypatch, capsys):
+    from cdpr_twin import recorders
+    from cdpr_twin.cli import main
+
+    close = recorders.Recorders.close
+
+    def close_under_fire(self, summary, commit=True):
+        os.kill(os.getpid(), signal.SIGTERM)  # the supervisor's stop, just as the run saves
+        return close(self, summary, commit)
+
+    monkeypatch.setattr(recorders.Recorders, "close", close_under_fire)
+    out = tmp_path / "out"
+    argv = ["run", "paper_open_loop", "--out", str(out), "--duration", "0.2", "--no-camera"]
+    assert main(argv) == 143
+    assert f"terminated as the run ended: its outputs in {out} are complete" in (
+        capsys.readouterr().err
+    )
+    assert json.loads((out / "summary.json").read_text())["status"] == "completed"
