@@ -145,10 +145,12 @@ def _failure(exc: BaseException, out: Path, show_traceback: bool, since: float) 
         code = 1
     elif isinstance(exc, KeyboardInterrupt):
         how, code = ("terminated", 143) if isinstance(exc, Terminated) else ("interrupted", 130)
-        message = {  # by what the run saved: stopped, ended as the signal came, or nothing
-            how: f'{how}; partial outputs (flushed, marked "{how}") in {out}',
-            "completed": f"{how} as the run ended: its outputs in {out} are complete",
-        }.get(_status(out, since), f"{how} before this run saved any output in {out}")
+        status = _status(out, since)  # what the run saved: stopped, ended as it came, nothing
+        message = f"{how} before this run saved any output in {out}"
+        if status == how:
+            message = f'{how}; partial outputs (flushed, marked "{how}") in {out}'
+        elif status and not status.startswith("failed"):
+            message = f"{how} as the run ended ({status}): its outputs in {out} are complete"
     else:
         where = (
             f"its outputs, up to the failure, are in {out}"

@@ -60,7 +60,8 @@ def run_notes(scenario, spawn: bool) -> list[str]:
             f"duration {scenario.duration:g} s runs {ticks} control ticks of {period:g} s, "
             f"{ticks * period:g} s"
         )
-    if spawn and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+    headless = not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    if spawn and sys.platform.startswith("linux") and headless:  # (macOS: no DISPLAY needed)
         notes.append(
             "--spawn: no display (DISPLAY and WAYLAND_DISPLAY unset), so no viewer can open; "
             "the run goes on and writes recording.rrd (open it later with cdpr-twin view, or "

@@ -56,9 +56,10 @@ def _build(args: argparse.Namespace) -> int:
     except (RobotError, ValueError) as exc:  # a bad description or --out, an infeasible home
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
         return 2
-    except OSError as exc:  # the directory cannot be created
-        print(f"cdpr-twin: error: --out {out}: cannot create it: {exc.strerror or exc}",
-              file=sys.stderr)  # fmt: skip
+    except OSError as exc:  # the directory cannot be reached or created
+        where = args.out or Path(args.description).parent
+        print(f"cdpr-twin: error: --out {where}: cannot create it: {exc.strerror or exc}; give "
+              "another directory", file=sys.stderr)  # fmt: skip
         return 2
     except OutputError as exc:
         print(

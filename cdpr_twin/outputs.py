@@ -369,9 +369,13 @@ def shielded() -> Iterator[None]:
         yield
     finally:
         for sig, handler in previous.items():
-            signal.signal(sig, handler)
-    if held and sys.exc_info()[1] is None:  # (in a stop's clean-up, the stop absorbs it)
-        signal.raise_signal(held[0])  # now, to the handler it was meant for (a worker: exit)
+            if handler is not None:  # (None: a handler installed from C, not restorable)
+                signal.signal(sig, handler)
+    stopping = sys.exc_info()[1]  # a stop under way absorbs its own kind of signal only
+    absorbed = signal.SIGTERM if isinstance(stopping, Terminated) else signal.SIGINT
+    for sig in dict.fromkeys(held):  # each kind once, in the order they came
+        if not (isinstance(stopping, KeyboardInterrupt) and sig == absorbed):
+            signal.raise_signal(sig)  # now, to the handler it was meant for (a worker: exit)
 
 
 @contextlib.contextmanager

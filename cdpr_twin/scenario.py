@@ -320,7 +320,7 @@ def _model(top: OptionReader, source: Path) -> ModelConfig:
     align_every = m.integer("align_every", 10, minimum=1)
     nominal = scenario_tables.read_nominal(m, source)
     payload = m.number("payload_kg", 0.0, minimum=0, unit="kg"), read_payload_com(m)
-    m.done()
+    m.done(("file", "nominal"))
     steps = 1.0 / control_rate / timestep
     if abs(steps - round(steps)) > 1e-6 * steps or round(steps) < 1:
         raise m.fail(

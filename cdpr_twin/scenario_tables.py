@@ -85,7 +85,7 @@ def read_realism(top: OptionReader) -> Realism:
             v = read_options(t, cls, required=False)
             build_options(t, cls, functools.partial(_one_part, name, part), v)  # names a bad field
             values[part] = v
-    r.done()
+    r.done(tuple(PARTS))
     return profile(name, **values)
 
 

@@ -213,7 +213,50 @@ def test_a_sigterm_as_the_run_ends_says_its_outputs_are_complete(tmp_path, monke
     out = tmp_path / "out"
     argv = ["run", "paper_open_loop", "--out", str(out), "--duration", "0.2", "--no-camera"]
     assert main(argv) == 143
-    assert f"terminated as the run ended: its outputs in {out} are complete" in (
+    assert f"terminated as the run ended (completed): its outputs in {out} are complete" in (
         capsys.readouterr().err
     )
     assert json.loads((out / "summary.json").read_text())["status"] == "completed"
+
+
+def test_a_held_signal_of_another_kind_than_the_stop_under_way_is_delivered():
+    from cdpr_twin.outputs import Terminated, shielded, sigterm_raises
+
+    with sigterm_raises(), pytest.raises(Terminated):  # a pool worker told to stop while it
+        try:  # saves a run stopped by Ctrl-C: the SIGTERM must still end it
+            raise KeyboardInterrupt
+        finally:
+            with shielded():
+                os.kill(os.getpid(), signal.SIGTERM)
+    with pytest.raises(KeyboardInterrupt) as stop:  # a second Ctrl-C: absorbed by the first
+        try:
+            raise KeyboardInterrupt("first")
+        finally:
+            with shielded():
+                os.kill(os.getpid(), signal.SIGINT)
+    assert str(stop.value) == "first"
+
+
+def test_model_build_into_an_unreachable_directory_is_one_line(tmp_path, monkeypatch, capsys):
+    from cdpr_twin.cli import main
+
+    real_exists = Path.exists
+
+    def exists(self, *args, **kwargs):
+        if self.name == "locked":
+            raise PermissionError(13, "Permission denied")
+        return real_exists(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "exists", exists)
+    robot = ROOT / "models" / "acrobot" / "robot.toml"
+    assert main(["model", "build", str(robot), "--out", str(tmp_path / "locked")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "Permission denied; give another directory" in err and "\n" not in err
+
+
+def test_a_typo_in_model_lists_the_optional_fields_too():
+    source = ROOT / "scenarios" / "paper_open_loop.toml"
+    data = tomllib.loads(source.read_text())
+    set_dotted(data, "model.nomnal", "x.toml")
+    with pytest.raises(ScenarioError, match=r"model\.nomnal: unknown field; .*nominal"):
+        scenario_from_data(data, source)

@@ -69,24 +69,24 @@ def _exit_with(parent: int) -> None:
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
-def stop_workers(pool: ProcessPoolExecutor) -> None:
+def stop_workers(pool: ProcessPoolExecutor, grace: float = 2.0) -> None:
     """End the pool's worker processes now (their tasks are abandoned, not recorded).
 
     ``shutdown`` alone lets every task already handed to a worker finish (40 s for a PBVS run),
-    past a supervisor's grace period. Python ≥ 3.14 has ``terminate_workers``; before it, the
-    pool's processes are only reachable by its private ``_processes``. A worker still alive 2 s
-    after SIGTERM (e.g. one that held it off to finish saving, then took its next task) is
-    killed.
+    past a supervisor's grace period. Each worker gets SIGTERM; one still alive ``grace``
+    seconds later (all share the deadline) is killed. Python ≥ 3.14 has ``terminate_workers``;
+    before it the processes are only reachable by the pool's private ``_processes``.
     """
+    processes = list((getattr(pool, "_processes", None) or {}).values())
     terminate = getattr(pool, "terminate_workers", None)
     if terminate is not None:
         terminate()
-        return
-    processes = list((getattr(pool, "_processes", None) or {}).values())
+    else:
+        for process in processes:
+            process.terminate()
+    deadline = time.monotonic() + grace
     for process in processes:
-        process.terminate()
-    for process in processes:
-        process.join(timeout=2.0)
+        process.join(timeout=max(0.0, deadline - time.monotonic()))
         if process.is_alive():
             process.kill()
 
