@@ -41,9 +41,9 @@ LOCK_NAME = ".lock"
 """The lock file in an output directory while a run writes it."""
 OUTPUT_NAMES = ("timeseries.csv", "recording.rrd", "summary.json")
 """The final names of a run's files (removed with ``*.partial`` when a new run starts)."""
-CAMPAIGN_FILES = ("campaign.json", "parts")
+CAMPAIGN_MARKERS = ("campaign.json", "parts")
 """What marks a campaign's directory (a run there is refused: it would mix into its table)."""
-STUDY_FILES = ("runs.json",)
+STUDY_MARKERS = ("runs.json",)
 """What marks a ``reproduce`` study's directory (a run or campaign there is refused)."""
 
 
@@ -114,11 +114,9 @@ def write_json_partial(path: Path, data: dict) -> Path:
     return write_partial(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
 
 
-def write_json_atomic(path: Path, data: dict) -> None:
-    """Write JSON through a ``fsync``'ed temporary file and rename: never a half-written file."""
-    tmp = write_json_partial(path, data)
-    with writing(path):
-        os.replace(tmp, path)
+def write_json_atomic(path: Path, data: dict | list) -> Path:
+    """Write indented JSON whole (:func:`write_atomic`): never a half-written file."""
+    return write_atomic(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
 
 
 def write_atomic(path: Path, data: str | bytes) -> Path:

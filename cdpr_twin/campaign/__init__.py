@@ -21,7 +21,7 @@ from cdpr_twin.campaign.table import RESULTS, ResultTable, load_table
 from cdpr_twin.campaign.worker import run_task
 from cdpr_twin.outputs import (
     OUTPUT_NAMES,
-    STUDY_FILES,
+    STUDY_MARKERS,
     OutputDir,
     OutputDirError,
     Terminated,
@@ -71,7 +71,7 @@ def run_campaign(
         ExecutorError: Ray is asked for but cannot start.
     """
     # a single run's or a study's directory is refused (it would be emptied or mixed)
-    owner = OutputDir(out, outputs=(), foreign=OUTPUT_NAMES + STUDY_FILES)
+    owner = OutputDir(out, outputs=(), foreign=OUTPUT_NAMES + STUDY_MARKERS)
     owner.claim()
     try:
         # parts of ≤ 1/10 of the runs (≤ 20 rows): a kill loses at most that much work

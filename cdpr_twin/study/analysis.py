@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cdpr_twin.outputs import write_json_atomic
 from cdpr_twin.results import (
     image_noise_vs_distance,
     load_summary,
@@ -22,7 +23,6 @@ from cdpr_twin.results import (
     value_at,
 )
 from cdpr_twin.se3 import pose_distance, pose_from_vector
-from cdpr_twin.study.files import write_json
 from cdpr_twin.study.findings import evaluate
 from cdpr_twin.study.plan import PBVS_SCENARIO
 from cdpr_twin.study.robot_numbers import model_physics, payloads, robot_errors
@@ -303,5 +303,5 @@ def analyse(out: Path, records: list[dict]) -> dict:
     rep["robot"] = {**robot_errors(_robot_scenario(records)), "payload_kg": payloads(records)}
     rep["realism"], rep["pbvs_goal"] = _realism(_robot_scenario(records))
     rep["findings"] = evaluate(rep)
-    write_json(out / "report.json", rep)
+    write_json_atomic(out / "report.json", rep)
     return rep

@@ -20,12 +20,10 @@ The study directory keeps the promises of a run's directory (:mod:`cdpr_twin.out
 from __future__ import annotations
 
 import contextlib
-import json
 import re
 from pathlib import Path
-from typing import Any
 
-from cdpr_twin.outputs import OutputDir, write_atomic, writing
+from cdpr_twin.outputs import OutputDir, writing
 
 FIGURES = ("fig5a", "fig5b", "fig7a", "fig7b", "fig8")
 """The study's figures (``<name>.png``)."""
@@ -33,22 +31,6 @@ STUDY_FILES = ("report.md", "report.json", "runs.json", *(f"{n}.png" for n in FI
 """The final names of a study's own files (beside its ``runs/``)."""
 RUN_NAME = re.compile(r"(open_loop|pbvs_.+)_seed\d+(_without_.+|_goal_.+)?")
 """How the study names its runs (:func:`cdpr_twin.study.plan.plan`, ``extra_runs``)."""
-
-
-def write_text(path: Path, text: str) -> Path:
-    """Write ``text`` whole (:func:`cdpr_twin.outputs.write_atomic`).
-
-    A failure leaves ``*.partial`` and ``path`` untouched.
-
-    Raises:
-        OutputError: the write failed (disk full, permission).
-    """
-    return write_atomic(path, text)
-
-
-def write_json(path: Path, data: Any) -> Path:
-    """``data`` as indented JSON, written whole (:func:`write_text`)."""
-    return write_text(path, json.dumps(data, indent=2) + "\n")
 
 
 def clear_earlier_study(out: Path) -> None:

@@ -209,8 +209,7 @@ def run_study(
         OutputError: ``runs/`` or ``runs.json`` cannot be written.
     """
     from cdpr_twin.campaign.executor import run_local  # the one engine of parallel runs
-    from cdpr_twin.outputs import writing
-    from cdpr_twin.study.files import write_json
+    from cdpr_twin.outputs import write_json_atomic, writing
 
     runs_dir = out / "runs"
     with writing(runs_dir):
@@ -224,5 +223,5 @@ def run_study(
                 progress(done, len(specs), record)
     order = {s.name: i for i, s in enumerate(specs)}
     records.sort(key=lambda r: order[r["name"]])
-    write_json(out / "runs.json", records)
+    write_json_atomic(out / "runs.json", records)
     return records

@@ -7,9 +7,10 @@ from pathlib import Path
 import numpy as np
 
 from cdpr_twin.metrics import sample_std
+from cdpr_twin.outputs import write_atomic, write_json_atomic
 from cdpr_twin.results import load_summary, model_estimators
 from cdpr_twin.study.analysis import figure_runs, segment_ends
-from cdpr_twin.study.files import FIGURES, write_json, write_text
+from cdpr_twin.study.files import FIGURES
 from cdpr_twin.timeseries import Timeseries
 
 PAPER_PBVS = {
@@ -250,7 +251,7 @@ def write_report(out: Path, rep: dict, figures: list[Path], wall_time_s: float) 
     lines = [*_intro(rep, wall_time_s), *_findings(rep), *_paper_table(rep), *_accuracy(rep)]
     lines += _estimator_table(rep) + _spread(rep)
     lines += ["", "## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figures]
-    return write_text(out / "report.md", "\n".join(lines) + "\n")
+    return write_atomic(out / "report.md", "\n".join(lines) + "\n")
 
 
 def rerender(out: Path, rep: dict, wall_time_s: float) -> Path:
@@ -263,6 +264,6 @@ def rerender(out: Path, rep: dict, wall_time_s: float) -> Path:
     from cdpr_twin.study.findings import evaluate
 
     rep = {**rep, "findings": evaluate({k: v for k, v in rep.items() if k != "findings"})}
-    write_json(out / "report.json", rep)  # the findings' texts, as report.md now says them
+    write_json_atomic(out / "report.json", rep)  # the findings' texts, as report.md now says them
     figures = [out / f"{n}.png" for n in FIGURES if (out / f"{n}.png").is_file()]
     return write_report(out, rep, figures, wall_time_s)
