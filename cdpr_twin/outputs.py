@@ -109,14 +109,19 @@ def write_partial(path: Path, data: str | bytes) -> Path:
     return tmp
 
 
+def _json_text(data: dict | list) -> str:
+    """The project's JSON files: indented, keys in their order, a final newline."""
+    return json.dumps(data, indent=2, sort_keys=False) + "\n"
+
+
 def write_json_partial(path: Path, data: dict) -> Path:
     """Write JSON to ``<path>.partial``, flushed and ``fsync``'ed; returns that path."""
-    return write_partial(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
+    return write_partial(path, _json_text(data))
 
 
 def write_json_atomic(path: Path, data: dict | list) -> Path:
     """Write indented JSON whole (:func:`write_atomic`): never a half-written file."""
-    return write_atomic(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
+    return write_atomic(path, _json_text(data))
 
 
 def write_atomic(path: Path, data: str | bytes) -> Path:
@@ -350,9 +355,9 @@ def shielded() -> Iterator[None]:
 
     A run completes, renames and commits its files in well under a second; a (second) Ctrl-C
     or SIGTERM during that used to interrupt it, leaving ``*.partial`` files and the lock. A
-    signal that came is delivered when the block ends normally, to the handler it was meant for
-    (a stop already under way absorbs it). SIGKILL still stops it. In another thread than the
-    main one (where signals cannot be handled) it does nothing.
+    signal that came is delivered afterwards, to the handler it was meant for, unless it is of
+    the kind of a stop already under way (which absorbs it). SIGKILL still stops it. In
+    another thread than the main one (where signals cannot be handled) it does nothing.
     """
     import threading
 
