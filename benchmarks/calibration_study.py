@@ -152,10 +152,14 @@ def main() -> None:
             med[f"exit_{k}tag_known_mm"] = statistics.median(
                 r["tag_known_exit_median_mm"][k] for r in rows
             )
+    from cdpr_twin.outputs import finite_or_null
+
     print("medians over robots:", json.dumps({k: round(v, 2) for k, v in med.items()}))
     Path(out).mkdir(parents=True, exist_ok=True)
     (Path(out) / "results.json").write_text(
-        json.dumps({"rows": rows, "medians": med, "set": a.set}, indent=1)
+        json.dumps(
+            finite_or_null({"rows": rows, "medians": med, "set": a.set}), indent=1, allow_nan=False
+        )
     )
 
 

@@ -27,7 +27,14 @@ import time
 from pathlib import Path
 from typing import Any
 
-from cdpr_twin.outputs import OutputDirError, OutputError, fsync_dir, partial_of, writing
+from cdpr_twin.outputs import (
+    OutputDirError,
+    OutputError,
+    finite_or_null,
+    fsync_dir,
+    partial_of,
+    writing,
+)
 
 PARTS = "parts"
 RESULTS = "results.parquet"
@@ -71,14 +78,14 @@ def flatten(task_fields: dict, summary: dict | None, error: str = "", wall: floa
     short = ("max_t_m", "max_r_deg", "rms_t_m", "rms_r_deg", "final_t_m", "final_r_deg")
     for name, e in s.get("estimators", {}).items():
         for k, c in zip(keys, short, strict=True):
-            row[f"est.{name}.{c}"] = float(e[k])
+            row[f"est.{name}.{c}"] = math.nan if e[k] is None else float(e[k])
         row[f"est.{name}.invalid"] = int(e["invalid_updates"])
     for k, cp in enumerate(s.get("segment_ends", []), 1):
         row[f"cp{k}.t_m"] = float(cp["truth_vs_waypoint"]["translation_m"])
         row[f"cp{k}.r_deg"] = float(cp["truth_vs_waypoint"]["rotation_deg"])
         for axis, v in zip(("x", "y", "z", "rx", "ry", "rz"), cp["true_pose"], strict=True):
             row[f"cp{k}.{axis}"] = float(v)
-    row["summary"] = json.dumps(summary) if summary is not None else ""
+    row["summary"] = "" if summary is None else json.dumps(finite_or_null(summary), allow_nan=False)
     return row
 
 
