@@ -41,27 +41,27 @@ def _demo(args: argparse.Namespace) -> int:
             m, truth = t.sense(), t.physics
             dt, dr = truth.settle_error
             print(
-                f"ACROBOT twin settled at [{', '.join(f'{v:g}' for v in pose)}] (m, deg): "
-                f"{dt * 1e3:.2e} mm / {np.rad2deg(dr):.2e} deg from the request"
+                f"{Path(args.model).stem} twin settled at [{', '.join(f'{v:g}' for v in pose)}] "
+                f"(m, deg): {dt * 1e3:.2e} mm / {np.rad2deg(dr):.2e} deg from the request"
             )
             print("cable   rest length l0 [m]   tension [N]")
             for i, (l0, tau) in enumerate(zip(m.cable_lengths, m.tensions, strict=True), 1):
                 print(f"  {i}       {l0:.6f}          {tau:7.3f}")
-            visp = T_TAGPUPIL_TAGVISP
-            truth_tag = se3.vector_from_pose(truth.T_cam_tag @ visp)
+            truth_tag = se3.vector_from_pose(truth.T_cam_tag @ T_TAGPUPIL_TAGVISP)
             print("tag pose in the camera, ViSP frame [x y z (m), rx ry rz (deg)]:")
             print("  true     ", np.array2string(truth_tag, precision=4, suppress_small=True))
             if m.tag is None:
                 print("  detected  none (tag not in view)")
             else:
-                det = se3.vector_from_pose(m.tag.T_cam_tag @ visp)
+                det = se3.vector_from_pose(m.tag.T_cam_tag @ T_TAGPUPIL_TAGVISP)
                 e_t, e_r = se3.pose_distance(m.tag.T_cam_tag, truth.T_cam_tag)
                 print(
                     "  detected ",
                     np.array2string(det, precision=4, suppress_small=True),
                     f" error {e_t * 1e3:.2f} mm / {np.rad2deg(e_r):.2f} deg",
                 )
-            print("  paper cp_o0 at p0: [-0.123 -0.101 0.338 168 -8 -179]")
+            if args.model == "acrobot" and pose.tolist() == list(P0):  # the paper's own view
+                print("  paper cp_o0 at p0: [-0.123 -0.101 0.338 168 -8 -179]")
     except (ModelError, SimulationError, InfeasibleTensionError, ValueError) as exc:
         print(f"cdpr-twin demo: error: {exc}", file=sys.stderr)
         return 2
@@ -311,7 +311,7 @@ def _parser() -> argparse.ArgumentParser:
         type=float,
         default=P0,
         metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
-        help="platform pose [m, m, m, deg, deg, deg] (default: the paper's p0)",
+        help="platform pose [m, m, m, deg×3] (default: ACROBOT's p0; give one for other robots)",
     )
     demo.add_argument("--model", default="acrobot", help="robot name or MJCF scene file")
     demo.add_argument("--noise", type=float, default=0.24, help="tension noise std [N]")

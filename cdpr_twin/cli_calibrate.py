@@ -178,7 +178,7 @@ def add_parser(sub) -> None:
         "--out", type=out_path, help="output directory (default: runs/<name>_calibration)"
     )
     p.add_argument("--poses", type=int, default=240, help="excitation poses (default 240)")
-    p.add_argument("--frames", type=int, default=4, help="readings averaged per pose (≥ 1)")
+    p.add_argument("--frames", type=int, default=4, help="readings averaged per pose (default 4)")
     p.add_argument("--seed", type=int, help="run seed (sensor noise) instead of the file's")
     p.add_argument(
         "--workers",

@@ -126,7 +126,7 @@ def add_parser(sub) -> None:
     ws = msub.add_parser("workspace", help="sample and draw the wrench-feasible workspace")
     ws.add_argument("description", type=Path, help="models/<robot>/robot.toml")
     ws.add_argument(
-        "--spacing", type=float, default=0.05, help="grid spacing [m] (at most 1e6 grid points)"
+        "--spacing", type=float, default=0.05, help="grid step [m] (default 0.05; ≤ 1e6 points)"
     )
     ws.add_argument(
         "--out", type=Path, default=None, help="figure, .png/.pdf/.svg… (default: beside it)"

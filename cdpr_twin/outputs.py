@@ -29,15 +29,14 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
-import json
-import math
 import os
 import signal
 import socket
 import sys
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+
+from cdpr_twin.json_format import json_text
 
 LOCK_NAME = ".lock"
 """The lock file in an output directory while a run writes it."""
@@ -111,34 +110,14 @@ def write_partial(path: Path, data: str | bytes) -> Path:
     return tmp
 
 
-def finite_or_null(data: Any) -> Any:
-    """``data`` with every non-finite float (NaN, ±∞) as ``None``: JSON (RFC 8259) has neither.
-
-    A reader (``jq``, JavaScript, a strict parser) then gets ``null`` where a number is undefined
-    — a deviation never measured, a run that did not reach p1 — instead of a bare ``NaN``.
-    """
-    if isinstance(data, float):
-        return data if math.isfinite(data) else None
-    if isinstance(data, dict):
-        return {k: finite_or_null(v) for k, v in data.items()}
-    if isinstance(data, list | tuple):
-        return [finite_or_null(v) for v in data]
-    return data
-
-
-def _json_text(data: dict | list) -> str:
-    """The project's JSON files: RFC 8259 (undefined numbers ``null``), indented, final newline."""
-    return json.dumps(finite_or_null(data), indent=2, sort_keys=False, allow_nan=False) + "\n"
-
-
 def write_json_partial(path: Path, data: dict) -> Path:
     """Write JSON to ``<path>.partial``, flushed and ``fsync``'ed; returns that path."""
-    return write_partial(path, _json_text(data))
+    return write_partial(path, json_text(data))
 
 
 def write_json_atomic(path: Path, data: dict | list) -> Path:
     """Write indented JSON whole (:func:`write_atomic`): never a half-written file."""
-    return write_atomic(path, _json_text(data))
+    return write_atomic(path, json_text(data))
 
 
 def write_atomic(path: Path, data: str | bytes) -> Path:

@@ -58,8 +58,7 @@ class RunSetup:
 
     Attributes:
         scenario: the scenario.
-        physics: the simulated robot (:class:`cdpr_twin.sim.Physics`; untyped here: this module
-            does not import mujoco).
+        physics: the simulated robot (:class:`cdpr_twin.sim.Physics`; untyped: no mujoco here).
         sensors: its sensors (:class:`cdpr_twin.sim.Sensors`).
         nominal: what the robot's software believes (:class:`cdpr_twin.sim.NominalRobot`).
         estimators: by name, in recording order (the in-loop one first).
@@ -105,8 +104,9 @@ class RunSetup:
         return tuple(n for n, e in self.estimators.items() if e.reports_covariance)
 
     def close(self) -> None:
-        """Free the renderer."""
+        """Free the renderer; drop the physics' hooks (their cycle kept the model alive)."""
         self.sensors.close()
+        self.physics.clear_hooks()
 
 
 @dataclass(frozen=True)

@@ -15,11 +15,20 @@ from cdpr_twin.se3 import pose_distance, so3_exp, so3_log
 OBSERVATION_KEYS = {"cable_lengths", "tensions", "tag_detected", "tag_pose", "pose_estimate"}
 
 
+UNBOUNDED = ("maximum value is infinity", "minimum value is -infinity")
+"""Gymnasium's heuristic warning on an infinite bound. Tensions (an overloaded cable's, before
+the monitor stops the episode), encoder lengths (a large robot's) and an estimate's position
+(a lost estimator's) have no bound in physics: a finite one would be a false promise."""
+
+
 def _checked(env) -> list[str]:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         check_env(env)
-    return [str(w.message) for w in caught if "WARN" in str(w.message)]
+    messages = [str(w.message) for w in caught if "WARN" in str(w.message)]
+    return [
+        m for m in messages if not ("observation space" in m and any(u in m for u in UNBOUNDED))
+    ]
 
 
 def test_check_env_passes_for_the_registered_reach_environment():
@@ -98,17 +107,19 @@ def test_a_proportional_pose_controller_reaches_the_goal_within_5_mm():
     their effect, as in the paper's open loop."""
     task = ReachPose(goal=(0.25, -0.15, 0.12, 3.0, -2.0, 5.0))
     env = CdprEnv(task=task, realism="ideal", truth_scale=0.0)
-    gain = 1.5  # 1/s
+    gain, slew = 1.5, 0.05  # 1/s; action change per tick (a full-speed step slackens cables)
     try:
         obs, info = env.reset(seed=3)
         assert set(obs) == OBSERVATION_KEYS
         start_error = info["translation_error"]
         goal = task.goal_pose
+        action = np.zeros(6)
         for _ in range(500):
             p = obs["pose_estimate"]
             v = gain * (goal[:3, 3] - p[:3])
             w = gain * so3_log(goal[:3, :3] @ so3_exp(p[3:]).T)
-            action = np.clip(np.concatenate([v, w]) / env.action_scale, -1, 1)
+            wanted = np.clip(np.concatenate([v, w]) / env.action_scale, -1, 1)
+            action = action + np.clip(wanted - action, -slew, slew)
             obs, reward, terminated, truncated, info = env.step(action.astype(np.float32))
             if terminated or truncated:
                 break

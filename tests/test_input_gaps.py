@@ -310,3 +310,18 @@ def test_an_undefined_number_is_null_in_summary_json_and_nan_in_the_table(tmp_pa
     assert math.isnan(row["est.lost_midway.final_t_m"])
     assert row["est.lost_midway.max_t_m"] == lost["max_translation_m"] > 0
     assert _strict_json(row["summary"])["estimators"]["lost_midway"]["final_rotation_deg"] is None
+
+
+def test_a_campaign_names_a_shipped_scenario_as_run_does(tmp_path):
+    from cdpr_twin.campaign import CampaignError, load_campaign
+
+    axes = '[[axes]]\nkey = "controller.gain"\nvalues = [0.2, 0.4]\n'
+    by_path = tmp_path / "by_path.toml"
+    by_path.write_text(f'name = "g"\nscenario = "{ROOT}/scenarios/paper_pbvs.toml"\n{axes}')
+    by_name = tmp_path / "by_name.toml"
+    by_name.write_text(f'name = "g"\nscenario = "paper_pbvs"\n{axes}')
+    ids = [[t.run_id for t in load_campaign(p).tasks] for p in (by_path, by_name)]
+    assert ids[0] == ids[1] and len(ids[0]) == 2  # the same runs
+    by_name.write_text(f'name = "g"\nscenario = "paper_pbv"\n{axes}')
+    with pytest.raises(CampaignError, match=r"scenario: no scenario named 'paper_pbv'; choose one"):
+        load_campaign(by_name)

@@ -3,7 +3,7 @@
 A campaign file (TOML) names a base scenario and how to vary it::
 
     name = "pbvs_gain_sweep"
-    scenario = "../scenarios/paper_pbvs.toml"   # relative to this file
+    scenario = "../scenarios/paper_pbvs.toml"   # relative to this file, or a shipped name
     seed = 1                                    # seeds the random draws below
     samples = 1                                 # random draws per grid point
     artefacts = "none"                          # per-run files: "none", "csv" or "all"
@@ -47,6 +47,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from cdpr_twin import resources
 
 DRAWS = ("integers", "uniform", "normal", "choice")
 ARTEFACTS = ("none", "csv", "all")
@@ -188,8 +190,13 @@ def _block(source: Path, table: dict, index: int, where: str) -> _Block:
     if unknown := sorted(set(table) - known - {"seed", "blocks"}):
         raise _fail(source, f"{where}{unknown[0]}", f"unknown field; use {sorted(known)}")
     if not isinstance(table.get("scenario"), str):
-        raise _fail(source, f"{where}scenario", "missing: the base scenario file (a path)")
+        raise _fail(source, f"{where}scenario", "missing: a scenario file or a shipped name")
     scenario = (source.parent / table["scenario"]).resolve()
+    if resources.is_name(table["scenario"]) and not scenario.is_file():
+        try:  # a shipped scenario by name, as `cdpr-twin run` takes it
+            scenario = resources.scenario_file(table["scenario"])
+        except resources.ResourceError as exc:
+            raise _fail(source, f"{where}scenario", str(exc)) from None
     overrides = table.get("overrides", {})
     if not isinstance(overrides, dict):
         raise _fail(source, f"{where}overrides", 'must be a table of "dotted.key" = value')

@@ -27,14 +27,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from cdpr_twin.outputs import (
-    OutputDirError,
-    OutputError,
-    finite_or_null,
-    fsync_dir,
-    partial_of,
-    writing,
-)
+from cdpr_twin.json_format import finite_or_null
+from cdpr_twin.outputs import OutputDirError, OutputError, fsync_dir, partial_of, writing
 
 PARTS = "parts"
 RESULTS = "results.parquet"

@@ -16,6 +16,13 @@ which the policy commands the winches at every control tick:
 - **reward, termination** from the task (:mod:`cdpr_twin.gym.tasks`), scored on the truth;
   truncation at the task's horizon. ``info`` carries the truth (``T_base_platform``, errors)
   for evaluation only;
+- **limits and faults**, as on the real robot: a twist whose cable rates exceed a winch's rate
+  limit is scaled down as a whole (its direction kept; ``info["action_scale"]`` < 1); a winch
+  run past its length range, a diverging simulation, or a fault of the robot's monitor
+  (platform on the floor, cable overload or slack, outside the frame — with the scenario's
+  ``[monitor] on_fault = "stop"``) ends the episode (``terminated``, ``info["failure"]``) with
+  a reward no policy gains by: the step's cost for every step left to the horizon, plus
+  :data:`FAILURE_REWARD`;
 - ``reset(seed=)`` draws the robot (its calibration errors; ``random_robot=False`` keeps the
   scenario's) and the run seed (sensor noise, homing offset) from the seed.
 """
@@ -35,7 +42,7 @@ from cdpr_twin.kinematics import jacobian
 from cdpr_twin.runner import RunSetup, prepare, start
 from cdpr_twin.scenario import EstimatorConfig, Scenario, load_scenario
 from cdpr_twin.se3 import so3_log
-from cdpr_twin.sim import SimulationError
+from cdpr_twin.sim import SimulationError, WinchLimitError
 from cdpr_twin.types import Command, Measurement, PoseEstimate
 
 ACTIONS = ("twist", "cable_rates")
@@ -43,8 +50,7 @@ ACTIONS = ("twist", "cable_rates")
 SEED_BOUND = 2**31
 """Robot and run seeds are drawn in [0, SEED_BOUND)."""
 FAILURE_REWARD = -10.0
-"""The reward of a step in which the simulation failed (the episode terminates)."""
-_POSITION, _LENGTH, _TENSION = 3.0, 5.0, 1000.0  # observation bounds [m, m, N]
+"""Added to a failed step's reward: the step's cost times the steps left to the horizon."""
 
 
 def pose6(T: np.ndarray) -> np.ndarray:
@@ -90,7 +96,8 @@ class CdprEnv(gym.Env):
         render_mode: ``None`` or ``"rgb_array"`` (the onboard camera's frame).
 
     Raises:
-        ValueError: for an unknown task, action, estimator or render mode, or a bad scenario.
+        ValueError: for an unknown task, action, estimator or render mode, a scale that is not
+            a positive number, a ``max_cable_rate`` above the winches' limit, or a bad scenario.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 25}  # noqa: RUF012 (gymnasium's)
@@ -112,6 +119,11 @@ class CdprEnv(gym.Env):
         render_mode: str | None = None,
     ) -> None:
         self.task = make_task(task)
+        scales = {"max_speed": max_speed, "max_angular_speed": max_angular_speed,
+                  "max_cable_rate": max_cable_rate}  # fmt: skip
+        for name, v in scales.items():
+            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive number, got {v!r}")
         if action not in ACTIONS:
             raise ValueError(f"unknown action {action!r}; choose one of {', '.join(ACTIONS)}")
         if render_mode not in (None, *self.metadata["render_modes"]):
@@ -128,6 +140,14 @@ class CdprEnv(gym.Env):
         self._horizon = max(1, round(self.task.horizon / self._period))
         self._setup: RunSetup | None = prepare(self.scenario)  # the robot: cable count, camera
         n = self._setup.physics.n_cables
+        self._max_rates = np.minimum(
+            -self._setup.physics.rate_range[0], self._setup.physics.rate_range[1]
+        )
+        if action == "cable_rates" and max_cable_rate > self._max_rates.min():
+            raise ValueError(
+                f"max_cable_rate {max_cable_rate} m/s exceeds the winches' rate limit "
+                f"{self._max_rates.min()} m/s; choose at most that"
+            )
         twist = [max_speed] * 3 + [max_angular_speed] * 3
         self.action_scale = np.array(twist if action == "twist" else [max_cable_rate] * n)
         """Units of an action of 1: [m/s ×3, rad/s ×3] (twist) or m/s per cable."""
@@ -143,10 +163,11 @@ class CdprEnv(gym.Env):
         return self._setup.nominal.geometry
 
     def _observation_space(self, n: int) -> spaces.Dict:
-        pose_high = np.array([_POSITION] * 3 + [np.pi] * 3)
+        """Unbounded where physics is (an overload's tension, a lost estimate's position)."""
+        pose_high = np.array([np.inf] * 3 + [np.pi] * 3)
         space = {
-            "cable_lengths": spaces.Box(0.0, _LENGTH, (n,), np.float64),
-            "tensions": spaces.Box(-_TENSION, _TENSION, (n,), np.float64),
+            "cable_lengths": spaces.Box(0.0, np.inf, (n,), np.float64),
+            "tensions": spaces.Box(-np.inf, np.inf, (n,), np.float64),
             "tag_detected": spaces.Discrete(2),
             "tag_pose": spaces.Box(-pose_high, pose_high, (6,), np.float64),
             "pose_estimate": spaces.Box(-pose_high, pose_high, (6,), np.float64),
@@ -163,6 +184,8 @@ class CdprEnv(gym.Env):
             ``(observation, info)``.
         """
         super().reset(seed=seed)
+        if options:
+            raise ValueError(f"reset() takes no options, got {sorted(options)}")
         robot_seed, run_seed = (int(v) for v in self.np_random.integers(SEED_BOUND, size=2))
         if not self.random_robot:
             robot_seed = self.scenario.truth.seed
@@ -178,7 +201,8 @@ class CdprEnv(gym.Env):
         self._setup.events.fire(0.5 * physics.timestep)  # what is due at t = 0
         self._steps, self._seeds = 0, (robot_seed, run_seed)
         self._read(None)
-        return self._observation(), self._info(self.task.score(self._truth()))
+        info = self._info(self.task.score(self._truth()))
+        return self._observation(), {**info, **self._faults()}
 
     def step(self, action):
         """Command the winches for one control period, then read the sensors.
@@ -188,32 +212,79 @@ class CdprEnv(gym.Env):
         """
         if self._setup is None or self._m is None:
             raise RuntimeError("call reset() before step()")
-        a = np.clip(np.asarray(action, dtype=float), -1.0, 1.0) * self.action_scale
-        command = self._command(a)
+        a = np.asarray(action, dtype=float)
+        if a.shape != self.action_space.shape or not np.isfinite(a).all():
+            raise ValueError(
+                f"an action is {self.action_space.shape[0]} finite numbers (Box(-1, 1), values "
+                f"outside are clipped), got shape {a.shape}: {np.round(a, 4).tolist()}"
+            )
+        command, scale = self._command(np.clip(a, -1.0, 1.0) * self.action_scale)
         physics = self._setup.physics
+        self._steps += 1
         try:
             physics.advance(self._period, command.cable_rates)
             self._setup.events.fire(physics.time + 0.5 * physics.timestep)
             self._read(command)
-        except SimulationError as exc:
-            score = self.task.score(self._truth())
-            info = {**self._info(score), "failure": str(exc)}
-            return self._observation(), FAILURE_REWARD, True, False, info
-        self._steps += 1
+        except (SimulationError, WinchLimitError) as exc:
+            return self._failed(str(exc), {"action_scale": scale})
+        faults = self._faults()
+        if "failure" in faults:
+            return self._failed(faults.pop("failure"), {"action_scale": scale, **faults})
         score = self.task.score(self._truth())
         truncated = self._steps >= self._horizon and not score.success
-        return self._observation(), float(score.reward), score.success, truncated, self._info(score)
+        info = {**self._info(score), "action_scale": scale, **faults}
+        return self._observation(), float(score.reward), score.success, truncated, info
 
-    def _command(self, a: np.ndarray) -> Command:
-        """The winch command of an action (and the platform twist it implies, ᵖv_p)."""
+    def _failed(self, why: str, extra: dict) -> tuple:
+        """A terminated step: its cost for each step left to the horizon, plus the penalty."""
+        score = self.task.score(self._truth())
+        left = max(self._horizon - self._steps, 0) + 1
+        reward = float(score.reward) * left + FAILURE_REWARD
+        return (
+            self._observation(),
+            reward,
+            True,
+            False,
+            {**self._info(score), **extra, "failure": why},
+        )
+
+    def _faults(self) -> dict[str, Any]:
+        """The monitor's faults since the last call, and the failure they are if they stop.
+
+        Returns:
+            ``{}``, or ``{"faults": [...]}`` plus ``"failure"`` when the scenario's
+            ``[monitor] on_fault`` is ``"stop"``.
+        """
+        monitor = self._setup.monitor
+        if monitor is None:
+            return {}
+        monitor.check()  # the state the step's last physics chunk left
+        faults = monitor.take()
+        if not faults:
+            return {}
+        out: dict[str, Any] = {"faults": [f"{f.status} ({f.detail})" for f in faults]}
+        if self.scenario.monitor.on_fault == "stop":
+            out["failure"] = out["faults"][0]
+        return out
+
+    def _command(self, a: np.ndarray) -> tuple[Command, float]:
+        """The winch command of an action (and the platform twist it implies, ᵖv_p).
+
+        Returns:
+            The command, and the factor (≤ 1) by which a twist was scaled down to keep every
+            cable rate within its winch's limit.
+        """
         geometry = self._setup.nominal.geometry
         T = self._estimate.T_base_platform
         R = T[:3, :3]
         if self.action_kind == "twist":
             rates = jacobian(geometry, T, "base") @ a
-            return Command(rates, np.concatenate([R.T @ a[:3], R.T @ a[3:]]))
+            over = float(np.max(np.abs(rates) / self._max_rates))
+            scale = 1.0 if over <= 1.0 else 1.0 / over
+            a, rates = a * scale, rates * scale
+            return Command(rates, np.concatenate([R.T @ a[:3], R.T @ a[3:]])), scale
         twist, *_ = np.linalg.lstsq(jacobian(geometry, T, "platform"), a, rcond=None)
-        return Command(a, twist)
+        return Command(a, twist), 1.0
 
     def _read(self, command: Command | None) -> None:
         self._m = self._setup.sensors.read(command)

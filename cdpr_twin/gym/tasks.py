@@ -130,9 +130,16 @@ def make_task(task: str | ReachPose | ServoToTag) -> ReachPose | ServoToTag:
     """A task instance from a name (``"reach"``, ``"servo"``) or an instance.
 
     Raises:
-        ValueError: for an unknown name.
+        ValueError: for an unknown name, or an object that is not a task (a task has
+            ``score(truth)``, ``horizon`` and ``needs_camera``).
     """
     if not isinstance(task, str):
+        if not (callable(getattr(task, "score", None)) and hasattr(task, "horizon")
+                and hasattr(task, "needs_camera")):  # fmt: skip
+            raise ValueError(
+                f"task must be {' or '.join(map(repr, TASKS))} or a task object (with score(), "
+                f"horizon and needs_camera), got {task!r}"
+            )
         return task
     if task not in TASKS:
         raise ValueError(f"unknown task {task!r}; choose one of {', '.join(TASKS)}")

@@ -20,6 +20,7 @@ from cdpr_twin.sim.monitor import Fault, FaultKind, Monitor, MonitorLimits, robo
 from cdpr_twin.sim.physics import Physics, SimulationError, StepHook
 from cdpr_twin.sim.sensors import NominalRobot, Sensors
 from cdpr_twin.sim.twin import Twin, build_robot, nominal_robot
+from cdpr_twin.sim.winch import WinchLimitError
 
 __all__ = [
     "DeviationSpec",
@@ -35,6 +36,7 @@ __all__ = [
     "StepHook",
     "TruthDeviations",
     "Twin",
+    "WinchLimitError",
     "build_model",
     "build_robot",
     "cable_count",

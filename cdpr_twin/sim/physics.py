@@ -130,6 +130,7 @@ class Physics:
         ):
             raise ModelError(f"{self.source}: the winch actuators must be declared together")
         self._ctrl_lo, self._ctrl_hi = m.actuator_ctrlrange[self._actuators].T.copy()
+        self.rate_range = (self._ctrl_lo.copy(), self._ctrl_hi.copy())  # (m,) each [m/s]
         self._tag_site = name2id(m, obj.mjOBJ_SITE, TAG_SITE)
         self._cam = cam_mod.camera_id(m) if cam_mod.has_camera(m) else -1
         self._occluder = occluder_of(m, self.data, lambda: self.T_base_tag)
@@ -217,6 +218,10 @@ class Physics:
     def add_hook(self, hook: StepHook) -> None:
         """Let ``hook`` act between physics steps (stepping stops at its times)."""
         self._hooks.append(hook)
+
+    def clear_hooks(self) -> None:
+        """Drop every hook: they hold this physics, a cycle that kept a closed run's model alive."""
+        self._hooks.clear()
 
     def disable_cable(self, i: int) -> None:
         """Cut cable i (from 0): its force is zero from now on, across every refresh."""

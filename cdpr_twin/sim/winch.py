@@ -164,6 +164,10 @@ class WinchServos:
         return paid / duration
 
 
+class WinchLimitError(ValueError):
+    """A command beyond the winches' limits: a rate out of range, or a length run past its end."""
+
+
 def checked_rates(rates: np.ndarray, n: int, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Commanded winch rates as a float array, checked for shape, finiteness and range.
 
@@ -174,7 +178,8 @@ def checked_rates(rates: np.ndarray, n: int, lo: np.ndarray, hi: np.ndarray) -> 
         hi: (n,) highest rates [m/s].
 
     Raises:
-        ValueError: for a wrong shape, a NaN or inf, or a rate out of range.
+        ValueError: for a wrong shape, a NaN or inf; :class:`WinchLimitError` for a rate out of
+            range.
     """
     rates = np.array(rates, dtype=float)
     if rates.shape != (n,):
@@ -184,7 +189,7 @@ def checked_rates(rates: np.ndarray, n: int, lo: np.ndarray, hi: np.ndarray) -> 
             f"cable_rates must be finite, got {rates.tolist()} (NaN or inf from the controller?)"
         )
     if (rates < lo).any() or (rates > hi).any():
-        raise ValueError(
+        raise WinchLimitError(
             f"cable rates {np.round(rates, 4).tolist()} m/s exceed the winches' "
             f"range [{lo.min()}, {hi.max()}] m/s"
         )
@@ -199,10 +204,10 @@ def check_lengths(l0_end: np.ndarray, act_range: np.ndarray) -> None:
         act_range: (n, 2) lowest and highest lengths [m].
 
     Raises:
-        ValueError: when a length leaves the range.
+        WinchLimitError: when a length leaves the range.
     """
     if np.any(l0_end < act_range[:, 0]) or np.any(l0_end > act_range[:, 1]):
-        raise ValueError(
+        raise WinchLimitError(
             f"these rates would run winch lengths to {np.round(l0_end, 4)} m, "
             f"outside the winch range {act_range[0].tolist()} m"
         )
