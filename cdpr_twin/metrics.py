@@ -174,6 +174,7 @@ def run_summary(
     return {
         "scenario": s.name,
         "source": str(s.source),
+        "nominal_model": None if s.model.nominal is None else str(s.model.nominal),
         "status": status,
         "controller": s.controller.type,
         "in_loop": s.estimators.in_loop,

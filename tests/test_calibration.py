@@ -211,7 +211,9 @@ def test_calibrates_robot_19_and_its_open_loop_run_improves(tmp_path):
         sc = replace(s, model=replace(s.model, nominal=nom)).with_overrides(
             duration=10.0, camera=False
         )
-        p1[name] = run(sc, None).summary["segment_ends"][0]["truth_vs_waypoint"]["translation_m"]
+        summary = run(sc, None).summary
+        assert summary["nominal_model"] == (None if nom is None else str(robot))  # said which
+        p1[name] = summary["segment_ends"][0]["truth_vs_waypoint"]["translation_m"]
     exit_cal = check["calibrated"]["exit_error_median_mm"]
     assert exit_cal < 0.7 * check["nominal"]["exit_error_median_mm"]
     assert check["calibrated"]["exit_shape_error_median_mm"] < 5.0
