@@ -70,7 +70,7 @@ def test_every_row_equals_its_runs_own_summary(small):
     campaign, out, info = small
     assert info["ran_now"] == 12 and info["status"] == "completed"
     rows = load_table(out).to_pylist()
-    assert sorted(r["run_id"] for r in rows) == sorted(t.run_id for t in campaign.tasks)
+    assert [r["run_id"] for r in rows] == [t.run_id for t in campaign.tasks]  # the file's order
     for row in rows:
         s = json.loads((out / "runs" / row["run_id"] / "summary.json").read_text())
         assert row["status"] == s["status"] and row["ok"]
@@ -370,3 +370,16 @@ def test_a_committed_campaign_report_is_what_its_table_gives(study, tmp_path):
     shutil.copy(committed / "results.parquet", copy)
     report = write_report(copy, load_campaign(ROOT / info["source"]))
     assert report.read_text() == (committed / "report.md").read_text()
+
+
+def test_the_table_follows_the_campaign_order_whatever_order_runs_end_in(tmp_path):
+    from cdpr_twin.campaign.table import ResultTable, flatten
+
+    ids = [f"{i:016x}" for i in (5, 3, 9, 1)]  # the campaign's order
+    table = ResultTable(tmp_path, every=1)
+    for run_id in ("0000000000000009", "0000000000000001", "0000000000000005", "000000000000000a"):
+        task = {"run_id": run_id, "block": "b", "name": run_id, "params": {}}
+        table.add(flatten(task, None, "not run"))  # one part each, as the workers ended them
+    table.gather(ids)
+    got = load_table(tmp_path).column("run_id").to_pylist()
+    assert got == [ids[0], ids[2], ids[3], "000000000000000a"]  # (3: not run yet; a: last)

@@ -151,3 +151,26 @@ def test_the_servo_task_is_achieved_at_p1_on_the_nominal_robot():
     moved = servo.score(nearby)  # 2.1 cm off p1: the view is off by about as much
     assert not moved.success and 0.015 < moved.translation_error < 0.03
     assert moved.reward == pytest.approx(-(moved.translation_error + 0.1 * moved.rotation_error))
+
+
+def test_rendering_between_steps_leaves_the_episode_as_it_is():
+    """``render()`` (a viewer, a video wrapper) forms its frame with noise of its own: the
+    run's frames, detections and estimates are those of the same episode without it."""
+    action = np.array([0.3, -0.2, 0.1, 0.0, 0.0, 0.2], np.float32)
+    episodes = []
+    for look in (False, True):
+        env = CdprEnv(render_mode="rgb_array", random_robot=False)
+        try:
+            obs, _ = env.reset(seed=7)
+            seen = [obs["tag_pose"]]
+            for _ in range(5):
+                if look:
+                    frame = env.render()
+                    assert frame.shape == (480, 640, 3) and frame.std() > 1  # a real frame
+                obs, *_ = env.step(action)
+                seen.append(obs["tag_pose"])
+        finally:
+            env.close()
+        episodes.append(np.array(seen))
+    assert np.all(episodes[0][:, 2] > 0)  # the tag seen all along
+    np.testing.assert_array_equal(episodes[1], episodes[0])

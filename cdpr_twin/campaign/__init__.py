@@ -125,6 +125,6 @@ def _execute(campaign, out, table, todo, workers, ray_address, progress) -> dict
             "executor": "local" if ray_address is False else "ray",
         }
         if any(Path(out, "parts").glob("part-*.parquet")):
-            summary["table"] = str(table.gather())
+            summary["table"] = str(table.gather([t.run_id for t in campaign.tasks]))
         write_json_atomic(Path(out) / "campaign.json", summary)
     return summary

@@ -24,6 +24,7 @@ import json
 import math
 import os
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -132,10 +133,20 @@ class ResultTable:
         self._rows = []
         self._flushed = time.monotonic()
 
-    def gather(self) -> Path:
-        """Write every part into ``results.parquet`` (whole, then renamed); returns its path."""
+    def gather(self, order: Sequence[str] = ()) -> Path:
+        """Write every part into ``results.parquet`` (whole, then renamed); returns its path.
+
+        Args:
+            order: the campaign's run ids in its task order: the rows follow it (runs end in
+                an order that depends on the workers; the table must not), others last by id.
+        """
         self.flush()
         table = load_parts(self.parts)
+        rank = {run_id: i for i, run_id in enumerate(order)}
+        ids = table.column("run_id").to_pylist()
+        table = table.take(
+            sorted(range(len(ids)), key=lambda j: (rank.get(ids[j], len(rank)), ids[j]))
+        )
         path = self.out / RESULTS
         _write(table, path)
         return path

@@ -205,6 +205,8 @@ class OnboardCamera:
         from cdpr_twin.vision import TagDetector  # OpenCV and pupil-apriltags, on demand
 
         self.physics, self.realism, self.run_rng = physics, realism, run_rng
+        # render()'s own noise: a look at the camera must not shift the run's frames
+        self._view_rng = np.random.default_rng(run_rng.bit_generator.seed_seq.spawn(1)[0])
         self.calibrated, self.calibrated_distortion = calibrate(intrinsics, r, robot_rng)
         self._renderer: cam_mod.CameraRenderer | None = cam_mod.CameraRenderer(
             physics.model, scale=r.supersample
@@ -263,9 +265,14 @@ class OnboardCamera:
             self._renderer = None
 
     def render(self) -> np.ndarray:
-        """The frame the camera takes now (exposure ending now), (H, W, 3) RGB uint8."""
-        self._drain()  # the frames in hand draw their noise first, as they were taken first
-        return self._form(self._renders())
+        """The frame the camera takes now (exposure ending now), (H, W, 3) RGB uint8.
+
+        Its noise comes from a stream of its own (from the run seed): rendering between reads
+        (a viewer, a video wrapper) leaves the run's frames, detections and estimates as they
+        are without it.
+        """
+        self._drain()  # the frames in hand are formed before this one, as they were taken
+        return self._form(self._renders(), self._view_rng)
 
     def _renders(self) -> list[np.ndarray]:
         """The GL part of a frame: the render(s) of the exposure ending now (this thread's)."""
@@ -275,8 +282,10 @@ class OnboardCamera:
             ]
         return [self._renderer.render(self.physics.data)]
 
-    def _form(self, renders: list[np.ndarray]) -> np.ndarray:
-        """The frame the sensor forms from the renders of its exposure (the run's noise)."""
+    def _form(
+        self, renders: list[np.ndarray], rng: np.random.Generator | None = None
+    ) -> np.ndarray:
+        """The frame the sensor forms from the renders of its exposure (``rng``: the run's)."""
         if not self._formed:
             return renders[0]
         r = self.realism
@@ -289,7 +298,8 @@ class OnboardCamera:
             linear *= np.float32(r.white_level - r.black_level)  # in place: b + (w − b)·L
             linear += np.float32(r.black_level)
         if r.noise:
-            gray = imaging.expose(linear, r.full_well_e, r.read_noise_e, r.gamma, self.run_rng)
+            rng = self.run_rng if rng is None else rng
+            gray = imaging.expose(linear, r.full_well_e, r.read_noise_e, r.gamma, rng)
         else:
             gray = imaging.encode(linear, r.gamma)
         return cv2.cvtColor(gray, cv2.COLOR_GRAY2RGB)
