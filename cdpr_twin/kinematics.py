@@ -282,3 +282,30 @@ def rest_lengths(lengths: np.ndarray, tensions: np.ndarray, es: np.ndarray) -> n
         (m,) rest lengths [m].
     """
     return es * lengths / (es + tensions)
+
+
+def start_error_transfer(
+    geom: CdprGeometry,
+    T_start: np.ndarray,
+    T_end: np.ndarray,
+    model: CableModel = "pulley",
+) -> np.ndarray:
+    """First-order map of a start-pose error to the pose error after an open-loop move.
+
+    The winches pay out the planned length changes l(T_end) − l(T_start) from wherever the
+    platform truly started: a start error δ₀ leaves every cable A(T_start) δ₀ longer than planned
+    at the end, and the platform settles where the lengths fit best (rigid cables, all taut):
+    δ_end = A(T_end)⁺ A(T_start) δ₀. It is why a robot homed to within its repeatability misses
+    an open-loop waypoint by about as much, however well its geometry is known.
+
+    Args:
+        geom: CDPR geometry.
+        T_start: (4, 4) the planned start pose.
+        T_end: (4, 4) the planned end pose.
+        model: cable model of the lengths.
+
+    Returns:
+        (6, 6) the map of base-frame pose errors [δp (m), δθ (rad)].
+    """
+    A_end = jacobian(geom, T_end, "base", model)
+    return np.linalg.pinv(A_end) @ jacobian(geom, T_start, "base", model)
