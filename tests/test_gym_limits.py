@@ -42,10 +42,8 @@ def test_a_twist_beyond_the_winch_limit_is_scaled_down_whole_not_an_exception():
         direction = (cable_lengths(geometry, T_dx) - cable_lengths(geometry, T)) / h
         expected = WINCH_RATE_LIMIT * direction / np.abs(direction).max()
         np.testing.assert_allclose(rates, expected, atol=1e-6)
-        assert info["action_scale"] == pytest.approx(
-            WINCH_RATE_LIMIT / (2 * np.abs(direction).max())
-        )
-        assert not terminated or "failure" in info
+        assert info["rate_scale"] == pytest.approx(WINCH_RATE_LIMIT / (2 * np.abs(direction).max()))
+        assert not terminated
     finally:
         env.close()
 
@@ -155,3 +153,60 @@ def test_unknown_reset_options_are_refused():
             env.reset(seed=0, options={"goal": 1})
     finally:
         env.close()
+
+
+def test_a_scaled_twist_stays_within_any_rate_limit_to_the_last_bit():
+    """Scaling by limit/max|rate| can round one ulp above the limit (for limits that are not
+    powers of two): the winch would refuse the command and the episode would end as a crash."""
+    env = CdprEnv(realism="ideal", truth_scale=0.0, max_speed=5.0, max_angular_speed=5.0)
+    try:
+        env.reset(seed=0)
+        rng = np.random.default_rng(1)
+        for limit in (0.3, 0.7, 1.1):
+            env._max_rates = np.full(8, limit)
+            for a in rng.uniform(-5, 5, size=(2000, 6)):
+                command, scale = env._command(a)
+                fastest = np.abs(command.cable_rates).max()
+                assert fastest <= limit and (scale == 1 or fastest == pytest.approx(limit))
+    finally:
+        env.close()
+
+
+def test_a_diverging_simulation_is_scored_where_the_robot_last_was():
+    env = CdprEnv(realism="ideal", truth_scale=0.0)
+    try:
+        env.reset(seed=0)
+        _, reward0, *_, info0 = env.step(np.zeros(6, np.float32))
+        env._setup.physics.data.qvel[:] = 1e30  # MuJoCo then resets its state (qpos0)
+        _, reward, terminated, _, info = env.step(np.zeros(6, np.float32))
+        assert terminated and info["failure"]
+        np.testing.assert_array_equal(info["T_base_platform"], info0["T_base_platform"])
+        left = env._horizon - 2 + 1
+        assert reward == pytest.approx(reward0 * left + FAILURE_REWARD)
+    finally:
+        env.close()
+
+
+def test_a_stopping_fault_at_reset_ends_the_first_step_with_the_robot_unmoved():
+    """Tension sensors whose range tops at 5 N: at p0 the cables read tens of newtons."""
+    s = load_scenario("paper_open_loop").with_realism("ideal")
+    tension = dataclasses.replace(s.realism.tension, range_max=5.0)
+    realism = dataclasses.replace(s.realism, tension=tension)
+    s = dataclasses.replace(s, realism=realism, monitor=MonitorConfig(on_fault="stop"))
+    env = CdprEnv(scenario=s, truth_scale=0.0)
+    try:
+        _, info = env.reset(seed=0)
+        assert info["failure"].startswith("fault: tension beyond the sensor range")
+        l0 = env._setup.physics.rest_lengths
+        _, _, terminated, _, step_info = env.step(np.r_[0.5, 0, 0, 0, 0, 0])
+        assert terminated and step_info["failure"] == info["failure"]
+        np.testing.assert_array_equal(env._setup.physics.rest_lengths, l0)  # no cable paid out
+    finally:
+        env.close()
+
+
+def test_numpy_scalars_are_numbers_and_booleans_are_not():
+    env = CdprEnv(max_speed=np.float32(0.1), max_angular_speed=np.int64(1))
+    env.close()
+    with pytest.raises(ValueError, match="max_speed must be a positive number, got True"):
+        CdprEnv(max_speed=True)

@@ -41,3 +41,16 @@ def test_a_cogiro_report_says_nothing_of_acrobots_magnitudes():
     robot = rep["robot"]
     assert robot["tag_size_m"] == 0.4 and robot["goal_tag_distance_m"] == pytest.approx(0.99)
     assert robot["sag_simulated"] and robot["payload_kg"]["open_loop"] == 250.0
+
+
+def test_an_undefined_roughness_stored_as_null_drops_its_sentence_not_the_report():
+    """report.json is strict JSON: a NaN roughness (no tick after the servo's start) is null."""
+    rep = {k: v for k, v in _stored("acrobot").items() if k != "findings"}
+    committed = evaluate(rep)
+    late = rep["pbvs"]["control"]["others_roughness_after_start_m"]
+    rep["pbvs"]["control"]["others_roughness_after_start_m"] = dict.fromkeys(late)  # all null
+    texts = evaluate(rep)
+    before = " ".join(f["why"] for f in committed)
+    assert "after the first 0.5 s" in before
+    assert "after the first 0.5 s" not in " ".join(f["why"] for f in texts)
+    assert [f["finding"] for f in texts] == [f["finding"] for f in committed]

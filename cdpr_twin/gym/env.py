@@ -17,12 +17,13 @@ which the policy commands the winches at every control tick:
   truncation at the task's horizon. ``info`` carries the truth (``T_base_platform``, errors)
   for evaluation only;
 - **limits and faults**, as on the real robot: a twist whose cable rates exceed a winch's rate
-  limit is scaled down as a whole (its direction kept; ``info["action_scale"]`` < 1); a winch
-  run past its length range, a diverging simulation, or a fault of the robot's monitor
-  (platform on the floor, cable overload or slack, outside the frame — with the scenario's
-  ``[monitor] on_fault = "stop"``) ends the episode (``terminated``, ``info["failure"]``) with
-  a reward no policy gains by: the step's cost for every step left to the horizon, plus
-  :data:`FAILURE_REWARD`;
+  limit is scaled down as a whole (its direction kept; ``info["rate_scale"]`` < 1); a winch
+  run past its length range, a diverging simulation, a non-finite estimate, or a fault of the
+  robot's monitor (platform on the floor, cable overload or slack, outside the frame — with
+  the scenario's ``[monitor] on_fault = "stop"``; one already present at reset ends the first
+  step, the robot unmoved) ends the episode (``terminated``, ``info["failure"]``) with a reward
+  no policy gains by: the step's cost (where the robot was, when the simulation lost its
+  state) for every step left to the horizon, plus :data:`FAILURE_REWARD`;
 - ``reset(seed=)`` draws the robot (its calibration errors; ``random_robot=False`` keeps the
   scenario's) and the run seed (sensor noise, homing offset) from the seed.
 """
@@ -30,6 +31,7 @@ which the policy commands the winches at every control tick:
 from __future__ import annotations
 
 import dataclasses
+import numbers
 from types import MappingProxyType
 from typing import Any
 
@@ -122,7 +124,7 @@ class CdprEnv(gym.Env):
         scales = {"max_speed": max_speed, "max_angular_speed": max_angular_speed,
                   "max_cable_rate": max_cable_rate}  # fmt: skip
         for name, v in scales.items():
-            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
+            if isinstance(v, bool) or not (isinstance(v, numbers.Real) and v > 0 and v < np.inf):
                 raise ValueError(f"{name} must be a positive number, got {v!r}")
         if action not in ACTIONS:
             raise ValueError(f"unknown action {action!r}; choose one of {', '.join(ACTIONS)}")
@@ -154,6 +156,8 @@ class CdprEnv(gym.Env):
         self.action_space = spaces.Box(-1.0, 1.0, (len(self.action_scale),), np.float32)
         self.observation_space = self._observation_space(n)
         self._m: Measurement | None = None
+        self._last: Truth | None = None  # the truth after the last step that went through
+        self._pending: str | None = None  # a stopping fault found at reset
         self._estimate: PoseEstimate | None = None
         self._steps, self._seeds = 0, (self.scenario.truth.seed, self.scenario.seed)
 
@@ -201,8 +205,11 @@ class CdprEnv(gym.Env):
         self._setup.events.fire(0.5 * physics.timestep)  # what is due at t = 0
         self._steps, self._seeds = 0, (robot_seed, run_seed)
         self._read(None)
-        info = self._info(self.task.score(self._truth()))
-        return self._observation(), {**info, **self._faults()}
+        self._last = self._truth()
+        faults = self._faults()
+        self._pending = faults.get("failure")  # the first step ends with it, as a run would
+        info = self._info(self.task.score(self._last), self._last)
+        return self._observation(), {**info, **faults}
 
     def step(self, action):
         """Command the winches for one control period, then read the sensors.
@@ -221,32 +228,44 @@ class CdprEnv(gym.Env):
         command, scale = self._command(np.clip(a, -1.0, 1.0) * self.action_scale)
         physics = self._setup.physics
         self._steps += 1
+        extra = {"rate_scale": scale}
+        if self._pending is not None:  # a stopping fault at reset: the robot does not move
+            return self._failed(self._pending, extra)
+        if not np.isfinite(command.cable_rates).all():
+            return self._failed(f"the {self.estimator} estimate is not finite: no command", extra)
         try:
             physics.advance(self._period, command.cable_rates)
             self._setup.events.fire(physics.time + 0.5 * physics.timestep)
             self._read(command)
-        except (SimulationError, WinchLimitError) as exc:
-            return self._failed(str(exc), {"action_scale": scale})
+        except WinchLimitError as exc:  # refused before any step: the state is the last one
+            return self._failed(str(exc), extra)
+        except SimulationError as exc:  # MuJoCo reset its state: score where the robot was
+            return self._failed(str(exc), extra, self._last)
         faults = self._faults()
         if "failure" in faults:
-            return self._failed(faults.pop("failure"), {"action_scale": scale, **faults})
-        score = self.task.score(self._truth())
+            return self._failed(faults.pop("failure"), {**extra, **faults})
+        self._last = self._truth()
+        score = self.task.score(self._last)
         truncated = self._steps >= self._horizon and not score.success
-        info = {**self._info(score), "action_scale": scale, **faults}
+        info = {**self._info(score, self._last), **extra, **faults}
         return self._observation(), float(score.reward), score.success, truncated, info
 
-    def _failed(self, why: str, extra: dict) -> tuple:
-        """A terminated step: its cost for each step left to the horizon, plus the penalty."""
-        score = self.task.score(self._truth())
+    def _failed(self, why: str, extra: dict, truth: Truth | None = None) -> tuple:
+        """A terminated step: its cost for each step left to the horizon, plus the penalty.
+
+        Args:
+            why: the failure, in words.
+            extra: more ``info``.
+            truth: where the robot is (default: now; a non-finite state: the last step's).
+        """
+        truth = self._truth() if truth is None else truth
+        if not np.isfinite(truth.T_base_platform).all():
+            truth = self._last
+        score = self.task.score(truth)
         left = max(self._horizon - self._steps, 0) + 1
         reward = float(score.reward) * left + FAILURE_REWARD
-        return (
-            self._observation(),
-            reward,
-            True,
-            False,
-            {**self._info(score), **extra, "failure": why},
-        )
+        info = {**self._info(score, truth), **extra, "failure": why}
+        return self._observation(), reward, True, False, info
 
     def _faults(self) -> dict[str, Any]:
         """The monitor's faults since the last call, and the failure they are if they stop.
@@ -281,7 +300,7 @@ class CdprEnv(gym.Env):
             rates = jacobian(geometry, T, "base") @ a
             over = float(np.max(np.abs(rates) / self._max_rates))
             scale = 1.0 if over <= 1.0 else 1.0 / over
-            a, rates = a * scale, rates * scale
+            a, rates = a * scale, np.clip(rates * scale, -self._max_rates, self._max_rates)
             return Command(rates, np.concatenate([R.T @ a[:3], R.T @ a[3:]])), scale
         twist, *_ = np.linalg.lstsq(jacobian(geometry, T, "platform"), a, rcond=None)
         return Command(a, twist), 1.0
@@ -308,11 +327,11 @@ class CdprEnv(gym.Env):
             obs["image"] = np.array(m.image, dtype=np.uint8)
         return obs
 
-    def _info(self, score: Score) -> dict[str, Any]:
+    def _info(self, score: Score, truth: Truth) -> dict[str, Any]:
         """Truth and scores, for evaluation (a policy must not read them)."""
         return {
             "time": float(self._m.time),
-            "T_base_platform": self._setup.physics.T_base_platform.copy(),
+            "T_base_platform": truth.T_base_platform.copy(),
             "translation_error": score.translation_error,
             "rotation_error": score.rotation_error,
             "is_success": score.success,

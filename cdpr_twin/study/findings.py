@@ -6,6 +6,7 @@ Each rule reads the report numbers (:func:`cdpr_twin.study.analyse`) and returns
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict
 from functools import partial
 
@@ -116,7 +117,11 @@ def image_noisiest(rep: dict) -> Finding | None:
         rough = pb["others_roughness_m"]
         worst = max(rough, key=rough.get)
         jump, at = pb.get("others_max_jump", {}).get(worst, (float("nan"), float("nan")))
-        late = pb.get("others_roughness_after_start_m", {})
+        late = {  # an undefined roughness (NaN; null in report.json) gets no sentence
+            n: v
+            for n, v in pb.get("others_roughness_after_start_m", {}).items()
+            if v is not None and math.isfinite(v)
+        }
         why += (
             f" With PBVS (control in the loop) {worst} is rougher ({rough[worst] * 1e3:.2f} mm "
             f"vs image {rough['image'] * 1e3:.2f} mm) because of one jump of {jump * 1e3:.1f} mm "
