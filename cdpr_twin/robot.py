@@ -85,7 +85,8 @@ class Robot:
             or both None (a uniform box); home_pose: (6,) [x, y, z m, rx, ry, rz deg], the
             pose of the viewer's keyframe named home_key.
         rate_limit [m/s], force_limit [N], length_range (2,) [m], tension_range (2,) [N]:
-            the winches; drum_radius [m]: their drums' radius.
+            the winches; drum_radius [m]: their drums' radius; drum_radius_scale: (m,) each
+            drum's radius over it, as a calibration estimated it (``None``: all as built).
         tension_sensors: the sensors' range, accuracy, repeatability and location.
         max_payload: the rated payload [kg] (0: none rated).
         camera, tag: or None.
@@ -135,6 +136,7 @@ class Robot:
     view_center: np.ndarray
     view_extent: float
     floor_half_size: float
+    drum_radius_scale: np.ndarray | None = None
 
     @property
     def n_cables(self) -> int:
@@ -319,6 +321,9 @@ def load_robot(path: str | Path) -> Robot:
     fields["tension_sensors"] = tension_sensors(tables[-2])
     fields["max_payload"] = payload(tables[-1])
     fields.update(_cables(tables[-4], tables[-3]))
+    if tables[3].get("drum_radius_scale", None) is not None:  # a calibration's, per drum
+        scale = tables[3].per_cable("drum_radius_scale", fields["exit_points"].shape[0])
+        fields["drum_radius_scale"] = scale
     for key, reader in (("camera", _camera), ("tag", _tag)):
         t = table(key, required=False)
         fields[key] = None if t is None else reader(t)

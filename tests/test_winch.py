@@ -301,3 +301,28 @@ def test_the_drum_radius_and_the_sensors_spec_are_the_robots():
     assert t.bias_std == 0.24 / math.sqrt(3.0)  # a ±0.24 N bound, rectangular (GUM 4.3.7)
     cogiro, _, _ = build_robot("cogiro")
     assert cogiro.winch.drum_radius == 0.0675  # issue 10
+
+
+@pytest.mark.parametrize("set_to", ["truth", "half-way"])
+def test_drives_and_encoders_set_to_calibrated_radii(set_to):
+    """A drive set to radius r_c turns its drum by the command over r_c: the cable pays out
+    r'/r_c of the command; its encoder reports r_c × the counted angle, i.e. r_c/r' of the
+    cable. Set to the true radii, both are exact (to the count)."""
+    w = WinchRealism(encoder_counts=4096, drum_radius=0.02, drum_radius_error_std=0.01)
+    physics, nominal, u = _robot(w, 3)
+    r_true = physics.drum_radius_true
+    r_set = r_true if set_to == "truth" else 0.5 * (r_true + 0.02)
+    physics.set_drum_radii(r_set / 0.02)
+    enc = _sensors(physics, nominal, w, 3)
+    home, l0 = enc.encoder_lengths, physics.rest_lengths
+    for _ in range(25):
+        physics.advance(0.04, 2 * u)
+    commanded = 25 * 0.04 * 2 * u
+    paid = physics.rest_lengths - l0
+    np.testing.assert_allclose(paid, commanded * r_true / r_set, rtol=1e-9, atol=1e-12)
+    expected = paid * r_set / r_true  # the reading: what the counts stand for at r_c
+    quantum = 2 * math.pi * r_set / 4096
+    reading = enc.encoder_lengths - home
+    assert np.all(reading <= expected + 1e-12) and np.all(reading > expected - quantum)
+    if set_to == "truth":
+        np.testing.assert_allclose(paid, commanded, rtol=1e-9, atol=1e-12)

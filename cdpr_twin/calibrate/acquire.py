@@ -329,7 +329,7 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
         detector, intrinsics_error = _detector(sensors.camera, nominal.tag_size, s.realism)
     finally:
         sensors.close()
-    scale = physics.drum_radius_true / physics.winch.drum_radius - 1.0
+    scale = physics.drum_radius_true / physics.drum_radius_set - 1.0  # against what it reads
     static = (physics.geometry, np.array(physics.T_base_tag), scale, intrinsics_error, nominal,
               detector)  # fmt: skip
     return index, rows, truth, float(physics.time), static

@@ -49,6 +49,9 @@ def calibrated_description(source: Path, cal: Calibration) -> str:
     mod = cal.model
     data["cables"]["exit_points_m"] = np.round(mod.a_base, 7).tolist()
     data["cables"]["anchor_points_m"] = np.round(mod.b_platform, 7).tolist()
+    winches = data.setdefault("winches", {})  # the drums the encoders read: r·(1 + s_i)
+    base = np.asarray(winches.get("drum_radius_scale", 1.0), dtype=float)
+    winches["drum_radius_scale"] = np.round(base * (1.0 + mod.scale), 9).tolist()
     if "camera" in data:
         R = mod.T_platform_cam[:3, :3] @ R_CV_MJCAM
         data["camera"]["position_m"] = np.round(mod.T_platform_cam[:3, 3], 7).tolist()
@@ -60,8 +63,8 @@ def calibrated_description(source: Path, cal: Calibration) -> str:
         data["tag"]["texture"] = str((source.parent / data["tag"]["texture"]).resolve())
     header = (
         f"{data.get('name', 'robot')}, calibrated by `cdpr-twin calibrate` from {source}.\n"
-        "Exit and anchor points, camera mount and tag pose estimated (calibration.json: each\n"
-        "one's 1-sigma); everything else as in the original description."
+        "Exit and anchor points, drum radii (scale), camera mount and tag pose estimated\n"
+        "(calibration.json: each one's 1-sigma); everything else as in the original description."
     )
     return toml_text(data, header)
 

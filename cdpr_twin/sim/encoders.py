@@ -48,7 +48,6 @@ class Encoders:
             home,
         )
         self._offset = np.zeros(physics.n_cables)
-        self.ideal = realism.encoder_counts == 0 and realism.drum_radius_error_std == 0.0
         self._l0_home = np.zeros(physics.n_cables)  # true paid-out lengths when homed [m]
         self._glitch = None  # (m,) jumps of the readings since homing [m], or None
 
@@ -57,6 +56,14 @@ class Encoders:
         if self._glitch is None:
             self._glitch = np.zeros(self.physics.n_cables)
         self._glitch[i] += jump
+
+    @property
+    def ideal(self) -> bool:
+        """Exact encoders on drums whose radii are the ones they are set to."""
+        p = self.physics
+        return self.realism.encoder_counts == 0 and np.array_equal(
+            p.drum_radius_set, p.drum_radius_true
+        )
 
     @property
     def quantum(self) -> float:
@@ -81,7 +88,7 @@ class Encoders:
 
     def read(self) -> np.ndarray:
         """The lengths the encoders report (m,) [m]."""
-        if self.ideal:
+        if self.ideal:  # (exact encoders on drums as set: the length itself, bit for bit)
             lengths = self.physics.rest_lengths + self._offset
         else:
             lengths = self._l0_home + self._offset + self.measured_payout()
@@ -91,11 +98,12 @@ class Encoders:
         """The length the encoders count as paid out since homing (m,) [m].
 
         The drum angle θ = ΔL/r' (ΔL the true paid-out length, r' the true radius), counted
-        as floor(θ·N/2π) counts and reported as nominal radius × counted angle.
+        as floor(θ·N/2π) counts and reported as the radius the encoders are set to (nominal,
+        or a calibration's: :meth:`Physics.set_drum_radii`) × counted angle.
         """
         w = self.realism
         theta = (self.physics.rest_lengths - self._l0_home) / self.physics.drum_radius_true
         if w.encoder_counts:
             step = 2.0 * math.pi / w.encoder_counts
             theta = np.floor(theta / step) * step
-        return w.drum_radius * theta
+        return self.physics.drum_radius_set * theta

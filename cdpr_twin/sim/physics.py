@@ -21,17 +21,11 @@ import math
 import mujoco
 import numpy as np
 
+from cdpr_twin import se3
 from cdpr_twin.events import StepHook, fire_due
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import cable_lengths, rest_lengths
 from cdpr_twin.realism import WinchRealism, robot_rng
-from cdpr_twin.se3 import (
-    inverse,
-    matrix_from_quat_wxyz,
-    pose_distance,
-    quat_wxyz_from_matrix,
-    transform,
-)
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim import winch as winch_mod
 from cdpr_twin.sim.model import (
@@ -89,7 +83,7 @@ class Physics:
         self._servos = WinchServos(self.winch, self.n_cables)
         rng = robot_rng(robot_seed, "winch")  # per robot; the encoders read the same radii
         self.drum_radius_true = winch_mod.draw_drum_radii(self.winch, rng, self.n_cables)
-        self._drum_ratio = self.drum_radius_true / self.winch.drum_radius  # cable per command
+        self.set_drum_radii(np.ones(self.n_cables))  # as built, until told otherwise
         self._hooks: list[StepHook] = []
         self.cable_enabled = np.ones(self.n_cables, dtype=bool)
         self._running: np.ndarray | None = None  # (m,) 0 for a stalled winch; None: none is
@@ -150,7 +144,7 @@ class Physics:
     def T_base_platform(self) -> np.ndarray:
         """Ground-truth platform pose (4, 4)."""
         q = self.data.qpos[self._qpos : self._qpos + 7]
-        return transform(matrix_from_quat_wxyz(q[3:]), q[:3])
+        return se3.transform(se3.matrix_from_quat_wxyz(q[3:]), q[:3])
 
     @property
     def rest_lengths(self) -> np.ndarray:
@@ -206,7 +200,7 @@ class Physics:
     @property
     def T_cam_tag(self) -> np.ndarray:
         """Ground-truth tag pose in the camera frame (4, 4)."""
-        return inverse(self.T_base_cam) @ self.T_base_tag
+        return se3.inverse(self.T_base_cam) @ self.T_base_tag
 
     @property
     def platform_half_size(self) -> np.ndarray:
@@ -218,6 +212,11 @@ class Physics:
     def add_hook(self, hook: StepHook) -> None:
         """Let ``hook`` act between physics steps (stepping stops at its times)."""
         self._hooks.append(hook)
+
+    def set_drum_radii(self, scale: np.ndarray) -> None:
+        """Set drives and encoders to the radii r·scale, (m,) (a calibration's; else r)."""
+        self.drum_radius_set = self.winch.drum_radius * np.asarray(scale, dtype=float)  # [m]
+        self._drum_ratio = self.drum_radius_true / self.drum_radius_set  # cable per command
 
     def clear_hooks(self) -> None:
         """Drop every hook: they hold this physics, a cycle that kept a closed run's model alive."""
@@ -351,7 +350,7 @@ class Physics:
         T = self.geometry.check_pose_inside(T_base_platform, "placed pose")
         d, m = self.data, self.model
         d.qpos[self._qpos : self._qpos + 3] = T[:3, 3]
-        d.qpos[self._qpos + 3 : self._qpos + 7] = quat_wxyz_from_matrix(T[:3, :3])
+        d.qpos[self._qpos + 3 : self._qpos + 7] = se3.quat_wxyz_from_matrix(T[:3, :3])
         d.qvel[:] = 0.0
         mujoco.mj_kinematics(m, d)
         self.refresh()
@@ -396,5 +395,5 @@ class Physics:
             self.step(round(settle_time / self.timestep))
         finally:
             self._hooks = hooks
-        self.settle_error = pose_distance(T, self.T_base_platform)
+        self.settle_error = se3.pose_distance(T, self.T_base_platform)
         self.data.time = 0.0
