@@ -80,6 +80,7 @@ def one(
         s.model.file.parent / "robot.toml",
         session.calibration,
         {"check_against_truth": check},
+        session.recording.drum_radii,
     )
     p1, refused = {}, None
     for name, nom in (("nominal", None), ("calibrated", robot)):

@@ -134,7 +134,7 @@ def _solve_and_write(args, s, source: Path, out: Path, started: float) -> int:
         },
         "check_against_truth": truth_check(session, nominal.geometry, nominal.T_base_tag),
     }
-    robot, report = write(out, source, cal, extra)
+    robot, report = write(out, source, cal, extra, rec.drum_radii)
     _print(cal, extra, robot, report)
     return 0
 

@@ -321,8 +321,14 @@ def load_robot(path: str | Path) -> Robot:
     fields["tension_sensors"] = tension_sensors(tables[-2])
     fields["max_payload"] = payload(tables[-1])
     fields.update(_cables(tables[-4], tables[-3]))
-    if tables[3].get("drum_radius_scale", None) is not None:  # a calibration's, per drum
+    if (raw := tables[3].get("drum_radius_scale", None)) is not None:  # a calibration's
         scale = tables[3].per_cable("drum_radius_scale", fields["exit_points"].shape[0])
+        items = raw if isinstance(raw, list) else [raw]
+        if any(isinstance(x, bool) for x in items) or np.any(abs(scale - 1) > 0.5):
+            raise tables[3].fail(
+                "drum_radius_scale",
+                f"must be each drum's radius over drum_radius_m (≈ 1, not metres), got {items}",
+            )
         fields["drum_radius_scale"] = scale
     for key, reader in (("camera", _camera), ("tag", _tag)):
         t = table(key, required=False)

@@ -205,7 +205,7 @@ def test_calibrates_robot_19_and_its_open_loop_run_improves(tmp_path):
     session = calibrate(s, n_poses=60)
     _, nominal, _ = build_robot(s.model.file)
     check = truth_check(session, nominal.geometry, nominal.T_base_tag)
-    robot, _ = write(tmp_path, ROBOT, session.calibration, {})
+    robot, _ = write(tmp_path, ROBOT, session.calibration, {}, session.recording.drum_radii)
     p1 = {}
     for name, nom in (("nominal", None), ("calibrated", robot)):
         sc = replace(s, model=replace(s.model, nominal=nom)).with_overrides(

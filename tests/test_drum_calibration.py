@@ -8,6 +8,7 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from cdpr_twin import MODELS_DIR
 from cdpr_twin.calibrate.output import toml_text
@@ -62,3 +63,67 @@ def test_a_description_with_the_true_drum_radii_removes_their_error_at_p1(tmp_pa
     nominal, exact = _miss_at_p1(_scenario()), _miss_at_p1(_scenario(calibrated))
     print(f"p1 missed by {nominal * 1e3:.2f} mm (nominal drums), {exact * 1e3:.2f} mm (true)")
     assert nominal > 1e-3 and exact < 0.3e-3 and exact < nominal / 5
+
+
+def _description(tmp_path: Path, **winches) -> Path:
+    """ACROBOT's description with ``[winches]`` fields changed, written to a file."""
+    data = tomllib.loads((MODELS_DIR / "acrobot" / "robot.toml").read_text())
+    data["winches"].update(winches)
+    data["tag"]["texture"] = str(MODELS_DIR / "acrobot" / data["tag"]["texture"])
+    path = tmp_path / "robot.toml"
+    path.write_text(toml_text(data))
+    return path
+
+
+def test_the_software_sets_its_drums_to_the_described_radius_times_the_scale(tmp_path):
+    from cdpr_twin.sim import build_robot
+
+    path = _description(tmp_path, drum_radius_m=0.025, drum_radius_scale=[1.01] * 8)
+    physics, nominal, _ = build_robot("acrobot", nominal_path=path)
+    np.testing.assert_allclose(nominal.drum_radii, 0.025 * 1.01, rtol=1e-15)
+    np.testing.assert_array_equal(physics.drum_radius_set, nominal.drum_radii)
+
+
+def test_a_calibration_scales_the_radii_it_read_with_not_the_file_it_copies(tmp_path):
+    """s_i is relative to the radius the encoder was set to while recording: r_set·(1 + s_i)
+    over the description's drum_radius_m, whatever scale the copied description held."""
+    from types import SimpleNamespace
+
+    from cdpr_twin.calibrate.output import calibrated_description
+    from cdpr_twin.sim import nominal_robot
+
+    source = _description(tmp_path, drum_radius_scale=[1.1] * 8)  # not what the drums were set to
+    g = nominal_robot("acrobot").geometry
+    s = np.linspace(-0.004, 0.004, 8)
+    model = SimpleNamespace(a_base=g.a_base, b_platform=g.b_platform, scale=s,
+                            T_platform_cam=g.T_platform_cam, T_base_tag=np.eye(4))  # fmt: skip
+    for set_to in (np.full(8, 0.02), np.full(8, 0.022)):
+        text = calibrated_description(source, SimpleNamespace(model=model), set_to)
+        written = np.array(tomllib.loads(text)["winches"]["drum_radius_scale"])
+        np.testing.assert_allclose(0.02 * written, set_to * (1 + s), rtol=1e-8)
+
+
+@pytest.mark.parametrize(
+    ("scale", "match"),
+    [
+        ([0.0201] * 8, "not metres"),
+        ([True] * 8, "not metres"),
+        ([1.0] * 7, "shape"),
+        ([1.0] * 7 + [-1.0], "> 0"),
+    ],
+    ids=["metres", "booleans", "seven", "negative"],
+)
+def test_a_drum_scale_that_is_not_one_per_drum_near_1_is_refused(tmp_path, scale, match):
+    from cdpr_twin.robot import RobotError, load_robot
+
+    with pytest.raises(RobotError, match=match):
+        load_robot(_description(tmp_path, drum_radius_scale=scale))
+
+
+def test_the_physics_refuses_drum_radii_that_are_not_one_positive_number_per_drum():
+    from cdpr_twin.sim import build_robot
+
+    physics, _, _ = build_robot("acrobot")
+    for bad in (np.full(7, 0.02), np.r_[np.full(7, 0.02), 0.0], np.full(8, np.nan)):
+        with pytest.raises(ValueError, match="drum radii must be 8 numbers > 0"):
+            physics.set_drum_radii(bad)

@@ -172,7 +172,8 @@ def test_a_scaled_twist_stays_within_any_rate_limit_to_the_last_bit():
         env.close()
 
 
-def test_a_diverging_simulation_is_scored_where_the_robot_last_was():
+def test_a_diverging_simulation_is_scored_where_the_robot_last_was(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo logs its warning to MUJOCO_LOG.TXT in the cwd
     env = CdprEnv(realism="ideal", truth_scale=0.0)
     try:
         env.reset(seed=0)

@@ -67,7 +67,7 @@ class Truth:
         T_base_platform: (K, 4, 4) true poses at the readings.
         geometry: the simulated robot's true :class:`~cdpr_twin.geometry.CdprGeometry`.
         T_base_tag: (4, 4) the true tag pose.
-        drum_scale: (m,) true drum radius / nominal radius − 1.
+        drum_scale: (m,) true drum radius / the radius its drive and encoder were set to − 1.
         intrinsics_error: (8,) the detector's intrinsics minus the true ones (fx, fy, cx, cy
             [px], k1, k2, p1, p2).
     """
@@ -90,6 +90,8 @@ class Recording:
         truth: ground truth, for the report only.
         simulated_time: simulated seconds [s].
         wall_time: wall-clock seconds of the recording [s].
+        drum_radii: (m,) the radii the drives and encoders were set to [m] (the nominal
+            description's, or the model's).
     """
 
     obs: Observations
@@ -98,6 +100,7 @@ class Recording:
     truth: Truth
     simulated_time: float
     wall_time: float
+    drum_radii: np.ndarray
 
     def subset(self, keep: np.ndarray) -> Recording:
         """The recording at the poses ``keep`` (a (K,) mask or indices) selects."""
@@ -204,7 +207,7 @@ def record(s: Scenario, poses: list[np.ndarray], frames: int = 4, workers: int =
     else:
         parts = [_segment(item, s, frames) for item in items]
     _, rows, truth, sim_time, static = zip(*parts, strict=True)
-    geometry, T_base_tag, drum_scale, intrinsics_error, nominal, detector = static[0]  # all same
+    geometry, T_base_tag, drum_scale, intrinsics_error, nominal, detector, radii = static[0]
     return Recording(
         obs=_observations([r for part in rows for r in part], poses),
         nominal=nominal,
@@ -213,6 +216,7 @@ def record(s: Scenario, poses: list[np.ndarray], frames: int = 4, workers: int =
                     drum_scale, intrinsics_error),
         simulated_time=float(sum(sim_time)),
         wall_time=time.perf_counter() - started,
+        drum_radii=radii,
     )  # fmt: skip
 
 
@@ -331,7 +335,7 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
         sensors.close()
     scale = physics.drum_radius_true / physics.drum_radius_set - 1.0  # against what it reads
     static = (physics.geometry, np.array(physics.T_base_tag), scale, intrinsics_error, nominal,
-              detector)  # fmt: skip
+              detector, physics.drum_radius_set.copy())  # fmt: skip
     return index, rows, truth, float(physics.time), static
 
 

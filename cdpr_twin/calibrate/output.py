@@ -1,7 +1,8 @@
 """A calibration's outputs: the corrected robot description, and the report (numpy only).
 
 ``calibrated_robot.toml`` is the robot's own description (same schema, every other number
-kept) with the estimated exit and anchor points, camera mount and tag pose; a scenario uses it
+kept) with the estimated exit and anchor points, drum radii (``[winches] drum_radius_scale``),
+camera mount and tag pose; a scenario uses it
 as its nominal model with ``[model] nominal = "calibrated_robot.toml"``. ``calibration.json``
 holds each parameter's estimate and 1σ, the fit, the rank analysis and timings, and — clearly
 apart, under ``"check_against_truth"`` — the twin's truth errors, which the solver never saw.
@@ -43,15 +44,22 @@ def toml_text(data: dict, header: str = "") -> str:
     return "\n".join(lines) + "\n"
 
 
-def calibrated_description(source: Path, cal: Calibration) -> str:
-    """The robot description ``source`` with the calibration's estimates, as TOML text."""
+def calibrated_description(source: Path, cal: Calibration, drum_radii: np.ndarray) -> str:
+    """The robot description ``source`` with the calibration's estimates, as TOML text.
+
+    Args:
+        source: the description the software believed while recording.
+        cal: the calibration.
+        drum_radii: (m,) the radii the drives and encoders were set to while recording [m]
+            (``Physics.drum_radius_set``): the drum scale errors s_i are relative to them.
+    """
     data = tomllib.loads(source.read_text(encoding="utf-8"))
     mod = cal.model
     data["cables"]["exit_points_m"] = np.round(mod.a_base, 7).tolist()
     data["cables"]["anchor_points_m"] = np.round(mod.b_platform, 7).tolist()
-    winches = data.setdefault("winches", {})  # the drums the encoders read: r·(1 + s_i)
-    base = np.asarray(winches.get("drum_radius_scale", 1.0), dtype=float)
-    winches["drum_radius_scale"] = np.round(base * (1.0 + mod.scale), 9).tolist()
+    winches = data["winches"]  # each drum: the radius it was read with, times (1 + s_i)
+    radii = np.asarray(drum_radii, dtype=float) * (1.0 + mod.scale)
+    winches["drum_radius_scale"] = np.round(radii / winches["drum_radius_m"], 9).tolist()
     if "camera" in data:
         R = mod.T_platform_cam[:3, :3] @ R_CV_MJCAM
         data["camera"]["position_m"] = np.round(mod.T_platform_cam[:3, 3], 7).tolist()
@@ -120,8 +128,13 @@ def clear(out: Path) -> None:
             path.unlink(missing_ok=True)
 
 
-def write(out: Path, source: Path, cal: Calibration, extra: dict) -> tuple[Path, Path]:
+def write(
+    out: Path, source: Path, cal: Calibration, extra: dict, drum_radii: np.ndarray
+) -> tuple[Path, Path]:
     """Write ``calibrated_robot.toml`` then ``calibration.json`` into ``out``.
+
+    ``drum_radii``: the radii the recording's drives and encoders were set to (its
+    :attr:`~cdpr_twin.calibrate.acquire.Recording.drum_radii`).
 
     Each is written as ``*.partial``, ``fsync``'ed and renamed: a final name always holds a
     whole file, and the report exists only if the description does.
@@ -136,7 +149,7 @@ def write(out: Path, source: Path, cal: Calibration, extra: dict) -> tuple[Path,
     robot, rep = (out / n for n in NAMES)
     tmp = partial_of(robot)
     with writing(tmp), tmp.open("w", encoding="utf-8") as f:
-        f.write(calibrated_description(source, cal))
+        f.write(calibrated_description(source, cal, drum_radii))
         f.flush()
         os.fsync(f.fileno())
     with writing(robot):

@@ -5,10 +5,11 @@ the homing offset, exactly.
 
 Otherwise each encoder counts its drum's angle θ from where it was homed, with
 ``encoder_counts`` counts per revolution (a counter: the count is floor(θ·N/2π), zeroed at
-homing), and reports the length the *nominal* drum radius r would pay out over the counted
-angle, while the cable actually paid out is the *true* radius r' times θ
-(:attr:`Physics.drum_radius_true`, drawn per robot). After paying out L the reading has moved by
-L·r/r' (less up to one count, 2π·r/N): an error ≈ −L·δr/r' that grows with paid-out cable.
+homing), and reports the length the radius r it is set to (the nominal one, or a calibrated
+description's: :attr:`Physics.drum_radius_set`) would pay out over the counted angle, while
+the cable actually paid out is the *true* radius r' times θ (:attr:`Physics.drum_radius_true`,
+drawn per robot). After paying out L the reading has moved by L·r/r' (less up to one count,
+2π·r/N): an error ≈ −L·δr/r' that grows with paid-out cable.
 """
 
 from __future__ import annotations
@@ -67,7 +68,7 @@ class Encoders:
 
     @property
     def quantum(self) -> float:
-        """The length one count stands for, 2π·r/N [m] (0 for exact encoders)."""
+        """The length one count stands for at the nominal radius, 2π·r/N [m] (0: exact)."""
         n = self.realism.encoder_counts
         return 2.0 * math.pi * self.realism.drum_radius / n if n else 0.0
 

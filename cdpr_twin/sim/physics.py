@@ -83,7 +83,7 @@ class Physics:
         self._servos = WinchServos(self.winch, self.n_cables)
         rng = robot_rng(robot_seed, "winch")  # per robot; the encoders read the same radii
         self.drum_radius_true = winch_mod.draw_drum_radii(self.winch, rng, self.n_cables)
-        self.set_drum_radii(np.ones(self.n_cables))  # as built, until told otherwise
+        self.set_drum_radii(np.full(self.n_cables, self.winch.drum_radius))  # until told
         self._hooks: list[StepHook] = []
         self.cable_enabled = np.ones(self.n_cables, dtype=bool)
         self._running: np.ndarray | None = None  # (m,) 0 for a stalled winch; None: none is
@@ -213,10 +213,12 @@ class Physics:
         """Let ``hook`` act between physics steps (stepping stops at its times)."""
         self._hooks.append(hook)
 
-    def set_drum_radii(self, scale: np.ndarray) -> None:
-        """Set drives and encoders to the radii r·scale, (m,) (a calibration's; else r)."""
-        self.drum_radius_set = self.winch.drum_radius * np.asarray(scale, dtype=float)  # [m]
-        self._drum_ratio = self.drum_radius_true / self.drum_radius_set  # cable per command
+    def set_drum_radii(self, radii: np.ndarray) -> None:
+        """Set the drives and encoders to these drum radii (m,) [m] (the software's belief)."""
+        radii = np.array(radii, dtype=float)
+        if radii.shape != (self.n_cables,) or not np.all((radii > 0) & np.isfinite(radii)):
+            raise ValueError(f"drum radii must be {self.n_cables} numbers > 0 [m], got {radii}")
+        self.drum_radius_set, self._drum_ratio = radii, self.drum_radius_true / radii  # cable/cmd
 
     def clear_hooks(self) -> None:
         """Drop every hook: they hold this physics, a cycle that kept a closed run's model alive."""
@@ -263,8 +265,7 @@ class Physics:
         quat[:, 3] = np.sin(half)
         d.mocap_quat[self._mocap] = quat
         l0 = d.act[self._actuators]
-        # 0 before reset(), and for disabled cables
-        on = (l0 > 0) & self.cable_enabled
+        on = (l0 > 0) & self.cable_enabled  # (l0 = 0 before reset())
         k = np.divide(self._es, l0, out=np.zeros(self.n_cables), where=on)
         self._gain[:, 0] = k
         self._bias[:, :3] = k[:, None] * self._bias_unit

@@ -33,15 +33,16 @@ class NominalRobot:
         intrinsics: calibrated camera intrinsics, or ``None`` without camera.
         tag_size: edge of the tag's black square [m] (0 without tag).
         T_base_tag: (4, 4) tag pose the model file states (pupil frame), or ``None``.
-        drum_radius_scale: (m,) each drum's radius over the nominal one, as a calibration
-            estimated it (the drives and encoders are set to it), or ``None`` (as built).
+        drum_radii: (m,) the drums' radii [m] a robot description states (``drum_radius_m``
+            × a calibration's ``drum_radius_scale``): the drives and encoders are set to
+            them; ``None``: the model's radius.
     """
 
     geometry: CdprGeometry
     intrinsics: CameraIntrinsics | None
     tag_size: float
     T_base_tag: np.ndarray | None
-    drum_radius_scale: np.ndarray | None = None
+    drum_radii: np.ndarray | None = None
 
 
 class Sensors:

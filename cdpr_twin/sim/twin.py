@@ -63,9 +63,9 @@ def _nominal_robot(model: mujoco.MjModel) -> NominalRobot:
 def nominal_from_description(path: str | Path, model_nominal: NominalRobot) -> NominalRobot:
     """What the software believes when told a robot description (e.g. a calibrated one).
 
-    Geometry, camera mount, tag pose and drum radii (a calibration's ``drum_radius_scale``)
-    come from the description; the camera intrinsics, tag size and the carried mass (platform
-    and payload) stay the model's.
+    Geometry, camera mount, tag pose and drum radii (``drum_radius_m``, times a calibration's
+    ``drum_radius_scale``) come from the description; the camera intrinsics, tag size and the
+    carried mass (platform and payload) stay the model's.
 
     Raises:
         ModelError: the description is invalid or has another cable count.
@@ -91,8 +91,9 @@ def nominal_from_description(path: str | Path, model_nominal: NominalRobot) -> N
     T_base_tag = model_nominal.T_base_tag
     if r.tag is not None:
         T_base_tag = transform(matrix_from_quat_wxyz(r.tag.quat_wxyz), r.tag.position)
-    scale = r.drum_radius_scale
-    return replace(model_nominal, geometry=geom, T_base_tag=T_base_tag, drum_radius_scale=scale)
+    scale = np.ones(geom.n_cables) if r.drum_radius_scale is None else r.drum_radius_scale
+    radii = r.drum_radius * scale
+    return replace(model_nominal, geometry=geom, T_base_tag=T_base_tag, drum_radii=radii)
 
 
 def _set_timestep(model: mujoco.MjModel, timestep: float | None) -> None:
@@ -182,8 +183,8 @@ def build_robot(
         physics = SaggingPhysics(*args, winch=winch, robot_seed=robot_seed, linear_density=rho)
     else:
         physics = Physics(*args, winch=winch, robot_seed=robot_seed)
-    if nominal.drum_radius_scale is not None:  # its drives and encoders, set as it believes
-        physics.set_drum_radii(nominal.drum_radius_scale)
+    if nominal.drum_radii is not None:  # its drives and encoders, set as it believes
+        physics.set_drum_radii(nominal.drum_radii)
     return physics, nominal, deviations
 
 
