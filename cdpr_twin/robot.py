@@ -236,6 +236,23 @@ def _winches(t: _Table) -> dict:
     }
 
 
+def _drum_scale(t: _Table, m: int) -> np.ndarray | None:
+    """``[winches] drum_radius_scale``, or ``None`` when absent.
+
+    Each drum's radius over ``drum_radius_m``, as a calibration estimated it (near 1).
+    """
+    if (raw := t.get("drum_radius_scale", None)) is None:
+        return None
+    scale = t.per_cable("drum_radius_scale", m)
+    items = raw if isinstance(raw, list) else [raw]
+    if any(isinstance(x, bool) for x in items) or np.any(abs(scale - 1) > 0.5):
+        raise t.fail(
+            "drum_radius_scale",
+            f"must be each drum's radius over drum_radius_m (≈ 1, not metres), got {items}",
+        )
+    return scale
+
+
 def _camera(t: _Table) -> Camera:
     res = t.array("resolution_px", (2,))
     if np.any(res < 1) or np.any(res != np.round(res)):
@@ -321,15 +338,7 @@ def load_robot(path: str | Path) -> Robot:
     fields["tension_sensors"] = tension_sensors(tables[-2])
     fields["max_payload"] = payload(tables[-1])
     fields.update(_cables(tables[-4], tables[-3]))
-    if (raw := tables[3].get("drum_radius_scale", None)) is not None:  # a calibration's
-        scale = tables[3].per_cable("drum_radius_scale", fields["exit_points"].shape[0])
-        items = raw if isinstance(raw, list) else [raw]
-        if any(isinstance(x, bool) for x in items) or np.any(abs(scale - 1) > 0.5):
-            raise tables[3].fail(
-                "drum_radius_scale",
-                f"must be each drum's radius over drum_radius_m (≈ 1, not metres), got {items}",
-            )
-        fields["drum_radius_scale"] = scale
+    fields["drum_radius_scale"] = _drum_scale(tables[3], fields["exit_points"].shape[0])
     for key, reader in (("camera", _camera), ("tag", _tag)):
         t = table(key, required=False)
         fields[key] = None if t is None else reader(t)

@@ -312,7 +312,7 @@ def test_drives_and_encoders_set_to_calibrated_radii(set_to):
     physics, nominal, u = _robot(w, 3)
     r_true = physics.drum_radius_true
     r_set = r_true if set_to == "truth" else 0.5 * (r_true + 0.02)
-    physics.set_drum_radii(r_set / 0.02)
+    physics.set_drum_radii(r_set)
     enc = _sensors(physics, nominal, w, 3)
     home, l0 = enc.encoder_lengths, physics.rest_lengths
     for _ in range(25):
