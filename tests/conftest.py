@@ -38,6 +38,22 @@ PAPER_POSES = {
 }
 
 
+EXACT_OPEN_LOOP = {
+    "realism.profile": "ideal",
+    "truth.exit_point_std": 0.0,
+    "truth.anchor_point_std": 0.0,
+    "truth.es_scale_std": 0.0,
+    "truth.pulley_radius_std": 0.0,
+    "truth.camera_position_std": 0.0,
+    "truth.camera_rotation_std_deg": 0.0,
+    "sensors.tension_noise_std": 0.0,
+    "sensors.camera": False,
+    "duration": 10.0,
+}
+"""Dotted overrides of ``paper_open_loop``: the robot exactly as modelled, ideal sensors, no
+camera, p0 → p1 (10 s): what a test then switches on is the only error."""
+
+
 def paper_pose(name: str) -> np.ndarray:
     return se3.pose_from_vector(PAPER_POSES[name])
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import EXACT_OPEN_LOOP
 
 from cdpr_twin import MODELS_DIR
 from cdpr_twin.calibrate.output import toml_text
@@ -18,19 +19,7 @@ from cdpr_twin.scenario import scenario_from_data
 
 ROOT = Path(__file__).resolve().parent.parent
 SOURCE = ROOT / "scenarios" / "paper_open_loop.toml"
-DRUMS_ONLY = {  # the robot exactly as modelled but its drums (1 % per drum), ideal otherwise
-    "realism.profile": "ideal",
-    "realism.winch.drum_radius_error_std": 0.01,
-    "truth.exit_point_std": 0.0,
-    "truth.anchor_point_std": 0.0,
-    "truth.es_scale_std": 0.0,
-    "truth.pulley_radius_std": 0.0,
-    "truth.camera_position_std": 0.0,
-    "truth.camera_rotation_std_deg": 0.0,
-    "sensors.tension_noise_std": 0.0,
-    "sensors.camera": False,
-    "duration": 10.0,  # p0 → p1
-}
+DRUMS_ONLY = {**EXACT_OPEN_LOOP, "realism.winch.drum_radius_error_std": 0.01}  # 1 % per drum
 
 
 def _scenario(nominal: Path | None = None):

@@ -8,6 +8,7 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
+from conftest import EXACT_OPEN_LOOP
 
 from cdpr_twin.campaign.spec import set_dotted
 from cdpr_twin.kinematics import start_error_transfer
@@ -19,19 +20,7 @@ from cdpr_twin.sim import nominal_robot
 
 ROOT = Path(__file__).resolve().parent.parent
 SOURCE = ROOT / "scenarios" / "paper_open_loop.toml"
-PERFECT = {  # the robot exactly as modelled, ideal sensors, no camera: only homing differs
-    "realism.profile": "ideal",
-    "truth.exit_point_std": 0.0,
-    "truth.anchor_point_std": 0.0,
-    "truth.es_scale_std": 0.0,
-    "truth.pulley_radius_std": 0.0,
-    "truth.camera_position_std": 0.0,
-    "truth.camera_rotation_std_deg": 0.0,
-    "sensors.tension_noise_std": 0.0,
-    "sensors.camera": False,
-    "duration": 10.0,  # p0 → p1
-    "seed": 3,
-}
+PERFECT = {**EXACT_OPEN_LOOP, "seed": 3}  # only homing differs (switched on below)
 
 
 def _at_p1(homing: tuple[float, float]) -> tuple[np.ndarray, dict]:
