@@ -211,3 +211,29 @@ def test_numpy_scalars_are_numbers_and_booleans_are_not():
     env.close()
     with pytest.raises(ValueError, match="max_speed must be a positive number, got True"):
         CdprEnv(max_speed=True)
+
+
+def test_random_full_scale_twists_slacken_cables_and_on_fault_decides_what_that_does():
+    """What the docs say of exploration: random ±1 twists every 40 ms slacken cables within a
+    few steps; ``on_fault="continue"`` lists the fault and goes on, ``"stop"`` ends there."""
+    ended = {}
+    for on_fault in ("stop", "continue"):
+        env = CdprEnv(on_fault=on_fault)
+        env.action_space.seed(0)
+        try:
+            env.reset(seed=0)
+            faults = []
+            for steps in range(1, 21):  # noqa: B007 (steps: how long it ran)
+                _, _, terminated, _, info = env.step(env.action_space.sample())
+                faults += info.get("faults", [])
+                if terminated:
+                    break
+            ended[on_fault] = (steps, terminated, faults)
+        finally:
+            env.close()
+    steps, terminated, faults = ended["stop"]
+    assert terminated and steps <= 5 and "fewer than six taut cables" in faults[0]
+    steps, terminated, faults = ended["continue"]
+    assert not terminated and steps == 20 and "fewer than six taut cables" in faults[0]
+    with pytest.raises(ValueError, match="on_fault must be 'stop', 'continue' or None"):
+        CdprEnv(on_fault="ignore")

@@ -76,6 +76,15 @@ def _configure(
     return s.with_overrides(in_loop=estimator, camera=camera)
 
 
+def _check(on_fault: str | None, **scales: float) -> None:
+    """Refuse an unknown ``on_fault`` and scales that are not positive numbers (ValueError)."""
+    if on_fault not in (None, "stop", "continue"):
+        raise ValueError(f"on_fault must be 'stop', 'continue' or None, got {on_fault!r}")
+    for name, v in scales.items():
+        if isinstance(v, bool) or not (isinstance(v, numbers.Real) and v > 0 and v < np.inf):
+            raise ValueError(f"{name} must be a positive number, got {v!r}")
+
+
 class CdprEnv(gym.Env):
     """The twin as a Gymnasium environment (see the module's description).
 
@@ -96,6 +105,10 @@ class CdprEnv(gym.Env):
         max_angular_speed: |ω| per axis at action ±1 [rad/s] (twist).
         max_cable_rate: |l̇| at action ±1 [m/s] (cable rates).
         render_mode: ``None`` or ``"rgb_array"`` (the onboard camera's frame).
+        on_fault: ``"stop"`` (a monitor fault ends the episode) or ``"continue"`` (it is listed
+            in ``info["faults"]``); ``None``: the scenario's ``[monitor] on_fault``. Uniformly
+            random full-scale twists slacken cables within 2–4 steps: explore with
+            ``"continue"``, or with smoother actions.
 
     Raises:
         ValueError: for an unknown task, action, estimator or render mode, a scale that is not
@@ -119,13 +132,11 @@ class CdprEnv(gym.Env):
         max_angular_speed: float = 0.3,
         max_cable_rate: float = 0.1,
         render_mode: str | None = None,
+        on_fault: str | None = None,
     ) -> None:
         self.task = make_task(task)
-        scales = {"max_speed": max_speed, "max_angular_speed": max_angular_speed,
-                  "max_cable_rate": max_cable_rate}  # fmt: skip
-        for name, v in scales.items():
-            if isinstance(v, bool) or not (isinstance(v, numbers.Real) and v > 0 and v < np.inf):
-                raise ValueError(f"{name} must be a positive number, got {v!r}")
+        _check(on_fault, max_speed=max_speed, max_angular_speed=max_angular_speed,
+               max_cable_rate=max_cable_rate)  # fmt: skip
         if action not in ACTIONS:
             raise ValueError(f"unknown action {action!r}; choose one of {', '.join(ACTIONS)}")
         if render_mode not in (None, *self.metadata["render_modes"]):
@@ -138,6 +149,9 @@ class CdprEnv(gym.Env):
         self.action_kind, self.image, self.render_mode = action, bool(image), render_mode
         self.random_robot, self.estimator = bool(random_robot), estimator
         self.scenario = _configure(scenario, estimator, bool(camera), truth_scale, realism)
+        if on_fault is not None:
+            monitor = dataclasses.replace(self.scenario.monitor, on_fault=on_fault)
+            self.scenario = dataclasses.replace(self.scenario, monitor=monitor)
         self._period = self.scenario.model.control_period
         self._horizon = max(1, round(self.task.horizon / self._period))
         self._setup: RunSetup | None = prepare(self.scenario)  # the robot: cable count, camera
