@@ -67,9 +67,9 @@ def _description(tmp_path: Path, **winches) -> Path:
 def test_the_software_sets_its_drums_to_the_described_radius_times_the_scale(tmp_path):
     from cdpr_twin.sim import build_robot
 
-    path = _description(tmp_path, drum_radius_m=0.025, drum_radius_scale=[1.01] * 8)
+    path = _description(tmp_path, drum_radius_m=0.0201, drum_radius_scale=[1.01] * 8)
     physics, nominal, _ = build_robot("acrobot", nominal_path=path)
-    np.testing.assert_allclose(nominal.drum_radii, 0.025 * 1.01, rtol=1e-15)
+    np.testing.assert_allclose(nominal.drum_radii, 0.0201 * 1.01, rtol=1e-15)
     np.testing.assert_array_equal(physics.drum_radius_set, nominal.drum_radii)
 
 
@@ -86,10 +86,13 @@ def test_a_calibration_scales_the_radii_it_read_with_not_the_file_it_copies(tmp_
     s = np.linspace(-0.004, 0.004, 8)
     model = SimpleNamespace(a_base=g.a_base, b_platform=g.b_platform, scale=s,
                             T_platform_cam=g.T_platform_cam, T_base_tag=np.eye(4))  # fmt: skip
-    for set_to in (np.full(8, 0.02), np.full(8, 0.022)):
+    for set_to in (np.full(8, 0.02), np.full(8, 0.021), np.full(8, 0.03)):  # 0.03: an override
         text = calibrated_description(source, SimpleNamespace(model=model), set_to)
-        written = np.array(tomllib.loads(text)["winches"]["drum_radius_scale"])
-        np.testing.assert_allclose(0.02 * written, set_to * (1 + s), rtol=1e-8)
+        winches = tomllib.loads(text)["winches"]
+        radius, written = winches["drum_radius_m"], np.array(winches["drum_radius_scale"])
+        np.testing.assert_allclose(radius * written, set_to * (1 + s), rtol=1e-8)
+        assert radius == (0.02 if set_to[0] < 0.022 else pytest.approx(0.03, rel=0.01))
+        assert np.all(abs(written - 1) < 0.1)  # a file load_robot takes
 
 
 @pytest.mark.parametrize(
@@ -114,5 +117,35 @@ def test_the_physics_refuses_drum_radii_that_are_not_one_positive_number_per_dru
 
     physics, _, _ = build_robot("acrobot")
     for bad in (np.full(7, 0.02), np.r_[np.full(7, 0.02), 0.0], np.full(8, np.nan)):
-        with pytest.raises(ValueError, match="drum radii must be 8 numbers > 0"):
+        with pytest.raises(ValueError, match=r"drum radii: 8 within 10 % of 0\.02 m"):
             physics.set_drum_radii(bad)
+
+
+def test_a_description_without_drum_scales_leaves_the_drives_at_the_robots_radius(tmp_path):
+    from cdpr_twin.realism import WinchRealism
+    from cdpr_twin.sim import ModelError, build_robot
+
+    winch = WinchRealism(drum_radius=0.03)  # a scenario's override of the robot's 20 mm
+    plain = MODELS_DIR / "acrobot" / "robot.toml"
+    physics, nominal, _ = build_robot("acrobot", winch=winch, nominal_path=plain)
+    assert nominal.drum_radii is None and np.all(physics.drum_radius_set == 0.03)
+    scaled = _description(tmp_path, drum_radius_scale=[1.0] * 8)  # 20 mm drums, told 30 mm
+    with pytest.raises(ModelError, match=r"drum_radius_m × scale: drum radii: 8 within 10 %"):
+        build_robot("acrobot", winch=winch, nominal_path=scaled)
+
+
+def test_a_recording_reads_with_the_radii_its_drives_are_set_to(tmp_path):
+    """What the calibration's s_i is relative to: the recording's set radii, and its truth."""
+    from cdpr_twin.calibrate.acquire import record
+
+    path = _description(tmp_path, drum_radius_scale=np.linspace(0.99, 1.01, 8).tolist())
+    s = _scenario(path)
+    s = s.with_overrides(camera=True)
+    rec = record(s, [s.start_pose, s.start_pose], frames=1)
+    np.testing.assert_allclose(rec.drum_radii, 0.02 * np.linspace(0.99, 1.01, 8), rtol=1e-12)
+    setup = prepare(s)  # the same robot: its true drums
+    try:
+        true = setup.physics.drum_radius_true
+    finally:
+        setup.close()
+    np.testing.assert_allclose(rec.truth.drum_scale, true / rec.drum_radii - 1, rtol=1e-12)

@@ -215,9 +215,9 @@ class Physics:
 
     def set_drum_radii(self, radii: np.ndarray) -> None:
         """Set the drives and encoders to these drum radii (m,) [m] (the software's belief)."""
-        radii = np.array(radii, dtype=float)
-        if radii.shape != (self.n_cables,) or not np.all((radii > 0) & np.isfinite(radii)):
-            raise ValueError(f"drum radii must be {self.n_cables} numbers > 0 [m], got {radii}")
+        radii, r = np.array(radii, dtype=float), self.winch.drum_radius  # (NaN, ≤ 0: refused)
+        if radii.shape != (self.n_cables,) or not np.all(abs(radii / r - 1) < 0.1):
+            raise ValueError(f"drum radii: {self.n_cables} within 10 % of {r} m, got {radii}")
         self.drum_radius_set, self._drum_ratio = radii, self.drum_radius_true / radii  # cable/cmd
 
     def clear_hooks(self) -> None:

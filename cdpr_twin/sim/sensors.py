@@ -33,9 +33,9 @@ class NominalRobot:
         intrinsics: calibrated camera intrinsics, or ``None`` without camera.
         tag_size: edge of the tag's black square [m] (0 without tag).
         T_base_tag: (4, 4) tag pose the model file states (pupil frame), or ``None``.
-        drum_radii: (m,) the drums' radii [m] a robot description states (``drum_radius_m``
-            × a calibration's ``drum_radius_scale``): the drives and encoders are set to
-            them; ``None``: the model's radius.
+        drum_radii: (m,) the drums' radii [m] a calibrated robot description states
+            (``drum_radius_m`` × ``drum_radius_scale``): the drives and encoders are set to
+            them; ``None``: the robot's own radius.
     """
 
     geometry: CdprGeometry

@@ -63,9 +63,9 @@ def _nominal_robot(model: mujoco.MjModel) -> NominalRobot:
 def nominal_from_description(path: str | Path, model_nominal: NominalRobot) -> NominalRobot:
     """What the software believes when told a robot description (e.g. a calibrated one).
 
-    Geometry, camera mount, tag pose and drum radii (``drum_radius_m``, times a calibration's
-    ``drum_radius_scale``) come from the description; the camera intrinsics, tag size and the
-    carried mass (platform and payload) stay the model's.
+    Geometry, camera mount, tag pose and, when it has a calibration's ``drum_radius_scale``, the
+    drum radii (× ``drum_radius_m``) come from the description; the camera intrinsics, tag size
+    and the carried mass (platform and payload) stay the model's.
 
     Raises:
         ModelError: the description is invalid or has another cable count.
@@ -91,8 +91,7 @@ def nominal_from_description(path: str | Path, model_nominal: NominalRobot) -> N
     T_base_tag = model_nominal.T_base_tag
     if r.tag is not None:
         T_base_tag = transform(matrix_from_quat_wxyz(r.tag.quat_wxyz), r.tag.position)
-    scale = np.ones(geom.n_cables) if r.drum_radius_scale is None else r.drum_radius_scale
-    radii = r.drum_radius * scale
+    radii = None if r.drum_radius_scale is None else r.drum_radius * r.drum_radius_scale
     return replace(model_nominal, geometry=geom, T_base_tag=T_base_tag, drum_radii=radii)
 
 
@@ -184,7 +183,10 @@ def build_robot(
     else:
         physics = Physics(*args, winch=winch, robot_seed=robot_seed)
     if nominal.drum_radii is not None:  # its drives and encoders, set as it believes
-        physics.set_drum_radii(nominal.drum_radii)
+        try:
+            physics.set_drum_radii(nominal.drum_radii)
+        except ValueError as exc:  # the description's drum_radius_m is not the robot's
+            raise ModelError(f"{nominal_path}: [winches] drum_radius_m × scale: {exc}") from None
     return physics, nominal, deviations
 
 
