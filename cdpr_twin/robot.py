@@ -236,6 +236,11 @@ def _winches(t: _Table) -> dict:
     }
 
 
+DRUM_SCALE_TOLERANCE = 0.1
+"""A drum's radius may differ from the robot's ``drum_radius_m`` by this fraction at most: a
+calibration's estimate is near 1 (a larger one is a unit mistake or another robot's radius)."""
+
+
 def _drum_scale(t: _Table, m: int) -> np.ndarray | None:
     """``[winches] drum_radius_scale``, or ``None`` when absent.
 
@@ -245,7 +250,7 @@ def _drum_scale(t: _Table, m: int) -> np.ndarray | None:
         return None
     scale = t.per_cable("drum_radius_scale", m)
     items = raw if isinstance(raw, list) else [raw]
-    if any(isinstance(x, bool) for x in items) or np.any(abs(scale - 1) > 0.5):
+    if any(isinstance(x, bool) for x in items) or np.any(abs(scale - 1) > DRUM_SCALE_TOLERANCE):
         raise t.fail(
             "drum_radius_scale",
             f"must be each drum's radius over drum_radius_m (≈ 1, not metres), got {items}",

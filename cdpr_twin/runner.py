@@ -356,7 +356,7 @@ def _marks(setup: RunSetup) -> tuple[tuple[str, ...], list]:
     if setup.monitor is not None:
         setup.monitor.check()  # the state the tick's last physics chunk left
         faults = setup.monitor.take()
-        marks += [f"{f.status} ({f.detail})" for f in faults]
+        marks += [f.described for f in faults]
     return tuple(marks), faults
 
 

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from cdpr_twin.calibrate.solver import Calibration
+from cdpr_twin.robot import DRUM_SCALE_TOLERANCE
 from cdpr_twin.se3 import quat_wxyz_from_matrix, rot_x
 
 R_CV_MJCAM = rot_x(np.pi)
@@ -59,8 +60,8 @@ def calibrated_description(source: Path, cal: Calibration, drum_radii: np.ndarra
     data["cables"]["anchor_points_m"] = np.round(mod.b_platform, 7).tolist()
     winches = data["winches"]  # each drum: the radius it was read with, times (1 + s_i)
     radii = np.asarray(drum_radii, dtype=float) * (1.0 + mod.scale)
-    if np.any(abs(radii / winches["drum_radius_m"] - 1) > 0.1):  # read at another radius
-        winches["drum_radius_m"] = float(np.round(np.median(radii), 9))  # (a realism override)
+    if np.any(abs(radii / winches["drum_radius_m"] - 1) > DRUM_SCALE_TOLERANCE):  # read at
+        winches["drum_radius_m"] = float(np.round(np.median(radii), 9))  # another radius
     winches["drum_radius_scale"] = np.round(radii / winches["drum_radius_m"], 9).tolist()
     if "camera" in data:
         R = mod.T_platform_cam[:3, :3] @ R_CV_MJCAM

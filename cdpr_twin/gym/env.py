@@ -295,7 +295,7 @@ class CdprEnv(gym.Env):
         faults = monitor.take()
         if not faults:
             return {}
-        out: dict[str, Any] = {"faults": [f"{f.status} ({f.detail})" for f in faults]}
+        out: dict[str, Any] = {"faults": [f.described for f in faults]}
         if self.scenario.monitor.on_fault == "stop":
             out["failure"] = out["faults"][0]
         return out

@@ -71,6 +71,11 @@ class Fault:
         """The run status this fault ends a run with."""
         return f"fault: {self.kind.value}"
 
+    @property
+    def described(self) -> str:
+        """The status with its numbers, as the run's marks and the Gym env's ``info`` say it."""
+        return f"{self.status} ({self.detail})"
+
     def as_dict(self) -> dict:
         """For ``summary.json``."""
         out = {"time_s": self.time, "kind": self.kind.value, "detail": self.detail}

@@ -26,6 +26,7 @@ from cdpr_twin.events import StepHook, fire_due
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import cable_lengths, rest_lengths
 from cdpr_twin.realism import WinchRealism, robot_rng
+from cdpr_twin.robot import DRUM_SCALE_TOLERANCE as DRUM_TOL
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim import winch as winch_mod
 from cdpr_twin.sim.model import (
@@ -123,8 +124,7 @@ class Physics:
             and np.shares_memory(self._bias, m.actuator_biasprm)
         ):
             raise ModelError(f"{self.source}: the winch actuators must be declared together")
-        self._ctrl_lo, self._ctrl_hi = m.actuator_ctrlrange[self._actuators].T.copy()
-        self.rate_range = (self._ctrl_lo.copy(), self._ctrl_hi.copy())  # (m,) each [m/s]
+        self.rate_range = self._ctrl_lo, self._ctrl_hi = tuple(m.actuator_ctrlrange[actuators].T)
         self._tag_site = name2id(m, obj.mjOBJ_SITE, TAG_SITE)
         self._cam = cam_mod.camera_id(m) if cam_mod.has_camera(m) else -1
         self._occluder = occluder_of(m, self.data, lambda: self.T_base_tag)
@@ -215,9 +215,9 @@ class Physics:
 
     def set_drum_radii(self, radii: np.ndarray) -> None:
         """Set the drives and encoders to these drum radii (m,) [m] (the software's belief)."""
-        radii, r = np.array(radii, dtype=float), self.winch.drum_radius  # (NaN, ≤ 0: refused)
-        if radii.shape != (self.n_cables,) or not np.all(abs(radii / r - 1) < 0.1):
-            raise ValueError(f"drum radii: {self.n_cables} within 10 % of {r} m, got {radii}")
+        radii, r, n = np.array(radii, dtype=float), self.winch.drum_radius, self.n_cables
+        if radii.shape != (n,) or not np.all(abs(radii / r - 1) <= DRUM_TOL):  # NaN fails too
+            raise ValueError(f"drum radii: {n} within {100 * DRUM_TOL:g} % of {r} m: {radii}")
         self.drum_radius_set, self._drum_ratio = radii, self.drum_radius_true / radii  # cable/cmd
 
     def clear_hooks(self) -> None:
