@@ -26,15 +26,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cdpr_twin.estimators import fused_fast as ff
-from cdpr_twin.estimators import fused_fast_tag as ft
+from cdpr_twin.estimators import fused_core as fc
 from cdpr_twin.estimators import fused_models as fm
 from cdpr_twin.estimators.base import NO_INPUTS, NON_FINITE_INPUT, TAG_LOST, Estimator
-from cdpr_twin.estimators.selection import condition_number
-from cdpr_twin.estimators.solvers import _cable_tuples, _kernel, _pose
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.plugins import OptionError, option, register
-from cdpr_twin.se3 import adjoint, inverse, se3_exp
 from cdpr_twin.types import Measurement, PoseEstimate
 
 SLACK_CABLES = "slack_cables"
@@ -145,6 +141,9 @@ class FusedOptions:
 class FusedEstimator(Estimator):
     """Est. 7: error-state EKF on SE(3) fusing the commanded twist, cable lengths and the tag.
 
+    The arithmetic of each stage is compiled (:mod:`cdpr_twin.estimators.fused_core`); this
+    class keeps the state, checks the inputs and says what it did (``flags``).
+
     Args:
         geometry: nominal geometry (exit and anchor points, sheave radii, E·S, camera mount).
         options: :class:`FusedOptions`.
@@ -163,30 +162,41 @@ class FusedEstimator(Estimator):
         intrinsics = o.use_tag and (
             o.focal_error_std > 0 or o.center_error_std_px > 0 or any(o.distortion_error_std)
         )
-        self.layout = fm.Layout.build(
+        L = self.layout = fm.Layout.build(
             m, geometry_errors, camera_errors, o.drum_consider, intrinsics
         )
-        self._m, self._n = m, self.layout.n
-        self._drum, self._tag_slice = self.layout.drum, self.layout.tag
-        self._cables = _cable_tuples(geometry.a_base, geometry.b_platform, geometry.pulley_radius)
-        self._gate1 = fm.chi2_gate(1, self.options.gate_probability)
-        self._gate6 = fm.chi2_gate(6, self.options.gate_probability)
-        self._corrected = self.layout.corrected
-        self._es = np.broadcast_to(geometry.es, m).tolist()
-        self._process_var = [o.process_position_std**2] * 3 + [o.process_rotation_std**2] * 3
-        self._T_cam_platform = inverse(geometry.T_platform_cam)
-        self._eye6 = np.eye(6)
-        self._columns = ff.CableColumns(self.layout, m)
+        self._m, self._n = m, L.n
+
+        def first(block: slice) -> int:
+            return block.start if block.stop > block.start else -1
+
+        self._blocks = np.array([L.corrected, L.drum.start, first(L.exit), first(L.anchor),
+                                 first(L.cam), first(L.intr), L.tag.start])  # fmt: skip
+        radii = np.zeros(m) if geometry.pulley_radius is None else geometry.pulley_radius
+        self._cables = np.ascontiguousarray(
+            np.column_stack([geometry.a_base, geometry.b_platform, radii]), dtype=float
+        )
+        self._gate1 = fm.chi2_gate(1, o.gate_probability)
+        self._gate6 = fm.chi2_gate(6, o.gate_probability)
+        self._es = np.broadcast_to(np.asarray(geometry.es, dtype=float), m).copy()
+        self._process_var = np.array([o.process_position_std**2] * 3
+                                     + [o.process_rotation_std**2] * 3)  # fmt: skip
+        self._T_platform_cam = np.ascontiguousarray(geometry.T_platform_cam, dtype=float)
+        self._tag_options = np.array(
+            [o.tag_size, o.focal_px, o.pixel_std, o.tag_latency, o.winch_time_constant]
+        )
+        self._lens = np.array(o.lens, dtype=float)
         self.P = np.zeros((self._n, self._n))
 
     def reset(self, T_base_platform0: np.ndarray, time: float = 0.0) -> None:
         """Start at a known pose, known to the homing repeatability; the tag is forgotten."""
         super().reset(T_base_platform0, time)
         o = self.options
+        self._T = np.ascontiguousarray(self._T, dtype=float)
         self._T0 = self._T.copy()
         self._rho = np.zeros(self._m)
-        self._T_tag: np.ndarray | None = None
-        self._at_T: tuple | None = None  # (pose, its kernel output): reused, never recomputed
+        self._T_tag = np.eye(4)
+        self._anchored = False
         self._ref: tuple[np.ndarray, np.ndarray] | None = None  # (lengths, corrected) at t₀
         self._last_twist = np.zeros(6)
         P0 = np.diag([o.initial_position_std**2] * 3 + [o.initial_rotation_std**2] * 3)
@@ -208,168 +218,91 @@ class FusedEstimator(Estimator):
     @property
     def T_base_tag(self) -> np.ndarray | None:
         """The tag's estimated pose in F_b (4, 4), or ``None`` before the first detection."""
-        return None if self._T_tag is None else self._T_tag.copy()
+        return self._T_tag.copy() if self._anchored else None
 
     def predict(self, twist: np.ndarray, dt: float, rates: np.ndarray, taut) -> None:
         """Propagate with the commanded twist ξ (F_p) over dt [s]; process noise added.
 
         The winches pay out (1 + ρ_i) times what they are commanded, so the platform moves by
         ξ dt + A⁺ (ρ ⊙ l̇ dt) (A the holding cables' Jacobian): the prediction shares the drum
-        errors with the length readings, and the filter knows it.
+        errors with the length readings, and the filter knows it. The drums' share enters
+        only while A's condition number is below ``max_condition``. The winches' velocity
+        loop lags each change of command by τ_w: (τ_w |Δξ|)² of unmodelled motion is added,
+        with the random walk's q·dt.
 
         Args:
             twist: (6,) commanded platform twist [m/s, rad/s].
             dt: time step [s].
             rates: (m,) commanded winch rates [m/s].
-            taut: (m,) bool (array or list), the cables the platform hangs on (last reading).
+            taut: (m,) bools, the cables the platform hangs on (last reading).
         """
         o = self.options
         twist = np.asarray(twist, dtype=float)
-        step = [v * dt for v in twist.tolist()]
-        taut = taut.tolist() if isinstance(taut, np.ndarray) else list(taut)
-        T_prev, E = self._T, se3_exp(step)
-        self._T = T_prev @ E
-        F = np.zeros((6, self._n))  # the pose rows of the transition; the others are I's
-        ff.adjoint(E, out=F, invert=True)
-        if sum(taut) >= 6 and any(step):
-            lengths, rows = _kernel(self._cables, True, _pose(self._T))
-            self._at_T = (self._T, lengths, rows := np.asarray(rows))
-            A = rows if all(taut) else rows[taut]
-            if not condition_number(A) > o.max_condition:  # else A⁺ would amplify the drum
-                self._drum_share(F, A, rows, T_prev, taut, rates, dt)  # errors into motions
-        X = F @ self.P  # F P Fᵀ, touching only the pose rows and columns
-        self.P[fm.POSE, :] = X
-        self.P[:, fm.POSE] = X.T
-        tw, last, tau = twist.tolist(), self._last_twist.tolist(), o.winch_time_constant
-        lag = [tau * abs(a - b) for a, b in zip(tw, last, strict=True)]
-        noise = np.diag([q * dt + d * d for q, d in zip(self._process_var, lag, strict=True)])
-        X = X @ F.T
-        X += noise  # + q dt + lag² on the diagonal
-        self.P[fm.POSE, fm.POSE] = X
+        lag = o.winch_time_constant * np.abs(twist - self._last_twist)
+        self._T = fc.predict(
+            self._T, self.P, twist * dt, np.asarray(rates, dtype=float) * dt,
+            np.asarray(taut, dtype=bool), self._process_var * dt + lag * lag, self._cables,
+            o.max_condition, self._blocks,
+        )  # fmt: skip
         self._last_twist = twist
 
-    def _drum_share(
-        self, F: np.ndarray, A: np.ndarray, rows: np.ndarray, T_prev: np.ndarray, taut: list,
-        rates: np.ndarray, dt: float,
-    ) -> None:  # fmt: skip
-        """Add A⁺ (ρ ⊙ l̇ dt)'s columns to F (the statics allow it: A well conditioned)."""
-        A_pinv = np.linalg.solve(A.T @ A, A.T)
-        scaled = A_pinv * [v * dt for v, t in zip(rates.tolist(), taut, strict=True) if t]
-        if len(A) == self._m:
-            F[:, self._drum] = scaled
-        else:
-            F[:, [i + self._drum.start for i, t in enumerate(taut) if t]] = scaled
-        if self._columns.geometry:
-            _, rows_prev = _kernel(self._cables, True, _pose(T_prev))
-            G = self._columns.transition(
-                rows, self._T[:3, :3], np.asarray(rows_prev), T_prev[:3, :3]
-            )
-            F -= A_pinv @ (G if len(A) == self._m else G[taut])
+    def _inject(self, dx: np.ndarray) -> None:  # dx: the corrected states' (c,)
+        self._T, self._T0, T_tag, self._rho = fc.inject(
+            self._T, self._T0, self._T_tag, self._rho, dx, self._blocks
+        )
+        if self._anchored:
+            self._T_tag = T_tag
 
-    def _inject(self, dx: np.ndarray) -> None:  # dx: the corrected states' (c,) at least
-        d = dx.tolist()
-        self._T = self._T @ se3_exp(d[fm.POSE])
-        self._T0 = self._T0 @ se3_exp(d[fm.START])
-        if self._drum.start < self._corrected:  # considered drums: dx is 0 there
-            self._rho = self._rho + dx[self._drum]
-        if self._T_tag is not None:
-            self._T_tag = self._T_tag @ se3_exp(d[self._tag_slice])
+    def _taut(self, m: Measurement, threshold: float) -> np.ndarray:
+        """(m,) bool: cables reading above ``threshold`` [N], not clipped."""
+        taut = m.tensions > threshold
+        return taut if m.tensions_clipped is None else taut & ~np.asarray(m.tensions_clipped)
 
-    def _taut(self, m: Measurement) -> list[bool]:
-        """(m,) bool: cables reading above the taut threshold, not clipped."""
-        return ff.taut(m.tensions, m.tensions_clipped, self.options.taut_threshold)
-
-    def update_cables(self, m: Measurement, taut: list[bool] | None = None) -> set[str]:
+    def update_cables(self, m: Measurement, taut: np.ndarray | None = None) -> set[str]:
         """Fuse the taut cables' lengths (taut: ``m``'s, if known); returns the flags raised."""
         o = self.options
-        lengths, tensions = m.cable_lengths.tolist(), m.tensions.tolist()
-        c = ff.corrected_readings(
-            lengths, tensions, m.cable_rates.tolist(), self._es, o.damping_time
+        c = fm.corrected_readings(
+            m.cable_lengths, m.tensions, m.cable_rates, self._es, o.damping_time
         )
         if self._ref is None:
-            self._ref = (lengths, c)
+            self._ref = (m.cable_lengths.copy(), c)
             return set()
-        flags: set[str] = set()
-        taut = self._taut(m) if taut is None else taut
-        if not all(taut):
-            flags.add(SLACK_CABLES)
-        at_T = self._at_T  # the prediction's lengths and rows at this very pose, if it made them
-        if at_T is not None and at_T[0] is self._T:
-            lengths_now, rows_now = at_T[1:]
-        else:
-            lengths_now, rows_now = _kernel(self._cables, True, _pose(self._T))
-            rows_now = np.asarray(rows_now)
-        lengths_0, rows_0 = _kernel(self._cables, True, _pose(self._T0))
-        moved = [a - b for a, b in zip(lengths, self._ref[0], strict=True)]
-        H = self._columns.measurement(
-            rows_now, self._T[:3, :3], np.asarray(rows_0), self._T0[:3, :3], moved
-        )
-        r = ff.cable_innovations(
-            c, self._ref[1], moved, lengths_now, lengths_0, self._rho.tolist(), o.encoder_quantum
-        )
-        var = ff.cable_noise_var(
-            lengths, tensions, self._es, o.encoder_quantum, o.length_noise_std,
-            o.tension_noise_std, o.taut_threshold,
+        taut = self._taut(m, o.taut_threshold) if taut is None else taut
+        flags = set() if taut.all() else {SLACK_CABLES}
+        var = fm.cable_noise_var(
+            m.cable_lengths, np.maximum(m.tensions, 1e-9), self._es, o.encoder_quantum,
+            o.length_noise_std, o.tension_noise_std, o.taut_threshold,
         )  # fmt: skip
-        s = (np.sum((H @ self.P) * H, axis=1)).tolist()  # diag(H P Hᵀ)
-        outlier, use = ff.gate_cables(r, s, var, self._gate1, taut)
+        readings = np.array([c, self._ref[1], m.cable_lengths - self._ref[0]])
+        outcome, outlier, dx = fc.update_cables(
+            self._T, self._T0, self.P, readings, self._rho, var, taut, self._cables,
+            0.5 * o.encoder_quantum, self._gate1, self._blocks,
+        )  # fmt: skip
         if outlier:
             flags.add(CABLE_OUTLIER)
-        if not use:
+        if outcome == fc.CABLES_NONE:
             return flags | {PREDICTED}
-        if len(use) < self._m:
-            H, var, r = H[use], [var[i] for i in use], [r[i] for i in use]
-        self._inject(
-            ff.joseph_update_in_place(self.P, H, np.diag(var), np.array(r), self._corrected)
-        )
+        self._inject(dx)
         return flags
 
     def update_tag(self, m: Measurement) -> set[str]:
         """Fuse a tag detection (the first one anchors the tag); returns the flags raised."""
-        o, L = self.options, self.layout
         if m.tag is None:
             return {TAG_LOST} if m.camera_on else set()
-        z = np.asarray(m.tag.T_cam_tag)
-        if not ff.finite(z.ravel()):
+        z = np.ascontiguousarray(m.tag.T_cam_tag, dtype=float)
+        if not np.isfinite(z).all():
             return {NON_FINITE_INPUT}
-        intr = L.intr.stop > L.intr.start
-        R, calibration = ft.tag_noise(z, o.tag_size, o.focal_px, o.pixel_std, o.lens, intr)
-        last = self._last_twist.tolist()
-        lag = [v * o.tag_latency for v in last]
-        tau = o.winch_time_constant
-        R += np.diag([(tau * abs(v)) * (tau * abs(v)) + 1e-12 for v in last])  # R: a new array
-        if self._T_tag is None:
-            self._anchor_tag(z, R, lag, calibration)
-            return set()
-        r, H_pose, z_hat = ft.tag_residual(self._T, self._T_tag, self._T_cam_platform, z, lag)
-        H = np.zeros((6, self._n))
-        H[:, fm.POSE] = H_pose
-        H[:, self._tag_slice] = self._eye6
-        if L.cam.stop > L.cam.start:
-            H[:, L.cam] = -ff.adjoint(np.linalg.inv(z_hat))
-        if intr:
-            H[:, L.intr] = calibration
-        S = H @ self.P @ H.T + R
-        if r @ np.linalg.solve(S, r) > self._gate6:
+        outcome, self._T_tag, dx = fc.update_tag(
+            self._T, self._T_tag, self._anchored, self.P, z, self._last_twist,
+            self._T_platform_cam, self._tag_options, self._lens, self._gate6, self._blocks,
+        )  # fmt: skip
+        if outcome == fc.TAG_GATED:
             return {TAG_OUTLIER}
-        self._inject(ff.joseph_update_in_place(self.P, H, R, r, self._corrected))
+        if outcome == fc.TAG_ANCHORED:
+            self._anchored = True
+        else:
+            self._inject(dx)
         return set()
-
-    def _anchor_tag(self, z: np.ndarray, R: np.ndarray, lag: list, calibration) -> None:
-        """Put the tag in F_b from detection z: ᵇT_o = T_lag ᵖT_c z, with its covariance R."""
-        M = self.geometry.T_platform_cam @ z
-        self._T_tag = self._T @ se3_exp([-v for v in lag]) @ M
-        J = np.zeros((6, self._n))  # δ_o = J x − n
-        J[:, fm.POSE] = adjoint(np.linalg.inv(M)) @ adjoint(se3_exp(lag))
-        L = self.layout
-        if L.cam.stop > L.cam.start:
-            J[:, L.cam] = adjoint(np.linalg.inv(z))
-        if L.intr.stop > L.intr.start:  # the calibration's bias in this first view
-            J[:, L.intr] = -calibration
-        t, P = self._tag_slice, self.P
-        P[t, :] = J @ P
-        P[:, t] = P[t, :].T
-        P[t, t] = J @ P @ J.T + R
 
     def update(
         self, measurement: Measurement, inputs: Mapping[str, PoseEstimate] = NO_INPUTS
@@ -383,15 +316,14 @@ class FusedEstimator(Estimator):
         if not dt >= 0:
             raise ValueError(f"fused: measurement time {m.time} s precedes {self._time} s")
         twist = m.twist_platform
-        if not (ff.finite(m.cable_lengths) and ff.finite(m.tensions)):
+        if not (np.isfinite(m.cable_lengths).all() and np.isfinite(m.tensions).all()):
             return self._held(m, NON_FINITE_INPUT, covariance=self.P[fm.POSE, fm.POSE])
-        taut = self._taut(m)
         if dt > 0:
-            moving = twist is not None and ff.finite(twist)
-            hanging = ff.taut(m.tensions, m.tensions_clipped, self.options.hang_threshold)
+            moving = twist is not None and bool(np.isfinite(twist).all())
+            hanging = self._taut(m, self.options.hang_threshold)
             self.predict(twist if moving else np.zeros(6), dt, m.cable_rates if moving else
                          np.zeros(self._m), hanging)  # fmt: skip
-        flags = self.update_cables(m, taut)
+        flags = self.update_cables(m, self._taut(m, self.options.taut_threshold))
         if self.options.use_tag:
             flags |= self.update_tag(m)
         self._time = m.time

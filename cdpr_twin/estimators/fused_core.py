@@ -1,0 +1,340 @@
+"""The fused filter's per-update arithmetic, compiled with Numba.
+
+An update of :mod:`cdpr_twin.estimators.fused` works on arrays of 3 to 88 elements, where
+NumPy's per-call overhead (about a microsecond a call, a few hundred calls an update) outweighed
+the arithmetic: 420–465 µs an update as the paper scenarios configure it. Here each stage —
+prediction, cable update, tag update — is one compiled call on the filter's arrays. The
+equations are those of :mod:`cdpr_twin.estimators.fused_models` (the reference formulations,
+NumPy) and :mod:`cdpr_twin.se3`; ``tests/test_fused_core.py`` holds every function here to
+them (round-off apart: the products are summed in another order).
+
+The functions are compiled on first use and cached on disk (Numba's ``cache=True``, in
+``__pycache__`` beside this file, or ``NUMBA_CACHE_DIR``): the first process to use them after
+an install compiles them (≈ 15 s), later ones load the machine code (≈ 0.2 s). The small
+systems are solved through ``inv`` (k ≤ 8, well conditioned: the drum share is used only below
+a condition number of 500): one LAPACK wrapper less to compile. They release the GIL, so a
+camera's worker thread keeps running beside them. The building blocks (SE(3) maps, the pulley
+kernel, a detection's noise) are in :mod:`cdpr_twin.estimators.fused_kernels`.
+
+The layout (:class:`cdpr_twin.estimators.fused_models.Layout`) comes as ``blocks``, 7 ints
+indexed by the constants below: the number of leading corrected states, then the first index of
+each block (−1: the block is absent; exit and anchor points come together).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cdpr_twin.estimators.fused_kernels import (
+    adjoint,
+    base_direction,
+    inverse,
+    jit,
+    kernel,
+    se3_exp,
+    se3_log,
+    tag_noise,
+)
+
+CABLES_USED, CABLES_NONE = 0, 1
+"""``update_cables``'s outcomes: lengths fused; no usable cable."""
+TAG_USED, TAG_ANCHORED, TAG_GATED = 0, 1, 2
+"""``update_tag``'s outcomes: detection fused; the tag was anchored; detection gated out."""
+CORRECTED, DRUM, EXIT, ANCHOR, CAM, INTR, TAG = range(7)
+"""Indices into ``blocks``."""
+
+
+# ------------------------------------------------------------------------------- Kalman
+@jit
+def joseph_update(
+    P: np.ndarray, H: np.ndarray, R: np.ndarray, r: np.ndarray, c: int
+) -> tuple[np.ndarray, float]:
+    """Joseph-form update in place with the states from c on considered (Schmidt).
+
+    P⁺ = P − K(HP) − (HP)ᵀKᵀ + K S Kᵀ on the leading c rows and columns (K's other rows are
+    zero), the leading block symmetrised; ``fused_models.joseph_update`` is the reference.
+
+    Args:
+        P: (n, n) covariance, symmetric; overwritten with the posterior.
+        H: (k, n) measurement Jacobian.
+        R: (k, k) measurement noise covariance.
+        r: (k,) innovation.
+        c: the number of leading corrected states.
+
+    Returns:
+        (c,) the corrected states' correction and the normalised innovation squared.
+    """
+    HP = H @ P  # (k, n) = (P Hᵀ)ᵀ, P symmetric
+    S = HP @ np.ascontiguousarray(H.T) + R
+    S_inv = np.linalg.inv(S)
+    K = np.ascontiguousarray(HP[:, :c].T) @ S_inv  # (c, k)
+    KHP = K @ HP  # (c, n)
+    KSK = (K @ S) @ np.ascontiguousarray(K.T)
+    n = P.shape[0]
+    top = P[:c].copy()
+    for i in range(c):
+        for j in range(n):
+            top[i, j] -= KHP[i, j]
+        for j in range(c):
+            top[i, j] += KSK[i, j] - KHP[j, i]
+    for i in range(c):
+        for j in range(i + 1):
+            top[i, j] = top[j, i] = 0.5 * (top[i, j] + top[j, i])
+    for i in range(c):
+        for j in range(n):
+            P[i, j] = top[i, j]
+            P[j, i] = top[i, j]
+    Sr = S_inv @ r
+    return K @ r, float(r @ Sr)
+
+
+@jit
+def transition(
+    T: np.ndarray, step: np.ndarray, rates_dt: np.ndarray, hanging: np.ndarray,
+    cables: np.ndarray, max_condition: float, blocks: np.ndarray, n: int,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """The predicted pose T exp(ξΔt) (4, 4) and the transition's pose rows F (6, n).
+
+    F's pose block is Ad(exp(−ξΔt)); while the hanging cables' Jacobian A is well conditioned
+    (condition number ≤ ``max_condition``), the winches paying out (1 + ρ_i) l̇_i Δt move the
+    platform by A⁺(ρ ⊙ l̇Δt) (drum columns) and the geometry errors by −A⁺ ΔG (∂L/∂(a, b) at
+    the new pose minus at the old: exit and anchor columns). Arguments: see :func:`predict`.
+    """
+    E = se3_exp(step)
+    T_new = T @ E
+    F = np.zeros((6, n))
+    F[:, :6] = adjoint(inverse(E))
+    hang = np.flatnonzero(hanging)
+    if len(hang) < 6 or not np.any(step != 0.0):
+        return T_new, F
+    _, rows = kernel(cables, T_new)
+    A = np.ascontiguousarray(rows[hang])
+    sv = np.linalg.svd(A)[1]
+    if not (sv[-1] > 0.0 and sv[0] / sv[-1] <= max_condition):
+        return T_new, F
+    At = np.ascontiguousarray(A.T)
+    A_pinv = np.linalg.inv(At @ A) @ At  # (6, k)
+    _, rows_prev = kernel(cables, T)
+    exit0, anchor0 = blocks[EXIT], blocks[ANCHOR]
+    for j in range(len(hang)):
+        i = hang[j]
+        for a in range(6):
+            F[a, blocks[DRUM] + i] = A_pinv[a, j] * rates_dt[i]
+        for b in range(3 if exit0 >= 0 else 0):  # −A⁺ G: this cable's exit and anchor columns
+            g_exit = base_direction(rows_prev, T, i, b) - base_direction(rows, T_new, i, b)
+            g_anchor = rows[i, b] - rows_prev[i, b]
+            for a in range(6):
+                F[a, exit0 + 3 * i + b] -= A_pinv[a, j] * g_exit
+                F[a, anchor0 + 3 * i + b] -= A_pinv[a, j] * g_anchor
+    return T_new, F
+
+
+@jit
+def predict(
+    T: np.ndarray, P: np.ndarray, step: np.ndarray, rates_dt: np.ndarray, hanging: np.ndarray,
+    lag_var: np.ndarray, cables: np.ndarray, max_condition: float, blocks: np.ndarray,
+) -> np.ndarray:  # fmt: skip
+    """Propagate pose and covariance over one step: P ← F P Fᵀ + diag(lag_var), in place.
+
+    Args:
+        T: (4, 4) pose before the step.
+        P: (n, n) covariance.
+        step: (6,) ξΔt [m, rad] in F_p.
+        rates_dt: (m,) commanded winch rates × Δt [m].
+        hanging: (m,) bool, the cables the platform hangs on.
+        lag_var: (6,) process noise added to the pose's diagonal [m², rad²].
+        cables: (m, 7) :func:`~cdpr_twin.estimators.fused_kernels.kernel`'s cables.
+        max_condition: A's largest condition number for the drum and geometry columns.
+        blocks: (7,) the layout.
+
+    Returns:
+        (4, 4) the predicted pose.
+    """
+    n = P.shape[0]
+    T_new, F = transition(T, step, rates_dt, hanging, cables, max_condition, blocks, n)
+    X = F @ P  # (6, n): F P, the new pose rows
+    XF = X @ np.ascontiguousarray(F.T)  # F P Fᵀ
+    for i in range(6):
+        for j in range(n):
+            P[i, j] = P[j, i] = X[i, j]
+    for i in range(6):
+        for j in range(6):
+            P[i, j] = 0.5 * (XF[i, j] + XF[j, i])
+        P[i, i] += lag_var[i]
+    return T_new
+
+
+@jit
+def cable_rows(
+    T: np.ndarray, T0: np.ndarray, moved: np.ndarray, cables: np.ndarray, blocks: np.ndarray,
+    n: int,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """The cable readings' H (m, n) and model motions L(T) − L(T₀) (m,) [m].
+
+    ∂/∂δ: the rows at T; ∂/∂δ₀: minus those at T₀; ∂/∂ρ_i: −Δl_i; ∂/∂a_i: R₀u₀ − Ru (F_b);
+    ∂/∂b_i: u_p − u_p₀ (F_p). Arguments: see :func:`update_cables`.
+    """
+    m = cables.shape[0]
+    l_now, rows_now = kernel(cables, T)
+    l_0, rows_0 = kernel(cables, T0)
+    H = np.zeros((m, n))
+    exit0, anchor0 = blocks[EXIT], blocks[ANCHOR]
+    for i in range(m):
+        for a in range(6):
+            H[i, a] = rows_now[i, a]
+            H[i, 6 + a] = -rows_0[i, a]
+        H[i, blocks[DRUM] + i] = -moved[i]
+        for b in range(3 if exit0 >= 0 else 0):
+            H[i, exit0 + 3 * i + b] = base_direction(rows_0, T0, i, b) - base_direction(
+                rows_now, T, i, b
+            )
+            H[i, anchor0 + 3 * i + b] = rows_now[i, b] - rows_0[i, b]
+    return H, l_now - l_0
+
+
+@jit
+def update_cables(
+    T: np.ndarray, T0: np.ndarray, P: np.ndarray, readings: np.ndarray, rho: np.ndarray,
+    var: np.ndarray, taut: np.ndarray, cables: np.ndarray, half_quantum: float, gate: float,
+    blocks: np.ndarray,
+) -> tuple[int, bool, np.ndarray]:  # fmt: skip
+    """Fuse the taut cables' readings since the reference (``fused_models``' cable model).
+
+    y_i = c_i − c_i(t₀) (+ q/2 once the count moved) against h_i = L_i(T) − L_i(T₀) − ρ_i Δl_i;
+    each taut cable's innovation is gated (χ²(1)) before the joint update. P: in place.
+
+    Args:
+        T: (4, 4) the pose.
+        T0: (4, 4) the reference reading's pose.
+        P: (n, n) covariance.
+        readings: (3, m) the corrected readings c, those of the reference c₀, and the encoder
+            counts since the reference Δl [m].
+        rho: (m,) drum scale errors.
+        var: (m,) reading variances [m²].
+        taut: (m,) bool, the cables whose readings may be used.
+        cables: (m, 7) :func:`~cdpr_twin.estimators.fused_kernels.kernel`'s cables.
+        half_quantum: half an encoder count [m].
+        gate: the χ²(1) gate.
+        blocks: (7,) the layout.
+
+    Returns:
+        (``CABLES_USED`` or ``CABLES_NONE``, whether a taut cable failed the gate, dx (c,)).
+    """
+    n, m, c = P.shape[0], cables.shape[0], blocks[CORRECTED]
+    moved = readings[2]
+    H, motion = cable_rows(T, T0, moved, cables, blocks, n)
+    r = np.empty(m)
+    for i in range(m):
+        y = readings[0, i] - readings[1, i] + (half_quantum if moved[i] != 0.0 else 0.0)
+        r[i] = y - (motion[i] - rho[i] * moved[i])
+    HP = H @ P
+    use = np.zeros(m, dtype=np.bool_)
+    outlier = False
+    for i in range(m):
+        gated = r[i] * r[i] > gate * (np.dot(HP[i], H[i]) + var[i])
+        outlier = outlier or (gated and taut[i])
+        use[i] = taut[i] and not gated
+    idx = np.flatnonzero(use)
+    if len(idx) == 0:
+        return CABLES_NONE, outlier, np.zeros(c)
+    R = np.diag(var[idx])
+    return CABLES_USED, outlier, joseph_update(P, H[idx], R, r[idx], c)[0]
+
+
+@jit
+def anchor_tag(
+    T: np.ndarray, P: np.ndarray, z: np.ndarray, lag: np.ndarray, R: np.ndarray,
+    calib: np.ndarray, T_platform_cam: np.ndarray, blocks: np.ndarray,
+) -> np.ndarray:  # fmt: skip
+    """Put the tag in F_b from the first detection, ᵇT_o = T exp(−ξd) ᵖT_c z: (4, 4).
+
+    Its error δ_o = J x − n (J: the pose's, the mount's and the calibration's), so its rows of P
+    are J P and its block J P Jᵀ + R (P in place). Arguments: see :func:`update_tag`.
+    """
+    n, tag0, cam0, intr0 = P.shape[0], blocks[TAG], blocks[CAM], blocks[INTR]
+    M = T_platform_cam @ z
+    J = np.zeros((6, n))
+    J[:, :6] = adjoint(inverse(M)) @ adjoint(se3_exp(lag))
+    if cam0 >= 0:
+        J[:, cam0 : cam0 + 6] = adjoint(inverse(z))
+    if intr0 >= 0:
+        J[:, intr0 : intr0 + 8] = -calib
+    JP = J @ P
+    JPJ = JP @ np.ascontiguousarray(J.T)
+    for i in range(6):
+        for j in range(n):
+            P[tag0 + i, j] = P[j, tag0 + i] = JP[i, j]
+    for i in range(6):
+        for j in range(6):
+            P[tag0 + i, tag0 + j] = 0.5 * (JPJ[i, j] + JPJ[j, i]) + R[i, j]
+    return T @ se3_exp(-lag) @ M
+
+
+@jit
+def update_tag(
+    T: np.ndarray, T_tag: np.ndarray, anchored: bool, P: np.ndarray, z: np.ndarray,
+    last_twist: np.ndarray, T_platform_cam: np.ndarray, options: np.ndarray, lens: np.ndarray,
+    gate: float, blocks: np.ndarray,
+) -> tuple[int, np.ndarray, np.ndarray]:  # fmt: skip
+    """Fuse a tag detection z = ᶜT_o, or anchor the tag with the first one; P in place.
+
+    The detection is the tag seen at T_lag = T exp(−ξd) (d the frame's age):
+    z = T_pc⁻¹ T_lag⁻¹ ᵇT_o exp(n), n's covariance from the corners' pixel noise plus the lag's
+    unmodelled motion; the innovation log(ẑ⁻¹ z) is gated (χ²(6)).
+
+    Args:
+        T: (4, 4) pose estimate.
+        T_tag: (4, 4) the tag's pose in F_b (ignored until ``anchored``).
+        anchored: whether the tag has been anchored.
+        P: (n, n) covariance.
+        z: (4, 4) the detection.
+        last_twist: (6,) the last commanded twist [m/s, rad/s].
+        T_platform_cam: (4, 4) the camera mounting.
+        options: (5,) tag size [m], focal [px], pixel std [px], frame age d [s], τ_w [s].
+        lens: (4,) the calibrated (k1, k2, p1, p2).
+        gate: the χ²(6) gate.
+        blocks: (7,) the layout.
+
+    Returns:
+        (outcome, (4, 4) the tag's pose, dx (c,): zeros unless ``TAG_USED``).
+    """
+    n, c, tag0, cam0, intr0 = P.shape[0], blocks[CORRECTED], blocks[TAG], blocks[CAM], blocks[INTR]
+    R, calib = tag_noise(z, options[0], options[1], options[2], lens, intr0 >= 0)
+    lag, tau = last_twist * options[3], options[4]
+    for i in range(6):
+        R[i, i] += (tau * abs(last_twist[i])) ** 2 + 1e-12
+    if not anchored:
+        return TAG_ANCHORED, anchor_tag(T, P, z, lag, R, calib, T_platform_cam, blocks), np.zeros(c)
+    M = inverse(T @ se3_exp(-lag)) @ T_tag  # ᵖT_o at the frame's time
+    z_hat = inverse(T_platform_cam) @ M
+    r = se3_log(inverse(z_hat) @ z)
+    H = np.zeros((6, n))
+    H[:, :6] = -(adjoint(inverse(M)) @ adjoint(se3_exp(lag)))
+    for i in range(6):
+        H[i, tag0 + i] = 1.0
+    if cam0 >= 0:
+        H[:, cam0 : cam0 + 6] = -adjoint(inverse(z_hat))
+    if intr0 >= 0:
+        H[:, intr0 : intr0 + 8] = calib
+    S = H @ P @ np.ascontiguousarray(H.T) + R
+    if r @ (np.linalg.inv(S) @ r) > gate:
+        return TAG_GATED, T_tag, np.zeros(c)
+    return TAG_USED, T_tag, joseph_update(P, H, R, r, c)[0]
+
+
+@jit
+def inject(
+    T: np.ndarray, T0: np.ndarray, T_tag: np.ndarray, rho: np.ndarray, dx: np.ndarray,
+    blocks: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """Apply a correction dx (c,): pose, start and tag on the right, drums (if corrected) added."""
+    drum0, tag0 = blocks[DRUM], blocks[TAG]
+    rho_new = rho.copy()
+    if drum0 < dx.shape[0]:
+        rho_new += dx[drum0 : drum0 + rho.shape[0]]
+    return (
+        T @ se3_exp(dx[0:6]),
+        T0 @ se3_exp(dx[6:12]),
+        T_tag @ se3_exp(dx[tag0 : tag0 + 6]),
+        rho_new,
+    )
