@@ -11,6 +11,8 @@ Jacobian, and the three stages of an update (prediction, cable update, tag updat
 block of the layout present and without the optional ones.
 """
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from conftest import paper_pose
@@ -74,6 +76,36 @@ def test_the_kernel_is_the_pulley_model_and_its_rows_the_jacobian(twin):
         ]
     )  # fmt: skip
     assert np.abs(fd - rows).max() < 1e-8
+
+
+def test_the_small_dense_algebra_is_numpys():
+    rng = np.random.default_rng(9)
+    for p, q, r in ((6, 88, 88), (8, 88, 8), (3, 3, 3), (1, 6, 1)):
+        A, B, C = rng.normal(size=(p, q)), rng.normal(size=(q, r)), rng.normal(size=(r, q))
+        A[rng.uniform(size=A.shape) < 0.3] = 0.0  # the products skip zeros
+        assert close(fk.mm(A, B), A @ B, 1e-13)
+        assert close(fk.mt(A, C), A @ C.T, 1e-13)
+        assert close(fk.tm(B, B), B.T @ B, 1e-13)
+        assert close(fk.mv(A, B[:, 0].copy()), A @ B[:, 0], 1e-13)
+    for k in (1, 6, 8):
+        S = random_covariance(rng, k, 1.0) + 0.1 * np.eye(k)
+        assert close(fk.inv(S), np.linalg.inv(S), 1e-10)
+        G = rng.normal(size=(k, k))  # not symmetric: the pivoting matters
+        assert close(fk.inv(G) @ G, np.eye(k), 1e-9)
+    assert np.isnan(fk.inv(np.zeros((3, 3)))).all()
+
+
+@pytest.mark.parametrize("target", [1.0, 18.0, 500.0, 3e4])
+def test_the_condition_number_is_the_svds(target):
+    rng = np.random.default_rng(10)
+    U = np.linalg.qr(rng.normal(size=(8, 6)))[0]
+    V = np.linalg.qr(rng.normal(size=(6, 6)))[0]
+    A = U @ np.diag(np.geomspace(1.0, 1.0 / target, 6)) @ V.T
+    sv = np.linalg.svd(A, compute_uv=False)
+    # AᵀA squares κ: its smallest eigenvalue comes out within ~κ²ε (relative)
+    assert fk.condition_number(A) == pytest.approx(sv[0] / sv[-1], rel=1e-9 + 1e-14 * target**2)
+    A[:, 5] = A[:, 4]  # rank-deficient
+    assert fk.condition_number(A) > 1e7
 
 
 @pytest.mark.parametrize(("n", "k", "c"), [(88, 8, 18), (88, 6, 18), (26, 5, 18), (12, 1, 12)])
@@ -283,3 +315,18 @@ def test_injection_composes_on_the_right_and_adds_corrected_drums():
         assert close(got[1], T0 @ se3.se3_exp(dx[6:12]), 1e-14)
         assert close(got[2], T_tag @ se3.se3_exp(dx[12:18]), 1e-14)
         assert close(got[3], rho + dx[18:26] if drums_corrected else rho, 1e-15)
+
+
+def test_a_run_uses_the_signatures_the_filter_compiled_when_built(tmp_path):
+    """Each stage has one compiled signature, the warm-up's (at construction): a run's inputs
+    (read-only measurement arrays, the geometry's frozen mount) reach it as the same types, so
+    nothing is compiled in the middle of a run."""
+    from cdpr_twin.runner import run
+    from cdpr_twin.scenario import load_scenario
+
+    ROOT = Path(__file__).resolve().parent.parent
+    s = load_scenario(ROOT / "scenarios" / "paper_pbvs.toml").with_overrides(duration=0.5)
+    assert "fused" in s.estimators.passive or s.estimators.in_loop == "fused"
+    run(s, tmp_path / "run")
+    for stage in (fc.predict, fc.update_cables, fc.update_tag, fc.inject):
+        assert len(stage.signatures) == 1, stage.signatures

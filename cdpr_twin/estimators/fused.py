@@ -181,12 +181,13 @@ class FusedEstimator(Estimator):
         self._es = np.broadcast_to(np.asarray(geometry.es, dtype=float), m).copy()
         self._process_var = np.array([o.process_position_std**2] * 3
                                      + [o.process_rotation_std**2] * 3)  # fmt: skip
-        self._T_platform_cam = np.ascontiguousarray(geometry.T_platform_cam, dtype=float)
+        self._T_platform_cam = np.array(geometry.T_platform_cam, dtype=float)  # writeable
         self._tag_options = np.array(
             [o.tag_size, o.focal_px, o.pixel_std, o.tag_latency, o.winch_time_constant]
         )
         self._lens = np.array(o.lens, dtype=float)
         self.P = np.zeros((self._n, self._n))
+        fc.warm_up(self._cables, self._n, self._blocks)
 
     def reset(self, T_base_platform0: np.ndarray, time: float = 0.0) -> None:
         """Start at a known pose, known to the homing repeatability; the tag is forgotten."""
@@ -237,12 +238,12 @@ class FusedEstimator(Estimator):
             taut: (m,) bools, the cables the platform hangs on (last reading).
         """
         o = self.options
-        twist = np.asarray(twist, dtype=float)
+        twist = np.array(twist, dtype=float)  # a writeable copy: the compiled signature
         lag = o.winch_time_constant * np.abs(twist - self._last_twist)
         self._T = fc.predict(
             self._T, self.P, twist * dt, np.asarray(rates, dtype=float) * dt,
             np.asarray(taut, dtype=bool), self._process_var * dt + lag * lag, self._cables,
-            o.max_condition, self._blocks,
+            float(o.max_condition), self._blocks,
         )  # fmt: skip
         self._last_twist = twist
 
@@ -289,7 +290,7 @@ class FusedEstimator(Estimator):
         """Fuse a tag detection (the first one anchors the tag); returns the flags raised."""
         if m.tag is None:
             return {TAG_LOST} if m.camera_on else set()
-        z = np.ascontiguousarray(m.tag.T_cam_tag, dtype=float)
+        z = np.array(m.tag.T_cam_tag, dtype=float)  # a writeable copy: the compiled signature
         if not np.isfinite(z).all():
             return {NON_FINITE_INPUT}
         outcome, self._T_tag, dx = fc.update_tag(

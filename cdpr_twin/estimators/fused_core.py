@@ -10,9 +10,10 @@ them (round-off apart: the products are summed in another order).
 
 The functions are compiled on first use and cached on disk (Numba's ``cache=True``, in
 ``__pycache__`` beside this file, or ``NUMBA_CACHE_DIR``): the first process to use them after
-an install compiles them (≈ 15 s), later ones load the machine code (≈ 0.2 s). The small
-systems are solved through ``inv`` (k ≤ 8, well conditioned: the drum share is used only below
-a condition number of 500): one LAPACK wrapper less to compile. They release the GIL, so a
+an install compiles them (≈ 15 s), later ones load the machine code (≈ 0.2 s). The algebra is
+written as loops (:mod:`~cdpr_twin.estimators.fused_kernels`' ``mm``, ``inv``, …) rather than
+NumPy's ``@`` and ``np.linalg``, whose BLAS and LAPACK wrappers Numba compiles anew at each
+call site: that kept the first compilation at ≈ 21 s. They release the GIL, so a
 camera's worker thread keeps running beside them. The building blocks (SE(3) maps, the pulley
 kernel, a detection's noise) are in :mod:`cdpr_twin.estimators.fused_kernels`.
 
@@ -28,12 +29,19 @@ import numpy as np
 from cdpr_twin.estimators.fused_kernels import (
     adjoint,
     base_direction,
+    condition_number,
+    indices,
+    inv,
     inverse,
     jit,
     kernel,
+    mm,
+    mt,
+    mv,
     se3_exp,
     se3_log,
     tag_noise,
+    tm,
 )
 
 CABLES_USED, CABLES_NONE = 0, 1
@@ -64,12 +72,12 @@ def joseph_update(
     Returns:
         (c,) the corrected states' correction and the normalised innovation squared.
     """
-    HP = H @ P  # (k, n) = (P Hᵀ)ᵀ, P symmetric
-    S = HP @ np.ascontiguousarray(H.T) + R
-    S_inv = np.linalg.inv(S)
-    K = np.ascontiguousarray(HP[:, :c].T) @ S_inv  # (c, k)
-    KHP = K @ HP  # (c, n)
-    KSK = (K @ S) @ np.ascontiguousarray(K.T)
+    HP = mm(H, P)  # (k, n) = (P Hᵀ)ᵀ, P symmetric
+    S = mt(HP, H) + R
+    S_inv = inv(S)
+    K = tm(HP, S_inv)[:c].copy()  # (c, k)
+    KHP = mm(K, HP)  # (c, n)
+    KSK = mt(mm(K, S), K)
     n = P.shape[0]
     top = P[:c].copy()
     for i in range(c):
@@ -84,8 +92,8 @@ def joseph_update(
         for j in range(n):
             P[i, j] = top[i, j]
             P[j, i] = top[i, j]
-    Sr = S_inv @ r
-    return K @ r, float(r @ Sr)
+    Sr = mv(S_inv, r)
+    return mv(K, r), float(np.sum(r * Sr))
 
 
 @jit
@@ -101,19 +109,19 @@ def transition(
     the new pose minus at the old: exit and anchor columns). Arguments: see :func:`predict`.
     """
     E = se3_exp(step)
-    T_new = T @ E
+    T_new = mm(T, E)
     F = np.zeros((6, n))
     F[:, :6] = adjoint(inverse(E))
-    hang = np.flatnonzero(hanging)
-    if len(hang) < 6 or not np.any(step != 0.0):
+    hang = indices(hanging)
+    if len(hang) < 6 or not (np.abs(step).max() > 0.0):
         return T_new, F
     _, rows = kernel(cables, T_new)
-    A = np.ascontiguousarray(rows[hang])
-    sv = np.linalg.svd(A)[1]
-    if not (sv[-1] > 0.0 and sv[0] / sv[-1] <= max_condition):
+    A = np.empty((len(hang), 6))
+    for j in range(len(hang)):
+        A[j] = rows[hang[j]]
+    if not condition_number(A) <= max_condition:
         return T_new, F
-    At = np.ascontiguousarray(A.T)
-    A_pinv = np.linalg.inv(At @ A) @ At  # (6, k)
+    A_pinv = mt(inv(tm(A, A)), A)  # (6, k)
     _, rows_prev = kernel(cables, T)
     exit0, anchor0 = blocks[EXIT], blocks[ANCHOR]
     for j in range(len(hang)):
@@ -152,8 +160,8 @@ def predict(
     """
     n = P.shape[0]
     T_new, F = transition(T, step, rates_dt, hanging, cables, max_condition, blocks, n)
-    X = F @ P  # (6, n): F P, the new pose rows
-    XF = X @ np.ascontiguousarray(F.T)  # F P Fᵀ
+    X = mm(F, P)  # (6, n): F P, the new pose rows
+    XF = mt(X, F)  # F P Fᵀ
     for i in range(6):
         for j in range(n):
             P[i, j] = P[j, i] = X[i, j]
@@ -227,18 +235,21 @@ def update_cables(
     for i in range(m):
         y = readings[0, i] - readings[1, i] + (half_quantum if moved[i] != 0.0 else 0.0)
         r[i] = y - (motion[i] - rho[i] * moved[i])
-    HP = H @ P
+    HP = mm(H, P)
     use = np.zeros(m, dtype=np.bool_)
     outlier = False
     for i in range(m):
-        gated = r[i] * r[i] > gate * (np.dot(HP[i], H[i]) + var[i])
+        gated = r[i] * r[i] > gate * (np.sum(HP[i] * H[i]) + var[i])
         outlier = outlier or (gated and taut[i])
         use[i] = taut[i] and not gated
-    idx = np.flatnonzero(use)
-    if len(idx) == 0:
+    idx = indices(use)
+    k = len(idx)
+    if k == 0:
         return CABLES_NONE, outlier, np.zeros(c)
-    R = np.diag(var[idx])
-    return CABLES_USED, outlier, joseph_update(P, H[idx], R, r[idx], c)[0]
+    Hu, R, ru = np.empty((k, n)), np.zeros((k, k)), np.empty(k)
+    for j in range(k):
+        Hu[j], R[j, j], ru[j] = H[idx[j]], var[idx[j]], r[idx[j]]
+    return CABLES_USED, outlier, joseph_update(P, Hu, R, ru, c)[0]
 
 
 @jit
@@ -252,22 +263,22 @@ def anchor_tag(
     are J P and its block J P Jᵀ + R (P in place). Arguments: see :func:`update_tag`.
     """
     n, tag0, cam0, intr0 = P.shape[0], blocks[TAG], blocks[CAM], blocks[INTR]
-    M = T_platform_cam @ z
+    M = mm(T_platform_cam, z)
     J = np.zeros((6, n))
-    J[:, :6] = adjoint(inverse(M)) @ adjoint(se3_exp(lag))
+    J[:, :6] = mm(adjoint(inverse(M)), adjoint(se3_exp(lag)))
     if cam0 >= 0:
         J[:, cam0 : cam0 + 6] = adjoint(inverse(z))
     if intr0 >= 0:
         J[:, intr0 : intr0 + 8] = -calib
-    JP = J @ P
-    JPJ = JP @ np.ascontiguousarray(J.T)
+    JP = mm(J, P)
+    JPJ = mt(JP, J)
     for i in range(6):
         for j in range(n):
             P[tag0 + i, j] = P[j, tag0 + i] = JP[i, j]
     for i in range(6):
         for j in range(6):
             P[tag0 + i, tag0 + j] = 0.5 * (JPJ[i, j] + JPJ[j, i]) + R[i, j]
-    return T @ se3_exp(-lag) @ M
+    return mm(mm(T, se3_exp(-lag)), M)
 
 
 @jit
@@ -305,19 +316,19 @@ def update_tag(
         R[i, i] += (tau * abs(last_twist[i])) ** 2 + 1e-12
     if not anchored:
         return TAG_ANCHORED, anchor_tag(T, P, z, lag, R, calib, T_platform_cam, blocks), np.zeros(c)
-    M = inverse(T @ se3_exp(-lag)) @ T_tag  # ᵖT_o at the frame's time
-    z_hat = inverse(T_platform_cam) @ M
-    r = se3_log(inverse(z_hat) @ z)
+    M = mm(inverse(mm(T, se3_exp(-lag))), T_tag)  # ᵖT_o at the frame's time
+    z_hat = mm(inverse(T_platform_cam), M)
+    r = se3_log(mm(inverse(z_hat), z))
     H = np.zeros((6, n))
-    H[:, :6] = -(adjoint(inverse(M)) @ adjoint(se3_exp(lag)))
+    H[:, :6] = -mm(adjoint(inverse(M)), adjoint(se3_exp(lag)))
     for i in range(6):
         H[i, tag0 + i] = 1.0
     if cam0 >= 0:
         H[:, cam0 : cam0 + 6] = -adjoint(inverse(z_hat))
     if intr0 >= 0:
         H[:, intr0 : intr0 + 8] = calib
-    S = H @ P @ np.ascontiguousarray(H.T) + R
-    if r @ (np.linalg.inv(S) @ r) > gate:
+    S = mt(mm(H, P), H) + R
+    if np.sum(r * mv(inv(S), r)) > gate:
         return TAG_GATED, T_tag, np.zeros(c)
     return TAG_USED, T_tag, joseph_update(P, H, R, r, c)[0]
 
@@ -333,8 +344,36 @@ def inject(
     if drum0 < dx.shape[0]:
         rho_new += dx[drum0 : drum0 + rho.shape[0]]
     return (
-        T @ se3_exp(dx[0:6]),
-        T0 @ se3_exp(dx[6:12]),
-        T_tag @ se3_exp(dx[tag0 : tag0 + 6]),
+        mm(T, se3_exp(dx[0:6])),
+        mm(T0, se3_exp(dx[6:12])),
+        mm(T_tag, se3_exp(dx[tag0 : tag0 + 6])),
         rho_new,
     )
+
+
+def warm_up(cables: np.ndarray, n: int, blocks: np.ndarray) -> None:
+    """Call every stage once on made-up inputs of the filter's shapes and types.
+
+    Compiles them (or loads them from the disk cache, ≈ 0.2 s) when the filter is built, not
+    at its first update in the middle of a run, where a compilation (≈ 20 s, once after an
+    install) would stall the loop and compete with the camera's worker thread.
+
+    Args:
+        cables: (m, 7) the filter's cables.
+        n: the state's dimension.
+        blocks: (7,) the layout.
+    """
+    m, c = cables.shape[0], int(blocks[CORRECTED])
+    T = np.eye(4)
+    T[:3, 3] = cables[:, :3].mean(axis=0) * 0.5 + np.array([0.0123, -0.0071, -0.2])
+    P = np.eye(n) * 1e-6
+    hanging = np.ones(m, dtype=bool)
+    predict(T, P, np.full(6, 1e-3), np.zeros(m), hanging, np.full(6, 1e-9), cables, 1e12, blocks)
+    update_cables(T, T, P, np.zeros((3, m)), np.zeros(m), np.full(m, 1e-6), hanging, cables,
+                  1e-5, 1e300, blocks)  # fmt: skip
+    z = np.eye(4)
+    z[:3, 3] = [0.01, 0.02, 0.3]
+    options, lens = np.array([0.04, 400.0, 1.0, 0.04, 0.008]), np.zeros(4)
+    for anchored in (False, True):
+        update_tag(T, T, anchored, P, z, np.zeros(6), T, options, lens, 1e300, blocks)
+    inject(T, T, T, np.zeros(m), np.zeros(c), blocks)

@@ -44,7 +44,7 @@ def se3_exp(d: np.ndarray) -> np.ndarray:
     th2 = wx * wx + wy * wy + wz * wz
     a, b, c = exp_coefficients(th2)
     K = np.array([[0.0, -wz, wy], [wz, 0.0, -wx], [-wy, wx, 0.0]])
-    K2 = K @ K
+    K2 = mm(K, K)
     T = np.eye(4)
     for i in range(3):
         for j in range(3):
@@ -97,7 +97,7 @@ def se3_log(T: np.ndarray) -> np.ndarray:
         theta = math.sqrt(theta2)
         dd = (1.0 - theta * math.sin(theta) / (2.0 * (1.0 - math.cos(theta)))) / theta2
     K = np.array([[0.0, -out[5], out[4]], [out[5], 0.0, -out[3]], [-out[4], out[3], 0.0]])
-    K2 = K @ K
+    K2 = mm(K, K)
     for i in range(3):
         acc = 0.0
         for j in range(3):
@@ -199,7 +199,7 @@ def tag_noise(
             dp[a, 3] = z[a, 2] * py
             dp[a, 4] = -z[a, 2] * px
             dp[a, 5] = -z[a, 0] * py + z[a, 1] * px
-        G = dn @ dp  # (2, 6)
+        G = mm(dn, dp)  # (2, 6)
         r2 = x * x + y * y
         aa, da = 1.0 + k1 * r2 + k2 * r2 * r2, 2.0 * k1 + 4.0 * k2 * r2
         d00 = aa + x * x * da + 2 * p1 * y + 6 * p2 * x
@@ -217,9 +217,145 @@ def tag_noise(
         Pi[2 * q, 6], Pi[2 * q, 7] = focal_px * 2 * x * y, focal_px * (r2 + 2 * x * x)
         Pi[2 * q + 1, 4], Pi[2 * q + 1, 5] = focal_px * y * r2, focal_px * y * r2 * r2
         Pi[2 * q + 1, 6], Pi[2 * q + 1, 7] = focal_px * (r2 + 2 * y * y), focal_px * 2 * x * y
-    Jt = np.ascontiguousarray(J.T)
-    cov = pixel_std * pixel_std * np.linalg.inv(Jt @ J)
+    cov = pixel_std * pixel_std * inv(tm(J, J))
     if not calibration:
         return cov, np.zeros((6, 8))
-    Jlt = np.ascontiguousarray(Jl.T)
-    return cov, -(np.linalg.inv(Jlt @ Jl) @ (Jlt @ Pi))
+    return cov, -mm(inv(tm(Jl, Jl)), tm(Jl, Pi))
+
+
+# --------------------------------------------------------------------- small dense algebra
+# Loops rather than NumPy's ``@`` and ``np.linalg``: the same arithmetic on these sizes
+# (≤ 88 × 88, solves ≤ 8), one compiled specialisation each instead of a BLAS or LAPACK wrapper
+# per call site, which is what makes the first compilation slow.
+@jit
+def mm(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """A B: (p, q) × (q, r) → (p, r)."""
+    p, q, r = A.shape[0], A.shape[1], B.shape[1]
+    out = np.zeros((p, r))
+    for i in range(p):
+        for k in range(q):
+            a = A[i, k]
+            if a != 0.0:
+                for j in range(r):
+                    out[i, j] += a * B[k, j]
+    return out
+
+
+@jit
+def mt(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """A Bᵀ: (p, q) × (r, q) → (p, r)."""
+    p, q, r = A.shape[0], A.shape[1], B.shape[0]
+    out = np.empty((p, r))
+    for i in range(p):
+        for j in range(r):
+            acc = 0.0
+            for k in range(q):
+                acc += A[i, k] * B[j, k]
+            out[i, j] = acc
+    return out
+
+
+@jit
+def tm(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Aᵀ B: (q, p) × (q, r) → (p, r)."""
+    q, p, r = A.shape[0], A.shape[1], B.shape[1]
+    out = np.zeros((p, r))
+    for k in range(q):
+        for i in range(p):
+            a = A[k, i]
+            if a != 0.0:
+                for j in range(r):
+                    out[i, j] += a * B[k, j]
+    return out
+
+
+@jit
+def mv(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """A x: (p, q) × (q,) → (p,)."""
+    out = np.zeros(A.shape[0])
+    for i in range(A.shape[0]):
+        for k in range(A.shape[1]):
+            out[i] += A[i, k] * x[k]
+    return out
+
+
+@jit
+def inv(A: np.ndarray) -> np.ndarray:
+    """Inverse of a small square matrix, Gauss–Jordan with partial pivoting (NaN if singular)."""
+    n = A.shape[0]
+    M = A.copy()
+    out = np.eye(n)
+    for col in range(n):
+        piv = col
+        for i in range(col + 1, n):
+            if abs(M[i, col]) > abs(M[piv, col]):
+                piv = i
+        if M[piv, col] == 0.0:
+            return np.full((n, n), np.nan)
+        for j in range(n):
+            M[col, j], M[piv, j] = M[piv, j], M[col, j]
+            out[col, j], out[piv, j] = out[piv, j], out[col, j]
+        d = 1.0 / M[col, col]
+        for j in range(n):
+            M[col, j] *= d
+            out[col, j] *= d
+        for i in range(n):
+            f = M[i, col]
+            if i != col and f != 0.0:
+                for j in range(n):
+                    M[i, j] -= f * M[col, j]
+                    out[i, j] -= f * out[col, j]
+    return out
+
+
+@jit
+def condition_number(A: np.ndarray) -> float:
+    """σ_max/σ_min of a (k, q) matrix, k ≥ q: √ of AᵀA's eigenvalue ratio (cyclic Jacobi).
+
+    ∞ when A is rank-deficient. AᵀA's eigenvalues come out within ~ε·λ_max, so the ratio is
+    right to a relative ~κ²ε: 1e-10 at κ = 10³ (the filter compares it with 500), 1e-8 at 3·10⁴.
+    """
+    q = A.shape[1]
+    S = np.zeros((q, q))
+    for i in range(q):
+        for j in range(q):
+            for k in range(A.shape[0]):
+                S[i, j] += A[k, i] * A[k, j]
+    for _ in range(50):
+        off, diag = 0.0, 0.0
+        for i in range(q):
+            diag += S[i, i] * S[i, i]
+            for j in range(i + 1, q):
+                off += S[i, j] * S[i, j]
+        if off <= 1e-32 * diag:
+            break
+        for p in range(q):
+            for r in range(p + 1, q):
+                if S[p, r] == 0.0:
+                    continue
+                theta = 0.5 * (S[r, r] - S[p, p]) / S[p, r]
+                t = (1.0 if theta >= 0.0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+                c = 1.0 / math.sqrt(t * t + 1.0)
+                s = t * c
+                for k in range(q):  # S ← Jᵀ S J with the rotation in the (p, r) plane
+                    skp, skr = S[k, p], S[k, r]
+                    S[k, p], S[k, r] = c * skp - s * skr, s * skp + c * skr
+                for k in range(q):
+                    spk, srk = S[p, k], S[r, k]
+                    S[p, k], S[r, k] = c * spk - s * srk, s * spk + c * srk
+    lo, hi = S[0, 0], S[0, 0]
+    for i in range(1, q):
+        lo, hi = min(lo, S[i, i]), max(hi, S[i, i])
+    return math.sqrt(hi / lo) if lo > 0.0 else math.inf
+
+
+@jit
+def indices(mask: np.ndarray) -> np.ndarray:
+    """The indices of a bool mask's True entries (``np.flatnonzero``)."""
+    out = np.empty(mask.shape[0], dtype=np.int64)
+    k = 0
+    for i in range(mask.shape[0]):
+        if mask[i]:
+            out[k] = i
+            k += 1
+    return out[:k]
