@@ -14,27 +14,16 @@ import math
 import numpy as np
 from numba import njit
 
-_SERIES = 1e-4  # θ² below which the series of se3 are used (as cdpr_twin.se3)
-_SMALL = 1e-8  # |v| of a quaternion below which log's first order is used (as cdpr_twin.se3)
+from cdpr_twin.se3 import _SERIES, _SMALL
+from cdpr_twin.se3 import exp_coefficients as exp_coefficients_py
 
 jit = njit(cache=True, nogil=True)
 """Compile, cache on disk, release the GIL."""
 
 
 # ---------------------------------------------------------------------------------- SE(3)
-@jit
-def exp_coefficients(theta2: float) -> tuple[float, float, float]:
-    """``se3.exp_coefficients``: a = sin θ/θ, b = (1 − cos θ)/θ², c = (θ − sin θ)/θ³."""
-    if theta2 < _SERIES:
-        t4 = theta2 * theta2
-        return (
-            1.0 - theta2 / 6.0 + t4 / 120.0,
-            0.5 - theta2 / 24.0 + t4 / 720.0,
-            1.0 / 6.0 - theta2 / 120.0 + t4 / 5040.0,
-        )
-    theta = math.sqrt(theta2)
-    s = math.sin(theta)
-    return s / theta, (1.0 - math.cos(theta)) / theta2, (theta - s) / (theta2 * theta)
+exp_coefficients = jit(exp_coefficients_py)
+"""``se3.exp_coefficients``, compiled: a = sin θ/θ, b = (1 − cos θ)/θ², c = (θ − sin θ)/θ³."""
 
 
 @jit
@@ -258,15 +247,7 @@ def mt(A: np.ndarray, B: np.ndarray) -> np.ndarray:
 @jit
 def tm(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """Aᵀ B: (q, p) × (q, r) → (p, r)."""
-    q, p, r = A.shape[0], A.shape[1], B.shape[1]
-    out = np.zeros((p, r))
-    for k in range(q):
-        for i in range(p):
-            a = A[k, i]
-            if a != 0.0:
-                for j in range(r):
-                    out[i, j] += a * B[k, j]
-    return out
+    return mm(np.ascontiguousarray(A.T), B)
 
 
 @jit
