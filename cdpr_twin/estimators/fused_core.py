@@ -10,11 +10,13 @@ them (round-off apart: the products are summed in another order).
 
 The functions are compiled on first use and cached on disk (Numba's ``cache=True``, in
 ``__pycache__`` beside this file, or ``NUMBA_CACHE_DIR``): the first process to use them after
-an install compiles them (≈ 15 s), later ones load the machine code (≈ 0.2 s). The algebra is
-written as loops (:mod:`~cdpr_twin.estimators.fused_kernels`' ``mm``, ``inv``, …) rather than
-NumPy's ``@`` and ``np.linalg``, whose BLAS and LAPACK wrappers Numba compiles anew at each
-call site: that kept the first compilation at ≈ 21 s. They release the GIL, so a
-camera's worker thread keeps running beside them. The building blocks (SE(3) maps, the pulley
+an install compiles them (≈ 20 s; :func:`warm_up` does it when the filter is built), later ones
+load the machine code (≈ 0.2 s). The algebra is written as loops
+(:mod:`~cdpr_twin.estimators.fused_kernels`' ``mm``, ``inv``, …) rather than NumPy's ``@`` and
+``np.linalg``: as fast at these sizes (84 against 94 µs an update), with no BLAS threads, and
+the same numbers whichever BLAS NumPy was built with (it did not shorten the compilation,
+measured 21 s either way). They release the GIL, so a camera's worker thread keeps running
+beside them. The building blocks (SE(3) maps, the pulley
 kernel, a detection's noise) are in :mod:`cdpr_twin.estimators.fused_kernels`.
 
 The layout (:class:`cdpr_twin.estimators.fused_models.Layout`) comes as ``blocks``, 7 ints

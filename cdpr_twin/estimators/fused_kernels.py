@@ -213,9 +213,8 @@ def tag_noise(
 
 
 # --------------------------------------------------------------------- small dense algebra
-# Loops rather than NumPy's ``@`` and ``np.linalg``: the same arithmetic on these sizes
-# (≤ 88 × 88, solves ≤ 8), one compiled specialisation each instead of a BLAS or LAPACK wrapper
-# per call site, which is what makes the first compilation slow.
+# Loops rather than NumPy's ``@`` and ``np.linalg`` on these sizes (≤ 88 × 88, solves ≤ 8):
+# as fast, no BLAS threads, and the same numbers whichever BLAS NumPy was built with.
 @jit
 def mm(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """A B: (p, q) × (q, r) → (p, r)."""
