@@ -257,10 +257,12 @@ class FusedEstimator(Estimator):
     def _taut(self, m: Measurement, threshold: float) -> np.ndarray:
         """(m,) bool: cables reading above ``threshold`` [N], not clipped."""
         taut = m.tensions > threshold
-        return taut if m.tensions_clipped is None else taut & ~np.asarray(m.tensions_clipped)
+        if m.tensions_clipped is not None:
+            taut = taut & ~np.asarray(m.tensions_clipped)
+        return np.asarray(taut, dtype=bool)  # the compiled signature's type
 
-    def update_cables(self, m: Measurement, taut: np.ndarray | None = None) -> set[str]:
-        """Fuse the taut cables' lengths (taut: ``m``'s, if known); returns the flags raised."""
+    def update_cables(self, m: Measurement, taut=None) -> set[str]:
+        """Fuse the taut cables' lengths (taut: m bools, list or array, if known); returns flags."""
         o = self.options
         c = fm.corrected_readings(
             m.cable_lengths, m.tensions, m.cable_rates, self._es, o.damping_time
@@ -268,7 +270,7 @@ class FusedEstimator(Estimator):
         if self._ref is None:
             self._ref = (m.cable_lengths.copy(), c)
             return set()
-        taut = self._taut(m, o.taut_threshold) if taut is None else taut
+        taut = self._taut(m, o.taut_threshold) if taut is None else np.array(taut, dtype=bool)
         flags = set() if taut.all() else {SLACK_CABLES}
         var = fm.cable_noise_var(
             m.cable_lengths, np.maximum(m.tensions, 1e-9), self._es, o.encoder_quantum,

@@ -330,7 +330,7 @@ def update_tag(
     if intr0 >= 0:
         H[:, intr0 : intr0 + 8] = calib
     S = mt(mm(H, P), H) + R
-    if np.sum(r * mv(inv(S), r)) > gate:
+    if not np.sum(r * mv(inv(S), r)) <= gate:  # NaN (S singular) is gated out too
         return TAG_GATED, T_tag, np.zeros(c)
     return TAG_USED, T_tag, joseph_update(P, H, R, r, c)[0]
 
