@@ -29,6 +29,7 @@ import numpy as np
 from cdpr_twin.estimators import fused_core as fc
 from cdpr_twin.estimators import fused_models as fm
 from cdpr_twin.estimators.base import NO_INPUTS, NON_FINITE_INPUT, TAG_LOST, Estimator
+from cdpr_twin.estimators.solvers import _cable_tuples
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.plugins import OptionError, option, register
 from cdpr_twin.types import Measurement, PoseEstimate
@@ -172,9 +173,8 @@ class FusedEstimator(Estimator):
 
         self._blocks = np.array([L.corrected, L.drum.start, first(L.exit), first(L.anchor),
                                  first(L.cam), first(L.intr), L.tag.start])  # fmt: skip
-        radii = np.zeros(m) if geometry.pulley_radius is None else geometry.pulley_radius
-        self._cables = np.ascontiguousarray(
-            np.column_stack([geometry.a_base, geometry.b_platform, radii]), dtype=float
+        self._cables = np.array(  # (m, 7): the model estimators' cables, as one array
+            _cable_tuples(geometry.a_base, geometry.b_platform, geometry.pulley_radius)
         )
         self._gate1 = fm.chi2_gate(1, o.gate_probability)
         self._gate6 = fm.chi2_gate(6, o.gate_probability)
@@ -193,7 +193,7 @@ class FusedEstimator(Estimator):
         """Start at a known pose, known to the homing repeatability; the tag is forgotten."""
         super().reset(T_base_platform0, time)
         o = self.options
-        self._T = np.ascontiguousarray(self._T, dtype=float)
+        self._T = np.array(self._T, dtype=float)  # a writeable copy: the compiled signature
         self._T0 = self._T.copy()
         self._rho = np.zeros(self._m)
         self._T_tag = np.eye(4)
