@@ -40,6 +40,7 @@ from cdpr_twin.estimators.fused_kernels import (
     mm,
     mt,
     mv,
+    put,
     se3_exp,
     se3_log,
     tag_noise,
@@ -99,6 +100,17 @@ def joseph_update(
 
 
 @jit
+def moving(step: np.ndarray) -> bool:
+    """Whether a step moves (``np.abs(step).max() > 0``: a NaN anywhere is no move)."""
+    out = False
+    for v in step:
+        if v != v:
+            return False
+        out = out or v != 0.0
+    return out
+
+
+@jit
 def transition(
     T: np.ndarray, step: np.ndarray, rates_dt: np.ndarray, hanging: np.ndarray,
     cables: np.ndarray, max_condition: float, blocks: np.ndarray, n: int,
@@ -113,14 +125,15 @@ def transition(
     E = se3_exp(step)
     T_new = mm(T, E)
     F = np.zeros((6, n))
-    F[:, :6] = adjoint(inverse(E))
+    put(F, 0, 0, adjoint(inverse(E)))
     hang = indices(hanging)
-    if len(hang) < 6 or not (np.abs(step).max() > 0.0):
+    if len(hang) < 6 or not moving(step):
         return T_new, F
     _, rows = kernel(cables, T_new)
     A = np.empty((len(hang), 6))
     for j in range(len(hang)):
-        A[j] = rows[hang[j]]
+        for a in range(6):
+            A[j, a] = rows[hang[j], a]
     if not condition_number(A) <= max_condition:
         return T_new, F
     A_pinv = mt(inv(tm(A, A)), A)  # (6, k)
@@ -250,7 +263,9 @@ def update_cables(
         return CABLES_NONE, outlier, np.zeros(c)
     Hu, R, ru = np.empty((k, n)), np.zeros((k, k)), np.empty(k)
     for j in range(k):
-        Hu[j], R[j, j], ru[j] = H[idx[j]], var[idx[j]], r[idx[j]]
+        for a in range(n):
+            Hu[j, a] = H[idx[j], a]
+        R[j, j], ru[j] = var[idx[j]], r[idx[j]]
     return CABLES_USED, outlier, joseph_update(P, Hu, R, ru, c)[0]
 
 
@@ -267,11 +282,11 @@ def anchor_tag(
     n, tag0, cam0, intr0 = P.shape[0], blocks[TAG], blocks[CAM], blocks[INTR]
     M = mm(T_platform_cam, z)
     J = np.zeros((6, n))
-    J[:, :6] = mm(adjoint(inverse(M)), adjoint(se3_exp(lag)))
+    put(J, 0, 0, mm(adjoint(inverse(M)), adjoint(se3_exp(lag))))
     if cam0 >= 0:
-        J[:, cam0 : cam0 + 6] = adjoint(inverse(z))
+        put(J, 0, cam0, adjoint(inverse(z)))
     if intr0 >= 0:
-        J[:, intr0 : intr0 + 8] = -calib
+        put(J, 0, intr0, calib, -1.0)
     JP = mm(J, P)
     JPJ = mt(JP, J)
     for i in range(6):
@@ -322,13 +337,13 @@ def update_tag(
     z_hat = mm(inverse(T_platform_cam), M)
     r = se3_log(mm(inverse(z_hat), z))
     H = np.zeros((6, n))
-    H[:, :6] = -mm(adjoint(inverse(M)), adjoint(se3_exp(lag)))
+    put(H, 0, 0, mm(adjoint(inverse(M)), adjoint(se3_exp(lag))), -1.0)
     for i in range(6):
         H[i, tag0 + i] = 1.0
     if cam0 >= 0:
-        H[:, cam0 : cam0 + 6] = -adjoint(inverse(z_hat))
+        put(H, 0, cam0, adjoint(inverse(z_hat)), -1.0)
     if intr0 >= 0:
-        H[:, intr0 : intr0 + 8] = calib
+        put(H, 0, intr0, calib)
     S = mt(mm(H, P), H) + R
     if not np.sum(r * mv(inv(S), r)) <= gate:  # NaN (S singular) is gated out too
         return TAG_GATED, T_tag, np.zeros(c)
