@@ -29,9 +29,11 @@ from __future__ import annotations
 import numpy as np
 
 from cdpr_twin.estimators.fused_kernels import (
+    add_to,
     adjoint,
     base_direction,
     condition_number,
+    dot,
     indices,
     inv,
     inverse,
@@ -41,6 +43,7 @@ from cdpr_twin.estimators.fused_kernels import (
     mt,
     mv,
     put,
+    scaled,
     se3_exp,
     se3_log,
     tag_noise,
@@ -76,7 +79,7 @@ def joseph_update(
         (c,) the corrected states' correction and the normalised innovation squared.
     """
     HP = mm(H, P)  # (k, n) = (P Hᵀ)ᵀ, P symmetric
-    S = mt(HP, H) + R
+    S = add_to(mt(HP, H), R)
     S_inv = inv(S)
     K = tm(HP, S_inv)[:c].copy()  # (c, k)
     KHP = mm(K, HP)  # (c, n)
@@ -96,7 +99,7 @@ def joseph_update(
             P[i, j] = top[i, j]
             P[j, i] = top[i, j]
     Sr = mv(S_inv, r)
-    return mv(K, r), float(np.sum(r * Sr))
+    return mv(K, r), dot(r, Sr)
 
 
 @jit
@@ -254,7 +257,7 @@ def update_cables(
     use = np.zeros(m, dtype=np.bool_)
     outlier = False
     for i in range(m):
-        gated = r[i] * r[i] > gate * (np.sum(HP[i] * H[i]) + var[i])
+        gated = r[i] * r[i] > gate * (dot(HP[i], H[i]) + var[i])
         outlier = outlier or (gated and taut[i])
         use[i] = taut[i] and not gated
     idx = indices(use)
@@ -295,7 +298,7 @@ def anchor_tag(
     for i in range(6):
         for j in range(6):
             P[tag0 + i, tag0 + j] = 0.5 * (JPJ[i, j] + JPJ[j, i]) + R[i, j]
-    return mm(mm(T, se3_exp(-lag)), M)
+    return mm(mm(T, se3_exp(scaled(lag, -1.0))), M)
 
 
 @jit
@@ -328,12 +331,12 @@ def update_tag(
     """
     n, c, tag0, cam0, intr0 = P.shape[0], blocks[CORRECTED], blocks[TAG], blocks[CAM], blocks[INTR]
     R, calib = tag_noise(z, options[0], options[1], options[2], lens, intr0 >= 0)
-    lag, tau = last_twist * options[3], options[4]
+    lag, tau = scaled(last_twist, options[3]), options[4]
     for i in range(6):
         R[i, i] += (tau * abs(last_twist[i])) ** 2 + 1e-12
     if not anchored:
         return TAG_ANCHORED, anchor_tag(T, P, z, lag, R, calib, T_platform_cam, blocks), np.zeros(c)
-    M = mm(inverse(mm(T, se3_exp(-lag))), T_tag)  # ᵖT_o at the frame's time
+    M = mm(inverse(mm(T, se3_exp(scaled(lag, -1.0)))), T_tag)  # ᵖT_o at the frame's time
     z_hat = mm(inverse(T_platform_cam), M)
     r = se3_log(mm(inverse(z_hat), z))
     H = np.zeros((6, n))
@@ -344,8 +347,8 @@ def update_tag(
         put(H, 0, cam0, adjoint(inverse(z_hat)), -1.0)
     if intr0 >= 0:
         put(H, 0, intr0, calib)
-    S = mt(mm(H, P), H) + R
-    if not np.sum(r * mv(inv(S), r)) <= gate:  # NaN (S singular) is gated out too
+    S = add_to(mt(mm(H, P), H), R)
+    if not dot(r, mv(inv(S), r)) <= gate:  # NaN (S singular) is gated out too
         return TAG_GATED, T_tag, np.zeros(c)
     return TAG_USED, T_tag, joseph_update(P, H, R, r, c)[0]
 

@@ -228,6 +228,33 @@ def put(dst: np.ndarray, i0: int, j0: int, src: np.ndarray, sign: float = 1.0) -
 
 
 @jit
+def dot(a: np.ndarray, b: np.ndarray) -> float:
+    """The dot product of two (k,) vectors, summed in order (as ``np.sum(a * b)`` compiles)."""
+    acc = 0.0
+    for i in range(a.shape[0]):
+        acc += a[i] * b[i]
+    return acc
+
+
+@jit
+def scaled(v: np.ndarray, s: float) -> np.ndarray:
+    """The (k,) vector s · v, new (an array expression compiles a kernel of its own)."""
+    out = np.empty(v.shape[0])
+    for i in range(v.shape[0]):
+        out[i] = v[i] * s
+    return out
+
+
+@jit
+def add_to(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """A += B for two (p, q) matrices; returns A."""
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            A[i, j] += B[i, j]
+    return A
+
+
+@jit
 def mm(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """A B: (p, q) × (q, r) → (p, r)."""
     p, q, r = A.shape[0], A.shape[1], B.shape[1]
