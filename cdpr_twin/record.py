@@ -32,6 +32,7 @@ from __future__ import annotations
 import contextlib
 import inspect
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,6 +44,10 @@ from cdpr_twin.types import CameraIntrinsics, Measurement, PoseEstimate
 
 SLACK_TENSION = 0.5
 """Below this measured tension [N] a cable is drawn as slack."""
+
+LIVE_FLUSH_TIMEOUT_S = 10.0
+"""How long the end of a run waits for a live viewer (``spawn``/``connect``) to take the data [s]:
+one that is not listening would otherwise hold the run, its lock and its signals, forever."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -369,12 +374,18 @@ class RerunRecorder:
                 viewer a failed flush is not an error: the viewer may have been closed.
         """
         self._flush()
-        try:
-            self.rec.flush()
+        try:  # a live viewer that does not take the data must not hold the run forever
+            self.rec.flush(timeout_sec=LIVE_FLUSH_TIMEOUT_S if self.spawned else 1e38)
         except Exception as exc:
             if not self.spawned:
                 self.abort()
                 raise OutputError(self._partial, f"Rerun could not write it: {exc}") from None
+            warnings.warn(
+                f"the live viewer did not take the recording within {LIVE_FLUSH_TIMEOUT_S:g} s "
+                f"({exc}); the file is written all the same",
+                RuntimeWarning,
+                stacklevel=2,
+            )
         self.rec.disconnect()  # writes the footer (Rerun ≥ 0.23), failing only in its log
         with writing(self._partial), self._partial.open("rb") as f:
             os.fsync(f.fileno())

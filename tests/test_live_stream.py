@@ -15,6 +15,8 @@ import sys
 import time
 from pathlib import Path
 
+from cdpr_twin import record
+
 RERUN = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
 
 
@@ -105,3 +107,23 @@ def test_a_run_streams_its_entities_to_a_rerun_grpc_server(tmp_path):
     # the same entities as the run's own file (the camera is off: no image)
     assert _entities(tmp_path / "out" / "recording.rrd", env) == on_server
     assert "/world/platform/cam/image" not in on_server
+
+
+def test_a_server_that_does_not_listen_delays_the_end_of_a_run_only_briefly(tmp_path):
+    """Nothing at the address: the run ends (it used to wait forever in Rerun's flush, its
+    signals held), warns, and its own recording is whole, with every entity. 2 s of run: with
+    less, Rerun's client buffers it all and never blocks."""
+    env = {**os.environ, "RERUN_ANALYTICS": "0", "MUJOCO_GL": "egl"}
+    start = time.monotonic()
+    proc = subprocess.run(
+        [sys.executable, "-m", "cdpr_twin", "run", "paper_open_loop", "--duration", "2",
+         "--no-camera", "--out", str(tmp_path / "out"), "--connect", str(_free_port())],
+        capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "live viewer did not take the recording" in proc.stderr
+    # the run, the flush's limit, Rerun's own 5 s for a last connection attempt
+    assert time.monotonic() - start < 60.0 + record.LIVE_FLUSH_TIMEOUT_S
+    assert {"/world/platform", "/tension", "/world/estimates/fused"} <= _entities(
+        tmp_path / "out" / "recording.rrd", env
+    )
