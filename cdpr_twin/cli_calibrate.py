@@ -54,7 +54,7 @@ def _remove_empty(made: list[Path]) -> None:
 
 def _calibrate(args: argparse.Namespace) -> int:
     from cdpr_twin.calibrate.acquire import check
-    from cdpr_twin.outputs import OutputDir, OutputDirError, OutputError
+    from cdpr_twin.outputs import OutputDir, OutputDirError, OutputError, others
     from cdpr_twin.scenario import ScenarioError, load_scenario
 
     started, made = time.perf_counter(), []
@@ -70,8 +70,9 @@ def _calibrate(args: argparse.Namespace) -> int:
         check(s)  # the robot builds, its start pose can be homed at (as `cdpr-twin run` checks)
         out = Path(args.out or Path("runs") / f"{s.name}_calibration")
         made = _missing(out)
-        owner = OutputDir(out)
-        owner.claim()  # refuses a directory another calibration or run is writing
+        # a run's, campaign's or study's directory is refused (its files are not ours to clear)
+        owner = OutputDir(out, outputs=(), foreign=others("calibration"))
+        owner.claim()  # refuses a directory another calibration is writing
     except (ScenarioError, OutputDirError, OutputError) as exc:
         _remove_empty(made)
         print(f"cdpr-twin calibrate: error: {exc}", file=sys.stderr)

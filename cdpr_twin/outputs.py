@@ -42,10 +42,14 @@ LOCK_NAME = ".lock"
 """The lock file in an output directory while a run writes it."""
 OUTPUT_NAMES = ("timeseries.csv", "recording.rrd", "summary.json")
 """The final names of a run's files (removed with ``*.partial`` when a new run starts)."""
-CAMPAIGN_MARKERS = ("campaign.json", "parts")
-"""What marks a campaign's directory (a run there is refused: it would mix into its table)."""
-STUDY_MARKERS = ("runs.json",)
-"""What marks a ``reproduce`` study's directory (a run or campaign there is refused)."""
+MARKERS = {"run": OUTPUT_NAMES, "campaign": ("campaign.json", "parts"), "study": ("runs.json",)}
+MARKERS["calibration"] = ("calibrated_robot.toml", "calibration.json")
+"""What marks each command's output directory (study: ``reproduce``'s); the others refuse it."""
+
+
+def others(kind: str) -> tuple[str, ...]:
+    """The markers of every command's directory but ``kind``'s (:data:`MARKERS`)."""
+    return tuple(n for k, names in MARKERS.items() if k != kind for n in names)
 
 
 class OutputDirError(Exception):

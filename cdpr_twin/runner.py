@@ -34,11 +34,10 @@ from cdpr_twin.estimators.base import Estimator, update_order
 from cdpr_twin.events import EventSchedule, TagOcclusion
 from cdpr_twin.metrics import RunMetrics
 from cdpr_twin.outputs import (
-    CAMPAIGN_MARKERS,
-    STUDY_MARKERS,
     OutputDir,
     OutputError,
     Terminated,
+    others,
     shielded,
 )
 from cdpr_twin.plugins import OptionError
@@ -320,7 +319,7 @@ def run(
 def _claim(setup: RunSetup, out_dir, record_rrd, spawn, connect) -> tuple:
     """The claimed output directory, the metrics and the recorders (nothing held on failure)."""
     s = setup.scenario
-    owner = OutputDir(out_dir, foreign=CAMPAIGN_MARKERS + STUDY_MARKERS)  # (else emptied, mixed)
+    owner = OutputDir(out_dir, foreign=others("run"))  # (else emptied or mixed)
     try:
         owner.claim()  # the lock, then an earlier run's files removed
         checkpoints = setup.controller.checkpoints(s.duration)

@@ -166,6 +166,11 @@ def test_a_signal_during_a_completed_runs_save_is_delivered_once_the_files_are_w
         ("campaign.json", "reproduce"),
         ("runs.json", "campaign"),  # a study's: a campaign overwrote its report.md
         ("runs.json", "run"),
+        ("summary.json", "calibrate"),  # a run's: calibrate deleted its files
+        ("campaign.json", "calibrate"),
+        ("calibration.json", "run"),
+        ("calibrated_robot.toml", "campaign"),
+        ("calibration.json", "reproduce"),
     ],
 )
 def test_a_command_refuses_another_commands_directory(tmp_path, capsys, marker, command):
@@ -184,6 +189,7 @@ def test_a_command_refuses_another_commands_directory(tmp_path, capsys, marker, 
         "reproduce": ["reproduce", "--out", str(out), "--duration", "0.2", "--runs-scale", "0.01"],
         "campaign": ["campaign", str(campaign), "--out", str(out)],
         "run": ["run", "paper_open_loop", "--out", str(out), "--duration", "0.2", "--no-camera"],
+        "calibrate": ["calibrate", "paper_open_loop", "--out", str(out), "--poses", "12"],
     }[command]
     assert main(argv) == 2
     assert f"holds another command's outputs ({marker})" in capsys.readouterr().err

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from cdpr_twin.calibrate.solver import Calibration
+from cdpr_twin.outputs import MARKERS
 from cdpr_twin.robot import DRUM_SCALE_TOLERANCE
 from cdpr_twin.se3 import quat_wxyz_from_matrix, rot_x
 
@@ -118,7 +119,7 @@ def report(cal: Calibration, extra: dict) -> dict:
     }
 
 
-NAMES = ("calibrated_robot.toml", "calibration.json")
+NAMES = MARKERS["calibration"]
 """What a calibration writes into its output directory (the report last: it marks completion)."""
 
 

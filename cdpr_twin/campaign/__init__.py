@@ -20,11 +20,10 @@ from cdpr_twin.campaign.spec import Campaign, CampaignError, Task, load_campaign
 from cdpr_twin.campaign.table import RESULTS, ResultTable, load_table
 from cdpr_twin.campaign.worker import run_task
 from cdpr_twin.outputs import (
-    OUTPUT_NAMES,
-    STUDY_MARKERS,
     OutputDir,
     OutputDirError,
     Terminated,
+    others,
     write_json_atomic,
 )
 
@@ -71,7 +70,7 @@ def run_campaign(
         ExecutorError: Ray is asked for but cannot start.
     """
     # a single run's or a study's directory is refused (it would be emptied or mixed)
-    owner = OutputDir(out, outputs=(), foreign=OUTPUT_NAMES + STUDY_MARKERS)
+    owner = OutputDir(out, outputs=(), foreign=others("campaign"))
     owner.claim()
     try:
         # parts of ≤ 1/10 of the runs (≤ 20 rows): a kill loses at most that much work
