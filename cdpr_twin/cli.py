@@ -298,7 +298,11 @@ def _study_failure(exc: BaseException, args: argparse.Namespace, finished: tuple
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``cdpr-twin`` command."""
     args = _parser().parse_args(argv)
-    return args.func(args)
+    try:
+        return args.func(args)
+    except SystemExit as exc:  # only a plugin's: the commands return their exit codes
+        print(f"cdpr-twin {args.command}: error: sys.exit({exc.code!r}) called", file=sys.stderr)
+        return 1
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -394,7 +398,3 @@ def _reproduce_parser(sub) -> None:
     rep.add_argument("--robot", choices=model_cli.STUDY_ROBOTS, default="acrobot", help="robot")
     rep.add_argument("--traceback", action="store_true", help=TRACEBACK_HELP)
     rep.set_defaults(func=_reproduce)
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -172,8 +172,9 @@ def _load_entry_point(kind: str, ep: importlib.metadata.EntryPoint) -> None:
             register(obj)
         if ep.name not in _REGISTRY[kind]:
             raise TypeError(f"{ep.value} registered no {kind} named {ep.name!r}")
-    except Exception as exc:
-        why = f"entry point {ep.name} = {ep.value!r} of {dist} failed to load: {exc}"
+    except (Exception, SystemExit) as exc:  # SystemExit: a sys.exit() at its import
+        what = f"sys.exit({exc.code!r})" if isinstance(exc, SystemExit) else exc
+        why = f"entry point {ep.name} = {ep.value!r} of {dist} failed to load: {what}"
         _BROKEN[kind][ep.name] = why
         warnings.warn(f"cdpr_twin: {why}; fix or uninstall {dist}", stacklevel=3)
         return
@@ -253,8 +254,18 @@ def load_modules(refs: list[str], base_dir: Path) -> None:
             sys.modules[mod_name] = module
             try:
                 spec.loader.exec_module(module)
-            except BaseException:
+            except BaseException as exc:
                 del sys.modules[mod_name]  # a failed import is not cached half-built
+                _no_exit(exc, f"plugin file {path}")
                 raise
         else:
-            importlib.import_module(ref)
+            try:
+                importlib.import_module(ref)
+            except SystemExit as exc:
+                _no_exit(exc, f"plugin module {ref}")
+
+
+def _no_exit(exc: BaseException, what: str) -> None:
+    """A plugin's ``sys.exit()`` at its import as an ImportError: not its exit code to choose."""
+    if isinstance(exc, SystemExit):
+        raise ImportError(f"{what} called sys.exit({exc.code!r}) while loading") from None

@@ -280,15 +280,14 @@ def run(
         connect: also stream to the Rerun gRPC server at this URL (``rerun+http://…/proxy``).
 
     Returns:
-        The :class:`RunResult`. On Ctrl-C (SIGTERM) the outputs so far are completed and flushed,
-        the summary says ``"status": "interrupted"`` (``"terminated"``), and the KeyboardInterrupt
-        (:class:`~cdpr_twin.outputs.Terminated`) is raised again.
+        The :class:`RunResult`. On Ctrl-C (SIGTERM: :class:`~cdpr_twin.outputs.Terminated`) the
+        outputs so far are saved, ``"status": "interrupted"`` (``"terminated"``); raised again.
 
     Raises:
         ScenarioError: the scenario cannot run (before any output is written).
-        OutputDirError: ``out_dir`` cannot be used, another run owns it, or it is a campaign's
-            or a study's (nothing touched).
+        OutputDirError: ``out_dir`` cannot be used, another run or command owns it (untouched).
         OutputError: an output could not be written (all left ``*.partial``, no summary).
+        RuntimeError: a plugin called ``sys.exit()`` (the run is recorded as failed).
     """
     setup = prepare(scenario)
     owner, metrics, recorders = _claim(setup, out_dir, record_rrd, spawn, connect)
@@ -301,8 +300,10 @@ def run(
     except OutputError:  # nothing is renamed: what was written stays *.partial
         status, commit = "failed: output", False
         raise
-    except Exception as exc:  # a diverged simulation or an impossible command: keep the record
+    except (Exception, SystemExit) as exc:  # diverged, impossible, a plugin's sys.exit(): failed
         status = f"failed: {type(exc).__name__}: {exc}"
+        if isinstance(exc, SystemExit):  # its code is not the command's exit code
+            raise RuntimeError(f"sys.exit({exc.code!r}) called during the run") from None
         raise
     finally:
         wall = time.perf_counter() - started
