@@ -139,8 +139,24 @@ def _axis(source: Path, where: str, axis: Any) -> dict:
     for field in need.get(axis.get("draw", ""), ()):
         if not isinstance(axis.get(field), int | float) or not math.isfinite(axis[field]):
             raise _fail(source, f"{where}.{field}", "missing, or not a finite number")
-    if axis.get("draw") in ("integers", "uniform") and not axis["low"] < axis["high"]:
+    return _check_draw(source, where, axis)
+
+
+def _check_draw(source: Path, where: str, axis: dict) -> dict:
+    """The random draw's parameters, checked (NumPy would raise on them mid-campaign)."""
+    draw = axis.get("draw")
+    if draw == "choice" and "values" not in axis:
+        raise _fail(source, f"{where}.values", 'draw = "choice" needs values = [...]')
+    if draw in ("integers", "uniform") and not axis["low"] < axis["high"]:
         raise _fail(source, f"{where}.high", f"must exceed low = {axis['low']}")
+    if draw == "uniform" and not math.isfinite(axis["high"] - axis["low"]):
+        raise _fail(source, f"{where}.high", "high − low must be a finite number")
+    for field in ("low", "high") if draw == "integers" else ():
+        v = axis[field]
+        if v != int(v) or not -(2**63) <= v < 2**63 - 1:
+            raise _fail(source, f"{where}.{field}", f"must be a 64-bit integer, got {v!r}")
+    if draw == "normal" and not axis["std"] > 0:
+        raise _fail(source, f"{where}.std", f"must be > 0, got {axis['std']!r}")
     return axis
 
 
@@ -290,11 +306,16 @@ def load_campaign(path: str | Path) -> Campaign:
     seed = top.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise _fail(source, "seed", f"must be an integer ≥ 0, got {seed!r}")
+    name = top.get("name", source.stem)
+    if not isinstance(name, str) or name in ("", ".", "..") or any(c in name for c in "/\\"):
+        raise _fail(source, "name", f"must be a plain name usable as a directory, got {name!r}")
     blocks = top.get("blocks")
     if blocks is None:
         parsed = [_block(source, top, 0, "")]
     elif not isinstance(blocks, list) or not blocks:
         raise _fail(source, "blocks", "must be a non-empty array of tables [[blocks]]")
+    elif extra := sorted(set(top) - {"name", "seed", "description", "blocks"}):
+        raise _fail(source, extra[0], "not allowed beside [[blocks]] (give it in each block)")
     else:
         parsed = [_block(source, b, i, f"blocks[{i}].") for i, b in enumerate(blocks)]
     tasks = [t for i, b in enumerate(parsed) for t in _tasks(source, b, seed,
@@ -304,7 +325,4 @@ def load_campaign(path: str | Path) -> Campaign:
         if t.run_id in seen:
             raise _fail(source, "axes", f"runs {seen[t.run_id]} and {t.name} are identical")
         seen[t.run_id] = t.name
-    name = top.get("name", source.stem)
-    if not isinstance(name, str) or not name or "/" in name:
-        raise _fail(source, "name", f"must be a plain name, got {name!r}")
     return Campaign(name, source, str(top.get("description", "")), tuple(tasks))
