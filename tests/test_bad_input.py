@@ -86,3 +86,31 @@ def test_model_estimator_options_are_validated(twin, option, value):
 
     with pytest.raises(ValueError, match=option):
         make_estimator("model_simple", twin.nominal_geometry, **{option: value})
+
+
+@pytest.mark.parametrize("selection", ["most_tensioned", "all_taut"])
+def test_huge_finite_tensions_are_rejected_updates_not_a_crash(selection):
+    """Tensions of 1e300 N (a broken sensor, an absurd noise): the elastic correction makes the
+    targets infinite, and the solver used to step to an infinite pose (``math domain error``
+    ending the run); it stops instead, and the update is flagged, the last pose held."""
+    from dataclasses import replace
+
+    from cdpr_twin.estimators import make_estimator
+    from cdpr_twin.sim import Twin
+    from cdpr_twin.types import Command
+
+    tw = Twin(camera=False)
+    try:
+        T = paper_pose("p0")
+        tw.reset(T)
+        m = tw.sense(Command(np.zeros(8), np.zeros(6)))
+        est = make_estimator("model_elastic_pulley", tw.nominal_geometry, selection=selection)
+        est.reset(T, m.time)
+        good = est.update(m)
+        assert not good.flags and np.allclose(good.T_base_platform, T, atol=1e-3)
+        bad = replace(m, time=m.time + 0.04, tensions=np.full(8, 1e300))
+        held = est.update(bad)
+        assert held.flags  # rejected, and why
+        np.testing.assert_array_equal(held.T_base_platform, good.T_base_platform)
+    finally:
+        tw.close()

@@ -175,6 +175,8 @@ def _newton(
         if info != 0:  # singular pose: take the least-squares step
             x = np.linalg.lstsq(A, neg_r, rcond=None)[0]
         delta = x.tolist()
+        if not math.isfinite(sum(x * x for x in delta)):  # e.g. an infinite target: stop
+            break
         step = 1.0
         for _ in range(30):  # step halving keeps the cost decreasing far from the root
             pose_new = _compose_exp(pose, [step * x for x in delta])
@@ -208,6 +210,7 @@ def _matrix(p: Pose) -> np.ndarray:
     )
 
 
+@np.errstate(over="ignore", invalid="ignore")  # huge targets: an infinite cost, not a warning
 def gauss_newton(
     cables: list[tuple[float, ...]],
     pulley: bool,
@@ -239,6 +242,8 @@ def gauss_newton(
     lengths, rows = _kernel(cables, pulley, pose)
     r = np.asarray(lengths) - goal
     cost = float(np.sum((sw * r) ** 2))
+    if not math.isfinite(cost):  # e.g. an infinite target or weight: no step, not converged
+        return _matrix(pose), r, 0, False
     for it in range(1, max_iterations + 1):
         x = np.linalg.lstsq(np.asarray(rows) * sw[:, None], -sw * r, rcond=None)[0]
         if np.max(np.abs(x)) < tol:
