@@ -114,3 +114,21 @@ def test_huge_finite_tensions_are_rejected_updates_not_a_crash(selection):
         np.testing.assert_array_equal(held.T_base_platform, good.T_base_platform)
     finally:
         tw.close()
+
+
+def test_a_supersampled_buffer_too_large_for_the_gl_names_supersample(tmp_path, capsys):
+    """64× was blamed on a missing EGL: the buffer (40960 px) exceeds what Mesa can hold."""
+    from pathlib import Path
+
+    from cdpr_twin.cli import main
+
+    root = Path(__file__).resolve().parent.parent
+    text = (root / "scenarios" / "paper_open_loop.toml").read_text()
+    path = tmp_path / "s.toml"
+    path.write_text(
+        text.replace('"../models/', f'"{root}/models/') + "\n[realism.camera]\nsupersample = 64\n"
+    )
+    assert main(["run", str(path), "--duration", "0.2", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "40960×30720 px" in err and "lower realism.camera.supersample" in err
+    assert "EGL" not in err

@@ -18,6 +18,8 @@ R_MJCAM_CV = rot_x(np.pi)
 """Rotation from the OpenCV camera frame to MuJoCo's camera frame (its own inverse)."""
 
 CAMERA_NAME = "platform_cam"
+MAX_BUFFER_PX = 16384
+"""The largest offscreen buffer side of Mesa's renderers (llvmpipe's) [px]."""
 
 
 def has_camera(model: mujoco.MjModel, name: str = CAMERA_NAME) -> bool:
@@ -87,6 +89,12 @@ class CameraRenderer:
         try:
             self._renderer = mujoco.Renderer(model, height=h, width=w)
         except Exception as exc:
+            if scale > 1 and max(w, h) > MAX_BUFFER_PX:
+                raise ValueError(
+                    f"the camera renders {w}×{h} px (supersample = {scale}): more than an "
+                    f"offscreen buffer can hold ({MAX_BUFFER_PX} px a side with Mesa; {exc}); "
+                    "lower realism.camera.supersample"
+                ) from None
             raise RuntimeError(
                 f"offscreen rendering failed ({exc}). MuJoCo chose its GL backend from "
                 f"MUJOCO_GL={os.environ.get('MUJOCO_GL')!r} when it was first imported: import "
