@@ -15,6 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
+MAX_POSES, MAX_FRAMES = 10_000, 1_000
+"""Upper bounds of ``--poses`` (40× the default: ≈ 40 min) and ``--frames``: beyond them a typo
+would run for days, its memory growing, before saying anything."""
+
 
 def _check_options(args: argparse.Namespace) -> None:
     """The numbers on the command line, checked before anything runs.
@@ -24,11 +28,12 @@ def _check_options(args: argparse.Namespace) -> None:
     """
     from cdpr_twin.scenario import ScenarioError
 
-    if args.poses < 12:
-        raise ScenarioError(f"--poses must be ≥ 12 (the unknowns need them), got {args.poses}")
-    if args.frames < 1:
+    if not 12 <= args.poses <= MAX_POSES:  # 12: the unknowns need them
+        raise ScenarioError(f"--poses must be within 12…{MAX_POSES}, got {args.poses}")
+    if not 1 <= args.frames <= MAX_FRAMES:
         raise ScenarioError(
-            f"--frames must be an integer ≥ 1 (readings averaged per pose), got {args.frames}"
+            f"--frames (readings averaged per pose) must be within 1…{MAX_FRAMES}, "
+            f"got {args.frames}"
         )
     if args.workers < 1:
         raise ScenarioError(f"--workers must be ≥ 1, got {args.workers}")

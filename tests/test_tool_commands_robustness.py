@@ -250,13 +250,21 @@ def test_calibrate_start_outside_the_frame_is_refused_as_run_refuses_it(
     assert _error(capsys).split("error: ", 1)[1] == err.split("error: ", 1)[1]
 
 
-@pytest.mark.parametrize("frames", ["0", "-1"])
-def test_calibrate_frames_below_one_is_refused(frames, tmp_path, no_recording, capsys):
+@pytest.mark.parametrize(
+    ("option", "value", "says"),
+    [
+        ("--frames", "0", "--frames (readings averaged per pose) must be within 1…1000, got 0"),
+        ("--frames", "-1", "--frames (readings averaged per pose) must be within 1…1000, got -1"),
+        ("--frames", "1001", "must be within 1…1000, got 1001"),
+        ("--poses", "11", "--poses must be within 12…10000, got 11"),
+        ("--poses", "100000000", "--poses must be within 12…10000"),  # was: 900 MB, no word
+    ],
+)
+def test_calibrate_counts_out_of_range_are_refused(option, value, says, tmp_path, capsys):
     out = tmp_path / "cal"
-    args = ["calibrate", "paper_open_loop", "--poses", "12", "--frames", frames]
+    args = ["calibrate", "paper_open_loop", "--poses", "12", option, value]
     assert cli.main([*args, "--out", str(out)]) == 2
-    err = _error(capsys)
-    assert f"--frames must be an integer ≥ 1 (readings averaged per pose), got {frames}" in err
+    assert says in _error(capsys)
     assert not out.exists()
 
 
