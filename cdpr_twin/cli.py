@@ -193,11 +193,9 @@ def _run(args: argparse.Namespace) -> int:
         if args.spawn and args.connect is not None:
             raise ValueError("give --spawn (a new viewer) or --connect ADDR, not both")
         connect = None if args.connect is None else live_url(args.connect)
+        camera = False if args.no_camera else None
         scenario = load_scenario(args.scenario).with_overrides(
-            seed=args.seed,
-            in_loop=args.in_loop,
-            duration=args.duration,
-            camera=False if args.no_camera else None,
+            seed=args.seed, in_loop=args.in_loop, duration=args.duration, camera=camera
         )
         if args.realism is not None:
             scenario = scenario.with_realism(args.realism)
@@ -300,9 +298,11 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
         return args.func(args)
-    except SystemExit as exc:  # only a plugin's: the commands return their exit codes
-        print(f"cdpr-twin {args.command}: error: sys.exit({exc.code!r}) called", file=sys.stderr)
-        return 1
+    except (SystemExit, KeyboardInterrupt) as exc:  # a plugin's exit; Ctrl-C while starting
+        stop = isinstance(exc, KeyboardInterrupt)  # (the commands return their exit codes)
+        why = "interrupted" if stop else f"error: sys.exit({exc.code!r}) called"
+        print(f"cdpr-twin {args.command}: {why}", file=sys.stderr)
+        return 130 if stop else 1
 
 
 def _parser() -> argparse.ArgumentParser:

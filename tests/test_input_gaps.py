@@ -331,3 +331,17 @@ def test_a_campaign_names_a_shipped_scenario_as_run_does(tmp_path):
     by_name.write_text(f'name = "g"\nscenario = "paper_pbv"\n{axes}')
     with pytest.raises(CampaignError, match=r"scenario: no scenario named 'paper_pbv'; choose one"):
         load_campaign(by_name)
+
+
+def test_ctrl_c_while_a_command_starts_is_one_line_not_a_traceback(monkeypatch, capsys):
+    """Ctrl-C before a command's own handling (its imports, reading the scenario) printed a
+    KeyboardInterrupt traceback."""
+    from cdpr_twin import scenario
+    from cdpr_twin.cli import main
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(scenario, "load_scenario", interrupted)
+    assert main(["run", "paper_open_loop", "--duration", "0.2"]) == 130
+    assert capsys.readouterr().err == "cdpr-twin run: interrupted\n"
