@@ -5,6 +5,7 @@ out independently (rest length = E·S·l / (E·S + τ), encoder l0 = c + (1 + s)
 calibration's own residual code.
 """
 
+import json
 import math
 from dataclasses import replace
 
@@ -277,3 +278,28 @@ def test_sigterm_leaves_no_calibration_file_under_a_final_name(tmp_path):
     assert proc.returncode == 143, err
     assert err.strip().endswith("terminated") and "Traceback" not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # no report, no partial, no lock
+
+
+def test_a_failed_report_write_leaves_no_description_under_its_final_name(tmp_path, monkeypatch):
+    """A full disk at the report left ``calibrated_robot.toml`` final without its report (a
+    scenario could use a calibration whose command failed); now both stay partial."""
+    from cdpr_twin import outputs
+    from cdpr_twin.calibrate import output
+
+    real = outputs.write_partial
+
+    def disk_full_at_the_report(path, data):
+        if path.name == "calibration.json":
+            raise outputs.OutputError(outputs.partial_of(path), "No space left on device")
+        return real(path, data)
+
+    monkeypatch.setattr(output, "calibrated_description", lambda *a: "# robot\n")
+    monkeypatch.setattr(output, "report", lambda *a: {"fit": 1})
+    monkeypatch.setattr(outputs, "write_partial", disk_full_at_the_report)
+    with pytest.raises(outputs.OutputError, match="No space"):
+        output.write(tmp_path, tmp_path / "robot.toml", None, {}, None)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["calibrated_robot.toml.partial"]
+    monkeypatch.setattr(outputs, "write_partial", real)
+    robot, rep = output.write(tmp_path, tmp_path / "robot.toml", None, {}, None)
+    assert robot.read_text() == "# robot\n" and json.loads(rep.read_text()) == {"fit": 1}
+    assert sorted(p.name for p in tmp_path.iterdir()) == [robot.name, rep.name]

@@ -140,24 +140,22 @@ def write(
     ``drum_radii``: the radii the recording's drives and encoders were set to (its
     :attr:`~cdpr_twin.calibrate.acquire.Recording.drum_radii`).
 
-    Each is written as ``*.partial``, ``fsync``'ed and renamed: a final name always holds a
-    whole file, and the report exists only if the description does.
+    Both are written whole as ``*.partial`` (``fsync``'ed) before either is renamed (renames
+    need no space): a full disk leaves both partial, never a description without its report.
 
     Raises:
         cdpr_twin.outputs.OutputError: a file cannot be written (naming it).
     """
-    from cdpr_twin.outputs import fsync_dir, partial_of, write_json_atomic, writing
+    from cdpr_twin.json_format import json_text
+    from cdpr_twin.outputs import fsync_dir, partial_of, write_partial, writing
 
     with writing(out):
         out.mkdir(parents=True, exist_ok=True)
     robot, rep = (out / n for n in NAMES)
-    tmp = partial_of(robot)
-    with writing(tmp), tmp.open("w", encoding="utf-8") as f:
-        f.write(calibrated_description(source, cal, drum_radii))
-        f.flush()
-        os.fsync(f.fileno())
-    with writing(robot):
-        os.replace(tmp, robot)
-    write_json_atomic(rep, report(cal, extra))
+    write_partial(robot, calibrated_description(source, cal, drum_radii))
+    write_partial(rep, json_text(report(cal, extra)))
+    for path in (robot, rep):  # the report last: it marks completion
+        with writing(path):
+            os.replace(partial_of(path), path)
     fsync_dir(out)
     return robot, rep
