@@ -227,3 +227,30 @@ def test_a_campaign_name_that_is_not_a_plain_directory_name_is_refused(tmp_path,
     path.write_text(f'name = "{name}"\n' + BASE)
     with pytest.raises(CampaignError, match="plain name"):
         load_campaign(path)
+
+
+def test_a_resume_that_cannot_write_its_table_leaves_no_stale_table(tmp_path, monkeypatch):
+    """A full disk at the end of a resume left results.parquet (and campaign.json) describing
+    the runs before it under their final names; now they go when new runs start, and the next
+    --resume writes them from the parts."""
+    from cdpr_twin.campaign import table as table_mod
+    from cdpr_twin.outputs import OutputError
+
+    out = tmp_path / "out"
+    two = load_campaign(_campaign(tmp_path, "grow", 0.2, camera=False, seeds=(1, 2)))
+    assert run_campaign(two, out, workers=1)["ran_now"] == 2
+    (out / "report.md").write_text("the report of 2 runs\n")
+    three = load_campaign(_campaign(tmp_path, "grow", 0.2, camera=False, seeds=(1, 2, 3)))
+
+    def disk_full(self, order=()):
+        raise OutputError(out / "results.parquet.partial", "No space left on device")
+
+    with monkeypatch.context() as m:
+        m.setattr(table_mod.ResultTable, "gather", disk_full)
+        with pytest.raises(OutputError):
+            run_campaign(three, out, workers=1, resume=True)
+    assert not (out / "results.parquet").exists() and not (out / "report.md").exists()
+    assert json.loads((out / "campaign.json").read_text())["status"] == "running"
+    again = run_campaign(three, out, workers=1, resume=True)
+    assert again["ran_now"] == 0 and again["status"] == "completed"
+    assert sorted(load_table(out).column("seed").to_pylist()) == [1, 2, 3]

@@ -25,6 +25,7 @@ from cdpr_twin.outputs import (
     Terminated,
     others,
     write_json_atomic,
+    writing,
 )
 
 __all__ = [
@@ -93,7 +94,25 @@ def run_campaign(
         owner.release()
 
 
+def _outdated(out: Path, campaign, todo: list) -> None:
+    """Before new runs, what described the runs so far goes: ``campaign.json`` says running.
+
+    The table, report and figures would be stale under their final names (the parts keep the
+    rows; the end of the campaign, or a ``--resume`` after a failure, writes them anew).
+    """
+    derived = [out / RESULTS, out / "report.md", out / "distribution.png"]
+    for path in derived + sorted(out.glob("effect_*.png")):
+        with writing(path):
+            path.unlink(missing_ok=True)
+    state = {"campaign": campaign.name, "source": str(campaign.source), "status": "running"}
+    write_json_atomic(
+        out / "campaign.json", {**state, "runs": len(campaign.tasks), "to_run": len(todo)}
+    )
+
+
 def _execute(campaign, out, table, todo, workers, ray_address, progress) -> dict:
+    if todo:
+        _outdated(Path(out), campaign, todo)
     runs_dir = str(Path(out) / "runs")
     start, n, status = time.perf_counter(), 0, "completed"
     if ray_address is False:
