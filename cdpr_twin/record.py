@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cdpr_twin.blueprint import default_blueprint
 from cdpr_twin.outputs import OutputError, partial_of, writing
 from cdpr_twin.se3 import covariance_ellipsoids, quat_xyzw_from_matrix
 from cdpr_twin.types import CameraIntrinsics, Measurement, PoseEstimate
@@ -113,7 +114,7 @@ class RerunRecorder:
         self.rec = rr.RecordingStream(
             application_id, recording_id=recording_id, send_properties=False
         )
-        blueprint = self.blueprint()
+        blueprint = default_blueprint()
         self.spawned = False  # streaming live (a spawned viewer or a server at ``connect``)
         if live:
             try:
@@ -136,23 +137,6 @@ class RerunRecorder:
             except RuntimeError as exc:  # Rerun's words for an OSError
                 raise OutputError(self._partial, str(exc)) from None
         self._log_static()
-
-    def blueprint(self):
-        """The default layout: 3D scene, camera image, deviations and tensions over time."""
-        import rerun.blueprint as rrb
-
-        return rrb.Blueprint(
-            rrb.Horizontal(
-                rrb.Spatial3DView(origin="world", name="ACROBOT"),
-                rrb.Vertical(
-                    rrb.Spatial2DView(origin="world/platform/cam", name="onboard camera"),
-                    rrb.TimeSeriesView(origin="deviation", name="estimate − truth"),
-                    rrb.TimeSeriesView(origin="tension", name="tensions [N]"),
-                ),
-                column_shares=[3, 2],
-            ),
-            collapse_panels=True,
-        )
 
     def _log_static(self) -> None:
         rr, rec, s = self.rr, self.rec, self.scene
@@ -380,12 +364,8 @@ class RerunRecorder:
             if not self.spawned:
                 self.abort()
                 raise OutputError(self._partial, f"Rerun could not write it: {exc}") from None
-            warnings.warn(
-                f"the live viewer did not take the recording within {LIVE_FLUSH_TIMEOUT_S:g} s "
-                f"({exc}); the file is written all the same",
-                RuntimeWarning,
-                stacklevel=2,
-            )
+            why = f"the live viewer did not take the recording in {LIVE_FLUSH_TIMEOUT_S:g} s"
+            warnings.warn(f"{why} ({exc}); the file is whole", RuntimeWarning, stacklevel=2)
         self.rec.disconnect()  # writes the footer (Rerun ≥ 0.23), failing only in its log
         with writing(self._partial), self._partial.open("rb") as f:
             os.fsync(f.fileno())
