@@ -55,11 +55,8 @@ def _demo(args: argparse.Namespace) -> int:
             else:
                 det = se3.vector_from_pose(m.tag.T_cam_tag @ T_TAGPUPIL_TAGVISP)
                 e_t, e_r = se3.pose_distance(m.tag.T_cam_tag, truth.T_cam_tag)
-                print(
-                    "  detected ",
-                    np.array2string(det, precision=4, suppress_small=True),
-                    f" error {e_t * 1e3:.2f} mm / {np.rad2deg(e_r):.2f} deg",
-                )
+                text = np.array2string(det, precision=4, suppress_small=True)
+                print("  detected ", text, f" error {e_t * 1e3:.2f} mm / {np.rad2deg(e_r):.2f} deg")
             if args.model == "acrobot" and pose.tolist() == list(P0):  # the paper's own view
                 print("  paper cp_o0 at p0: [-0.123 -0.101 0.338 168 -8 -179]")
     except (ModelError, SimulationError, InfeasibleTensionError, ValueError) as exc:
@@ -152,11 +149,8 @@ def _failure(exc: BaseException, out: Path, show_traceback: bool, since: float) 
         elif status and not status.startswith("failed"):
             message = f"{how} as the run ended ({status}): its outputs in {out} are complete"
     else:
-        where = (
-            f"its outputs, up to the failure, are in {out}"
-            if _status(out, since).startswith("failed")
-            else "no output was written"
-        )
+        kept = _status(out, since).startswith("failed")
+        where = f"its outputs, up to the failure, are in {out}" if kept else "nothing was written"
         what, hint = _unexpected(exc, show_traceback)
         message, code = f"the run failed: {what}; {where}{hint}", 1
     print(f"cdpr-twin: {message}", file=sys.stderr)
@@ -398,3 +392,7 @@ def _reproduce_parser(sub) -> None:
     rep.add_argument("--robot", choices=model_cli.STUDY_ROBOTS, default="acrobot", help="robot")
     rep.add_argument("--traceback", action="store_true", help=TRACEBACK_HELP)
     rep.set_defaults(func=_reproduce)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

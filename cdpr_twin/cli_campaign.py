@@ -106,7 +106,7 @@ def _what_was_kept(out: Path, since: float) -> str:
         ran = 0
     table = out / RESULTS if (out / RESULTS).exists() else out / PARTS
     if not ran:
-        return f"no run finished now; {out} holds what it held before ({rest})"
+        return f"no run finished now; the runs before are in {table} ({rest}, and the report)"
     return f"{ran} runs finished now and are recorded in {table} ({rest})"
 
 

@@ -24,7 +24,7 @@ def controller_for(scenario: Scenario, geom) -> Controller:
         controller.check_period(scenario.model.control_period)
     except OptionError as exc:
         raise ScenarioError(f"{src}: controller.{exc.field}: {exc.problem}") from None
-    except Exception as exc:  # a plugin's own failure: name it, no traceback
+    except (Exception, SystemExit) as exc:  # a plugin's own failure (or exit): no traceback
         raise ScenarioError(f"{src}: controller: {type(exc).__name__}: {exc}") from None
     return controller
 
@@ -57,7 +57,7 @@ def check_task(scenario: Scenario, nominals: dict | None = None) -> None:
         return  # true robot, as runner.prepare does: its pose, not the nominal model's view
     try:
         goal = controller.goal_pose(nominal.T_base_tag)
-    except Exception as exc:  # a plugin's own failure: name it, no traceback
+    except (Exception, SystemExit) as exc:  # a plugin's own failure (or exit): no traceback
         raise ScenarioError(f"{s.source}: controller: {type(exc).__name__}: {exc}") from None
     if goal is not None:
         check_goal(s, nominal.geometry, goal)

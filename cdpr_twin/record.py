@@ -364,7 +364,9 @@ class RerunRecorder:
             if not self.spawned:
                 self.abort()
                 raise OutputError(self._partial, f"Rerun could not write it: {exc}") from None
-            why = f"the live viewer did not take the recording in {LIVE_FLUSH_TIMEOUT_S:g} s"
+            why = (
+                f"the live viewer did not take all of the recording (≤ {LIVE_FLUSH_TIMEOUT_S:g} s)"
+            )
             warnings.warn(f"{why} ({exc}); the file is whole", RuntimeWarning, stacklevel=2)
         self.rec.disconnect()  # writes the footer (Rerun ≥ 0.23), failing only in its log
         with writing(self._partial), self._partial.open("rb") as f:

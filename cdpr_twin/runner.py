@@ -145,7 +145,7 @@ def _build_plugins(scenario: Scenario, geom) -> tuple[Controller, dict[str, Esti
         options = scenario.estimators.options.get(name) or est_cls.Options()
         try:
             estimators[name] = est_cls(geom, options)
-        except Exception as exc:
+        except (Exception, SystemExit) as exc:  # SystemExit: a plugin's sys.exit()
             raise ScenarioError(f"{src}: estimators.{name}: {type(exc).__name__}: {exc}") from None
     return controller, estimators
 

@@ -1,5 +1,7 @@
 """Bad input gets a clear error naming the problem."""
 
+import math
+
 import numpy as np
 import pytest
 from conftest import paper_pose
@@ -132,3 +134,25 @@ def test_a_supersampled_buffer_too_large_for_the_gl_names_supersample(tmp_path, 
     err = capsys.readouterr().err
     assert "40960×30720 px" in err and "lower realism.camera.supersample" in err
     assert "EGL" not in err
+
+
+@pytest.mark.parametrize("pulley", [False, True])
+@pytest.mark.parametrize("goal", [1e152, 1e153, math.inf])
+def test_the_solvers_stop_on_targets_no_pose_can_reach(pulley, goal):
+    """Huge, inconsistent targets with small weights keep the cost finite while the step is not
+    (``math domain error`` from the pose update, at 1e153 with weights 1e-2); both solvers
+    say "not converged" instead."""
+    from cdpr_twin.estimators.solvers import _cable_tuples, gauss_newton, solve_fast
+    from cdpr_twin.sim import Twin
+
+    with Twin(camera=False) as tw:
+        g, T = tw.nominal_geometry, paper_pose("p0")
+    radii = g.pulley_radius if pulley else None
+    cables = _cable_tuples(g.a_base, g.b_platform, radii)
+    targets = goal * np.arange(1.0, len(cables) + 1.0)  # no pose has these lengths
+    for weight in (1.0, 1e-2):
+        _, _, _, ok = gauss_newton(cables, pulley, targets, np.full(len(cables), weight), T)
+        assert not ok
+    _, residual, _ = solve_fast(g.a_base[:6], g.b_platform[:6], None if radii is None else
+                                radii[:6], targets[:6], T)  # fmt: skip
+    assert not residual <= 1e-6

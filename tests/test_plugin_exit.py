@@ -10,6 +10,7 @@ import json
 from pathlib import Path
 
 import pyarrow.parquet as pq
+import pytest
 
 from cdpr_twin.cli import main
 
@@ -27,6 +28,11 @@ from cdpr_twin.estimators.control import ControlEstimator
 class Exiting(ControlEstimator):
     name = "exiting"
 
+    def __init__(self, geometry, options):
+        super().__init__(geometry, options)
+        if {at_build}:
+            sys.exit(4)
+
     def update(self, measurement, inputs=None):
         self.calls = getattr(self, "calls", 0) + 1
         if self.calls == 3:
@@ -35,14 +41,18 @@ class Exiting(ControlEstimator):
 """
 
 
-def _scenario(tmp_path: Path, at_import: bool = False) -> Path:
+def _scenario(tmp_path: Path, at_import: bool = False, at_build: bool = False) -> Path:
     """The paper's open loop with the plugin (one file for the session: it registers once)."""
-    plugin = tmp_path.parent / ("exiting_at_import.py" if at_import else "exiting.py")
+    stem = "exiting_at_import" if at_import else "exiting_at_build" if at_build else "exiting"
+    plugin = tmp_path.parent / f"{stem}.py"
     if not plugin.exists():
-        plugin.write_text(PLUGIN.format(at_import="sys.exit(3)" if at_import else ""))
+        text = PLUGIN.replace('name = "exiting"', f'name = "{stem}"')
+        plugin.write_text(
+            text.format(at_import="sys.exit(3)" if at_import else "", at_build=at_build)
+        )
     text = (ROOT / "scenarios" / "paper_open_loop.toml").read_text()
     text = text.replace('"../models/', f'"{ROOT}/models/')
-    text = text.replace('passive = ["', 'passive = ["exiting", "', 1)
+    text = text.replace('passive = ["', f'passive = ["{stem}", "', 1)
     path = tmp_path / "s.toml"
     path.write_text(f'plugins = ["{plugin}"]\n' + text)
     return path
@@ -74,10 +84,12 @@ def test_a_plugins_exit_at_import_refuses_the_scenario(tmp_path, capsys):
     assert not out.exists()
 
 
-def test_a_campaign_records_a_plugins_exit_as_a_failed_run(tmp_path):
+@pytest.mark.parametrize("at_build", [False, True])
+def test_a_campaign_records_a_plugins_exit_as_a_failed_run(tmp_path, at_build):
+    """Mid-run, or while the estimator is built (that one ended the campaign "completed")."""
     campaign = tmp_path / "c.toml"
     campaign.write_text(
-        f'name = "c"\nscenario = "{_scenario(tmp_path)}"\n\n'
+        f'name = "c"\nscenario = "{_scenario(tmp_path, at_build=at_build)}"\n\n'
         '[overrides]\n"sensors.camera" = false\nduration = 0.4\n\n'
         '[[axes]]\nkey = "seed"\nvalues = [1, 2]\n'
     )
@@ -85,5 +97,5 @@ def test_a_campaign_records_a_plugins_exit_as_a_failed_run(tmp_path):
     main(["campaign", str(campaign), "--out", str(out), "--workers", "1"])
     rows = pq.read_table(out / "results.parquet").to_pylist()
     assert len(rows) == 2  # was: no table, and campaign.json saying "completed"
-    why = "failed: RuntimeError: sys.exit(5) called during the run"
-    assert all(r["status"].startswith(why) for r in rows)
+    why = "estimators.exiting_at_build: SystemExit: 4" if at_build else "RuntimeError: sys.exit(5)"
+    assert all(r["status"].startswith("failed") and why in r["status"] for r in rows), rows

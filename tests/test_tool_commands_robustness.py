@@ -260,7 +260,9 @@ def test_calibrate_start_outside_the_frame_is_refused_as_run_refuses_it(
         ("--poses", "100000000", "--poses must be within 12…10000"),  # was: 900 MB, no word
     ],
 )
-def test_calibrate_counts_out_of_range_are_refused(option, value, says, tmp_path, capsys):
+def test_calibrate_counts_out_of_range_are_refused(
+    option, value, says, tmp_path, no_recording, capsys
+):
     out = tmp_path / "cal"
     args = ["calibrate", "paper_open_loop", "--poses", "12", option, value]
     assert cli.main([*args, "--out", str(out)]) == 2

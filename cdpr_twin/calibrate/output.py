@@ -147,15 +147,16 @@ def write(
         cdpr_twin.outputs.OutputError: a file cannot be written (naming it).
     """
     from cdpr_twin.json_format import json_text
-    from cdpr_twin.outputs import fsync_dir, partial_of, write_partial, writing
+    from cdpr_twin.outputs import fsync_dir, partial_of, shielded, write_partial, writing
 
     with writing(out):
         out.mkdir(parents=True, exist_ok=True)
     robot, rep = (out / n for n in NAMES)
     write_partial(robot, calibrated_description(source, cal, drum_radii))
     write_partial(rep, json_text(report(cal, extra)))
-    for path in (robot, rep):  # the report last: it marks completion
-        with writing(path):
-            os.replace(partial_of(path), path)
+    with shielded():  # a signal between the renames would split the pair
+        for path in (robot, rep):  # the report last: it marks completion
+            with writing(path):
+                os.replace(partial_of(path), path)
     fsync_dir(out)
     return robot, rep

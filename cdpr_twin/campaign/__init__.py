@@ -129,6 +129,9 @@ def _execute(campaign, out, table, todo, workers, ray_address, progress) -> dict
     except KeyboardInterrupt as exc:
         status = "terminated" if isinstance(exc, Terminated) else "interrupted"
         raise
+    except BaseException:  # e.g. a worker lost: the campaign.json must not say completed
+        status = "failed"
+        raise
     finally:
         if n or not (Path(out) / RESULTS).exists():
             table.flush()

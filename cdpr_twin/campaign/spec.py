@@ -153,7 +153,7 @@ def _check_draw(source: Path, where: str, axis: dict) -> dict:
         raise _fail(source, f"{where}.high", "high − low must be a finite number")
     for field in ("low", "high") if draw == "integers" else ():
         v = axis[field]
-        if v != int(v) or not -(2**63) <= v < 2**63 - 1:
+        if v != int(v) or not -(2**63) <= v <= 2**63 - 1:
             raise _fail(source, f"{where}.{field}", f"must be a 64-bit integer, got {v!r}")
     if draw == "normal" and not axis["std"] > 0:
         raise _fail(source, f"{where}.std", f"must be > 0, got {axis['std']!r}")

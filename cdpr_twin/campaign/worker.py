@@ -32,7 +32,7 @@ def run_task(task: Task, runs_dir: str) -> dict:
     try:
         s = scenario_from_data(task.data, task.source)
         result = run(s, out, record_rrd=task.artefacts == "all")
-    except Exception as exc:  # the campaign goes on: this run is a row with its error
+    except (Exception, SystemExit) as exc:  # the campaign goes on: a row with its error
         last = traceback.extract_tb(exc.__traceback__)[-1]
         where = f" ({Path(last.filename).name}:{last.lineno})"
         error = f"{type(exc).__name__}: {exc}{where}".replace("\n", " ")

@@ -246,6 +246,8 @@ def gauss_newton(
         return _matrix(pose), r, 0, False
     for it in range(1, max_iterations + 1):
         x = np.linalg.lstsq(np.asarray(rows) * sw[:, None], -sw * r, rcond=None)[0]
+        if not math.isfinite(x @ x):  # huge targets with small weights: a finite cost, no step
+            return _matrix(pose), r, it, False
         if np.max(np.abs(x)) < tol:
             return _matrix(pose), r, it, True
         step = 1.0
