@@ -10,7 +10,7 @@ them (round-off apart: the products are summed in another order).
 
 The functions are compiled on first use and cached on disk (Numba's ``cache=True``, in
 ``__pycache__`` beside this file, or ``NUMBA_CACHE_DIR``): the first process to use them after
-an install compiles them (≈ 20 s; :func:`warm_up` does it when the filter is built), later ones
+an install compiles them (16–20 s; :func:`warm_up` does it when the filter is built), later ones
 load the machine code (≈ 0.2 s). The algebra is written as loops
 (:mod:`~cdpr_twin.estimators.fused_kernels`' ``mm``, ``inv``, …) rather than NumPy's ``@`` and
 ``np.linalg``: as fast at these sizes (84 against 94 µs an update), with no BLAS threads, and
@@ -375,7 +375,7 @@ def warm_up(cables: np.ndarray, n: int, blocks: np.ndarray) -> None:
     """Call every stage once on made-up inputs of the filter's shapes and types.
 
     Compiles them (or loads them from the disk cache, ≈ 0.2 s) when the filter is built, not
-    at its first update in the middle of a run, where a compilation (≈ 20 s, once after an
+    at its first update in the middle of a run, where a compilation (16–20 s, once after an
     install) would stall the loop and compete with the camera's worker thread.
 
     Args:
