@@ -105,6 +105,8 @@ def _what_was_kept(out: Path, since: float) -> str:
     except (OSError, ValueError, KeyError):
         ran = 0
     table = out / RESULTS if (out / RESULTS).exists() else out / PARTS
+    if not ran and not any(out.glob(f"{PARTS}/part-*.parquet")):
+        return f"no run finished now ({rest})"
     if not ran:
         return f"no run finished now; the runs before are in {table} ({rest}, and the report)"
     return f"{ran} runs finished now and are recorded in {table} ({rest})"
