@@ -16,6 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from cdpr_twin.campaign.executor import ExecutorError, run_local, run_ray
+from cdpr_twin.campaign.report import report_files
 from cdpr_twin.campaign.spec import Campaign, CampaignError, Task, load_campaign
 from cdpr_twin.campaign.table import RESULTS, ResultTable, load_table
 from cdpr_twin.campaign.worker import run_task
@@ -100,8 +101,7 @@ def _outdated(out: Path, campaign, todo: list) -> None:
     The table, report and figures would be stale under their final names (the parts keep the
     rows; the end of the campaign, or a ``--resume`` after a failure, writes them anew).
     """
-    derived = [out / RESULTS, out / "report.md", out / "distribution.png"]
-    for path in derived + sorted(out.glob("effect_*.png")):
+    for path in [out / RESULTS, *report_files(out)]:
         with writing(path):
             path.unlink(missing_ok=True)
     state = {"campaign": campaign.name, "source": str(campaign.source), "status": "running"}

@@ -248,6 +248,11 @@ def _failure_section(columns: dict, ok: np.ndarray) -> list[str]:
     return [*lines, ""]
 
 
+def report_files(out: Path) -> list[Path]:
+    """What :func:`write_report` writes into ``out``: ``report.md`` and its figures."""
+    return [out / "report.md", out / "distribution.png", *sorted(out.glob("effect_*.png"))]
+
+
 def write_report(out: str | Path, campaign: Campaign) -> Path:
     """Compute ``report.md`` and its figures from the campaign's table; returns its path."""
     out = Path(out)
