@@ -32,14 +32,16 @@ from pathlib import Path
 def tag_known(session, nominal) -> dict:
     """Exit-point errors of the recording re-solved with the tag's true pose given."""
     from cdpr_twin.calibrate.problem import Problem
-    from cdpr_twin.calibrate.session import NOISE, Session, truth_check
+    from cdpr_twin.calibrate.session import Session, truth_check
     from cdpr_twin.calibrate.solver import solve
 
     rec = session.recording
     priors = replace(session.priors, tag_position=1e-6, tag_rotation=1e-6)
-    problem = Problem(nominal.geometry, rec.truth.T_base_tag, rec.obs, priors, NOISE, rec.detector)
-    check = truth_check(Session(solve(problem), rec, priors, 0.0), nominal.geometry,
-                        nominal.T_base_tag)["calibrated"]  # fmt: skip
+    problem = Problem(
+        nominal.geometry, rec.truth.T_base_tag, rec.obs, priors, session.noise, rec.detector
+    )
+    solved = Session(solve(problem), rec, priors, 0.0, 0, session.noise)
+    check = truth_check(solved, nominal.geometry, nominal.T_base_tag)["calibrated"]
     return {k: check[f"exit_{k}error_median_mm"] for k in ("", "shape_")}
 
 

@@ -105,6 +105,23 @@ def pulley_lengths(a: np.ndarray, r: np.ndarray, b: np.ndarray) -> np.ndarray:
     return free + wrap
 
 
+def pulley_vectors(a: np.ndarray, r: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Full cable lengths (eq. 15-24) and the free segments' directions, vectorised.
+
+    Args:
+        a: (k, 3) exit points in F_b [m].
+        r: (k,) sheave radii [m].
+        b: (k, 3) anchor points in F_b [m].
+
+    Returns:
+        ``(lengths, u)``: (k,) lengths from A_i around the sheave to B_i [m], and (k, 3) unit
+        vectors from the exit tangent point A'_i toward B_i (a taut cable pulls its anchor
+        along −u).
+    """
+    _, _, _, free, wrap, u = _pulley(a, r, b)
+    return free + wrap, u
+
+
 def pulley_state(geom: CdprGeometry, T_base_platform: np.ndarray) -> PulleyState:
     """Pulley kinematics (eq. 15-24) of every cable at a platform pose.
 

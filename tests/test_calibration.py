@@ -240,7 +240,9 @@ def test_the_recording_does_not_depend_on_the_worker_count():
     for name in ("encoder", "tensions", "taut", "seen", "T_cam_tag"):
         np.testing.assert_array_equal(getattr(one.obs, name), getattr(two.obs, name))
     np.testing.assert_array_equal(one.truth.T_base_platform, two.truth.T_base_platform)
-    assert one.obs.seen.any() and one.obs.n_poses == 8
+    assert one.obs.seen.any() and one.obs.n_poses == 1 + 8  # the homed robot's readings first
+    np.testing.assert_array_equal(one.obs.home, np.arange(9) == 0)
+    np.testing.assert_array_equal(one.obs.T_guess[0], s.start_pose)
 
 
 def _calibrate_cmd(out, *extra):

@@ -5,7 +5,9 @@ moved by the run's homing offset, the encoders zeroed as if it stood at the nomi
 then driven open loop through the excitation poses: straight quintic lines (eq. 26-29) whose
 cable rates are the *nominal* model's length changes from tick to tick, so the true robot goes
 wherever its true geometry and physics put it. At each pose it rests, waits out the camera's
-latency, and averages ``frames`` readings. The camera is read only where the nominal model
+latency, and averages ``frames`` readings; the first readings are taken where it was homed,
+before it moves and untightened (the one pose the robot's software knows, within the
+homing's repeatability). The camera is read only where the nominal model
 puts the whole tag within :data:`VIEW_MARGIN` of the image and not edge-on (elsewhere nothing
 could be detected, and a frame costs more than the physics); at the other poses the readings
 are taken without waiting out the camera's latency (the robot is at rest either way). What the
@@ -70,6 +72,8 @@ class Truth:
         drum_scale: (m,) true drum radius / the radius its drive and encoder were set to − 1.
         intrinsics_error: (8,) the detector's intrinsics minus the true ones (fx, fy, cx, cy
             [px], k1, k2, p1, p2).
+        tension_bias: (m,) each tension sensor's offset [N].
+        tension_gain: (m,) each tension sensor's relative gain error.
     """
 
     T_base_platform: np.ndarray
@@ -77,6 +81,8 @@ class Truth:
     T_base_tag: np.ndarray
     drum_scale: np.ndarray
     intrinsics_error: np.ndarray
+    tension_bias: np.ndarray
+    tension_gain: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -92,6 +98,8 @@ class Recording:
         wall_time: wall-clock seconds of the recording [s].
         drum_radii: (m,) the radii the drives and encoders were set to [m] (the nominal
             description's, or the model's).
+        tension_sensors: the tension sensors' specification (not their drawn errors): offset
+            std [N], relative gain error std, reading noise std [N].
     """
 
     obs: Observations
@@ -101,6 +109,7 @@ class Recording:
     simulated_time: float
     wall_time: float
     drum_radii: np.ndarray
+    tension_sensors: tuple[float, float, float]
 
     def subset(self, keep: np.ndarray) -> Recording:
         """The recording at the poses ``keep`` (a (K,) mask or indices) selects."""
@@ -144,14 +153,17 @@ def _tighten(physics, sensors, period: float, target: float, timeout: float = 4.
         physics.advance(period, np.where(low, np.maximum(rate, -TIGHTEN_SPEED), 0.0))
 
 
-def _read(physics, sensors, period: float, frames: int, wait: int, look: bool) -> tuple:
-    """Rest, tighten, then average ``frames`` readings (the camera's only if ``look``).
+def _read(
+    physics, sensors, period: float, frames: int, wait: int, look: bool, tighten: bool = True
+) -> tuple:
+    """Rest, tighten (if ``tighten``), then average ``frames`` readings.
 
-    Returns (encoders, tensions, taut, tag).
+    The camera's only if ``look``. Returns (encoders, tensions, taut, tag).
     """
     rest = np.zeros(physics.n_cables)
-    physics.advance(round(SETTLE / period) * period, rest)
-    _tighten(physics, sensors, period, TIGHTEN_TARGET)
+    if tighten:
+        physics.advance(round(SETTLE / period) * period, rest)
+        _tighten(physics, sensors, period, TIGHTEN_TARGET)
     physics.advance(round(SETTLE / period) * period, rest)
     for _ in range(wait if look else 0):
         sensors.read(None)
@@ -180,7 +192,10 @@ def _mean_pose(poses: list[np.ndarray]) -> np.ndarray | None:
 
 
 def record(s: Scenario, poses: list[np.ndarray], frames: int = 4, workers: int = 1) -> Recording:
-    """Home the scenario's robot, drive it through ``poses`` and record each.
+    """Home the scenario's robot, record it there, drive it through ``poses`` and record each.
+
+    The observations' first row is the homed robot's (``home``; ``T_guess`` the start pose),
+    then one per pose of ``poses``.
 
     Args:
         s: the scenario (robot, truth seed, realism, run seed, start pose, stepping).
@@ -207,16 +222,17 @@ def record(s: Scenario, poses: list[np.ndarray], frames: int = 4, workers: int =
     else:
         parts = [_segment(item, s, frames) for item in items]
     _, rows, truth, sim_time, static = zip(*parts, strict=True)
-    geometry, T_base_tag, drum_scale, intrinsics_error, nominal, detector, radii = static[0]
+    geometry, T_tag, drum, k_error, nominal, detector, radii, tension = static[0]
     return Recording(
-        obs=_observations([r for part in rows for r in part], poses),
+        obs=_observations([r for part in rows for r in part], [s.start_pose, *poses]),
         nominal=nominal,
         detector=detector,
-        truth=Truth(np.array([T for part in truth for T in part]), geometry, T_base_tag,
-                    drum_scale, intrinsics_error),
+        truth=Truth(np.array([T for part in truth for T in part]), geometry, T_tag, drum,
+                    k_error, *tension[1]),
         simulated_time=float(sum(sim_time)),
         wall_time=time.perf_counter() - started,
         drum_radii=radii,
+        tension_sensors=tension[0],
     )  # fmt: skip
 
 
@@ -303,7 +319,8 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
 
     Returns:
         (index, rows, true poses, simulated time, (true geometry, true tag, drum scales,
-        intrinsics error, nominal robot, detector)).
+        intrinsics error, nominal robot, detector, drum radii, (tension sensors' specification,
+        their drawn offsets and gain errors)).
     """
     from cdpr_twin.sim import Sensors
 
@@ -322,6 +339,12 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
         _reset_at_start(s, physics, settle_time=0.3)
         sensors.home(s.start_pose)
         rows, truth, here = [], [], s.start_pose
+        if index == 0:  # the readings where the encoders were homed, as they were
+            look = tag_in_view(g, nominal.T_base_tag, nominal.intrinsics, nominal.tag_size, here,
+                               VIEW_MARGIN)  # fmt: skip
+            wait = s.realism.camera.latency_ticks
+            rows.append(_read(physics, sensors, period, frames, wait, look, tighten=False))
+            truth.append(np.array(physics.T_base_platform))
         for T in poses:
             _move(physics, sensors, g, here, T, period)
             look = tag_in_view(g, nominal.T_base_tag, nominal.intrinsics, nominal.tag_size, T,
@@ -331,11 +354,14 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
             truth.append(np.array(physics.T_base_platform))
             here = T
         detector, intrinsics_error = _detector(sensors.camera, nominal.tag_size, s.realism)
+        t = sensors.realism.tension
+        tension = ((t.bias_std, t.gain_error_std, sensors.tension.noise_std),
+                   (sensors.tension.bias.copy(), sensors.tension.gain_error.copy()))  # fmt: skip
     finally:
         sensors.close()
     scale = physics.drum_radius_true / physics.drum_radius_set - 1.0  # against what it reads
     static = (physics.geometry, np.array(physics.T_base_tag), scale, intrinsics_error, nominal,
-              detector, physics.drum_radius_set.copy())  # fmt: skip
+              detector, physics.drum_radius_set.copy(), tension)  # fmt: skip
     return index, rows, truth, float(physics.time), static
 
 
@@ -355,6 +381,7 @@ def _detector(camera, tag_size: float, realism) -> tuple[Detector, np.ndarray]:
 
 
 def _observations(rows: list[tuple], poses: list[np.ndarray]) -> Observations:
+    """The rows read at ``poses``: the first where the encoders were homed, then the tour's."""
     seen = np.array([r[3] is not None for r in rows])
     return Observations(
         encoder=np.array([r[0] for r in rows]),
@@ -363,4 +390,5 @@ def _observations(rows: list[tuple], poses: list[np.ndarray]) -> Observations:
         T_cam_tag=np.array([np.eye(4) if r[3] is None else r[3] for r in rows]),
         seen=seen,
         T_guess=np.array(poses),
+        home=np.arange(len(rows)) == 0,
     )

@@ -3,10 +3,11 @@
 Unknowns (all corrections to the nominal model, zero at the start):
 
 - shared: exit points A_i (m × 3, F_b), anchor points B_i (m × 3, F_p), one length offset c_i
-  per cable, one drum scale error s_i per cable, the camera mount ᵖT_c (6, a twist applied on
-  the right of the nominal mount), the tag pose ᵇT_o (6, likewise) and the error of the
-  intrinsics the tag detector uses (8: fx, fy, cx, cy [px], k1, k2, p1, p2; with a
-  :class:`Detector`);
+  per cable, one drum scale error s_i per cable, with the force balance each tension sensor's
+  bias b_i [N] and gain error g_i (a reading is (1 + g_i)·τ_i + b_i), the camera mount ᵖT_c
+  (6, a twist applied on the right of the nominal mount), the tag pose ᵇT_o (6, likewise) and
+  the error of the intrinsics the tag detector uses (8: fx, fy, cx, cy [px], k1, k2, p1, p2;
+  with a :class:`Detector`);
 - per recorded pose k: the platform pose ᵇT_p,k (6, a twist on the right of the pose the
   robot was commanded to).
 
@@ -24,10 +25,23 @@ Residuals, each divided by its noise so that they are unitless:
   (:func:`cdpr_twin.estimators.fused_models.tag_calibration_jacobian`): a camera calibration
   error biases every detection by an amount that depends on the view, which the other
   parameters would otherwise absorb (it was the largest error left in the exit points);
+- the wrench balance at pose k (with a ``force_std``; poses whose cables are all taut): force
+  Σ τ_ik·u_ik − m·g and moment about the platform's origin Σ ᵇR_p·b_i × (−τ_ik·u_ik) +
+  ᵇR_p·c × m·g, τ_ik = (r_ik − b_i)/(1 + g_i) from the readings r_ik, u_ik the unit vector of
+  the cable's free segment (eq. 15-24), m·g the platform's weight at its centre of mass c (as
+  the description states them). Gravity is the one direction every recording sees in the
+  base frame: a frame tilted by θ leaves m·g·θ (0.6 N per degree on ACROBOT) in every pose's
+  force balance, where the length and tag residuals cannot tell it (it is a gauge for them),
+  so the balance levels the frame; and anchors placed δ off the centre of mass leave m·g·δ
+  in the moment balance (0.03 N·m per mm), which places the platform frame;
 - priors: each shared correction over the builder's tolerance (:class:`Priors`). The data
   cannot see the base and platform frames themselves (a rigid motion of exit points, tag and
-  poses together, or of anchors, camera and poses, leaves every measurement unchanged): the
-  priors fix those gauges, and :mod:`cdpr_twin.calibrate.solver` reports them.
+  poses together, or of anchors, camera and poses, leaves every measurement unchanged; with
+  the force balance, only the base frame's position and its rotation about the vertical stay
+  unseen): the priors fix those gauges, and :mod:`cdpr_twin.calibrate.solver` reports them.
+  Among them, the pose where the encoders were homed (:attr:`Observations.home`): the robot
+  stood at the pose it was homed at, within the homing's repeatability — the one reference
+  of the base frame's position the robot itself has, beside the builder's tolerances.
 """
 
 from __future__ import annotations
@@ -39,55 +53,11 @@ import numpy as np
 from scipy.sparse import lil_matrix
 from scipy.spatial.transform import Rotation
 
+from cdpr_twin.calibrate.layout import BLOCKS, Layout
+from cdpr_twin.calibrate.observations import Observations
 from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.kinematics import pulley_lengths
+from cdpr_twin.kinematics import pulley_vectors
 from cdpr_twin.se3 import inverse, se3_exp
-
-BLOCKS = ("exit", "anchor", "offset", "scale", "camera", "tag", "intrinsics")
-"""The shared parameter blocks, in the order they sit in the parameter vector."""
-
-
-@dataclass(frozen=True, eq=False)
-class Observations:
-    """What the robot recorded at K static poses (no truth in it).
-
-    Attributes:
-        encoder: (K, m) encoder lengths [m].
-        tensions: (K, m) tension readings [N].
-        taut: (K, m) readings to use (cables taut, readings not clipped).
-        T_cam_tag: (K, 4, 4) detected tag poses (pupil frame; anything where not seen).
-        seen: (K,) whether the tag was detected at pose k.
-        T_guess: (K, 4, 4) the poses the robot was commanded to (the solver's start).
-    """
-
-    encoder: np.ndarray
-    tensions: np.ndarray
-    taut: np.ndarray
-    T_cam_tag: np.ndarray
-    seen: np.ndarray
-    T_guess: np.ndarray
-
-    @property
-    def n_poses(self) -> int:
-        """Number of poses K."""
-        return self.encoder.shape[0]
-
-    @property
-    def redundancy(self) -> np.ndarray:
-        """(K,) equations beyond the pose's own six unknowns: taut cables, + 6 with the tag.
-
-        A pose without any (e.g. six taut cables and no tag) is fitted exactly whatever the
-        shared parameters are: it carries no information on them, and where its six cables are
-        ill-conditioned it only slows the solver down.
-        """
-        return self.taut.sum(axis=1) + 6 * self.seen.astype(int) - 6
-
-    def subset(self, keep: np.ndarray) -> Observations:
-        """The observations at the poses ``keep`` (a (K,) mask or indices) selects."""
-        return Observations(
-            self.encoder[keep], self.tensions[keep], self.taut[keep], self.T_cam_tag[keep],
-            self.seen[keep], self.T_guess[keep],
-        )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -101,6 +71,8 @@ class NoiseModel:
         tag_depth_std: tag position noise along the optical axis at 0 m [m].
         tag_std_per_m: growth of both with the tag's distance [m per m].
         tag_rotation_std: tag orientation noise [rad].
+        force_std: the force balance's residual per axis [N]; ``None``: no wrench balance.
+        moment_std: the moment balance's residual per axis [N·m].
     """
 
     length_std: float = 15e-6
@@ -108,6 +80,8 @@ class NoiseModel:
     tag_depth_std: float = 0.5e-3
     tag_std_per_m: float = 4e-3
     tag_rotation_std: float = math.radians(0.3)
+    force_std: float | None = None
+    moment_std: float = 0.002
 
 
 @dataclass(frozen=True)
@@ -119,13 +93,19 @@ class Priors:
         anchor: anchor point position [m] per axis.
         offset: length offset [m] (encoders homed at a pose the model misplaces).
         scale: relative drum radius error.
+        tension_bias: tension sensor offset [N].
+        tension_gain: tension sensor relative gain error.
         camera_position: camera mount position [m] per axis.
         camera_rotation: camera mount orientation [rad] per axis.
         tag_position: tag position [m] per axis.
         tag_rotation: tag orientation [rad] per axis.
         intrinsics: the detector's intrinsics error: fx, fy, cx, cy [px], k1, k2, p1, p2.
+        home_position: the homing's repeatability [m] per axis: where the encoders were homed
+            the robot stood at the pose it was homed at, within this (and ``home_rotation``).
+        home_rotation: the homing's repeatability [rad] per axis.
         estimate: the blocks to estimate (others stay nominal), from :data:`BLOCKS`
-            (``intrinsics`` only with a :class:`Detector`).
+            (``intrinsics`` only with a :class:`Detector`, the tension sensors' only with a
+            force balance).
         use_priors: add the prior residuals (without them the gauges are free).
     """
 
@@ -133,11 +113,15 @@ class Priors:
     anchor: float = 0.004
     offset: float = 0.05
     scale: float = 0.005
+    tension_bias: float = 0.24 / math.sqrt(3.0)
+    tension_gain: float = 0.001
     camera_position: float = 0.001
     camera_rotation: float = math.radians(0.3)
     tag_position: float = 0.001
     tag_rotation: float = math.radians(0.3)
     intrinsics: tuple[float, ...] = (2.0, 2.0, 1.5, 1.5, 0.01, 0.02, 5e-4, 5e-4)
+    home_position: float = 0.001
+    home_rotation: float = math.radians(0.2)
     estimate: tuple[str, ...] = BLOCKS
     use_priors: bool = True
 
@@ -193,64 +177,6 @@ def inverse_stack(T: np.ndarray) -> np.ndarray:
     return out
 
 
-class Layout:
-    """Where each parameter sits in the vector: shared blocks, then 6 per pose.
-
-    Args:
-        m: cable count.
-        n_poses: K.
-        priors: which blocks are estimated, and their prior σ.
-        with_intrinsics: whether the intrinsics block can be estimated (a detector is known).
-    """
-
-    def __init__(self, m: int, n_poses: int, priors: Priors, with_intrinsics: bool = False) -> None:
-        sizes = dict(exit=3 * m, anchor=3 * m, offset=m, scale=m, camera=6, tag=6, intrinsics=8)
-        self.m, self.n_poses, self.blocks = m, n_poses, {}
-        at = 0
-        for name in BLOCKS:
-            if name in priors.estimate and (name != "intrinsics" or with_intrinsics):
-                self.blocks[name] = slice(at, at + sizes[name])
-                at += sizes[name]
-        self.n_shared = at
-        self.n = at + 6 * n_poses
-        self.sigma = np.concatenate([self._prior(n, priors) for n in self.blocks] or [[]])
-
-    def _prior(self, name: str, p: Priors) -> np.ndarray:
-        if name == "intrinsics":
-            return np.asarray(p.intrinsics, dtype=float)
-        if name in ("camera", "tag"):
-            pos, rot = getattr(p, f"{name}_position"), getattr(p, f"{name}_rotation")
-            return np.array([pos] * 3 + [rot] * 3)
-        return np.full(self.m * (3 if name in ("exit", "anchor") else 1), getattr(p, name))
-
-    def pose(self, k: int) -> slice:
-        """The slice of pose k's six parameters."""
-        return slice(self.n_shared + 6 * k, self.n_shared + 6 * k + 6)
-
-    def names(self) -> list[str]:
-        """A name per shared parameter (``exit3.y``, ``offset5``, ``camera.rx``…; from 1)."""
-        out: list[str] = []
-        for name in self.blocks:
-            if name in ("exit", "anchor"):
-                out += [f"{name}{i + 1}.{ax}" for i in range(self.m) for ax in "xyz"]
-            elif name in ("camera", "tag"):
-                out += [f"{name}.{ax}" for ax in ("x", "y", "z", "rx", "ry", "rz")]
-            elif name == "intrinsics":
-                out += [f"intrinsics.{k}" for k in ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2")]
-            else:
-                out += [f"{name}{i + 1}" for i in range(self.m)]
-        return out
-
-    def get(self, x: np.ndarray, name: str) -> np.ndarray:
-        """A block's values (zeros when not estimated), shaped (m, 3), (m,) or (6,)."""
-        m = self.m
-        shape = dict(exit=(m, 3), anchor=(m, 3), offset=(m,), scale=(m,), intrinsics=(8,))
-        shape = shape.get(name, (6,))
-        if name not in self.blocks:
-            return np.zeros(shape)
-        return x[self.blocks[name]].reshape(shape)
-
-
 @dataclass(frozen=True, eq=False)
 class Model:
     """The robot the parameters describe (nominal + corrections), and the poses.
@@ -260,6 +186,8 @@ class Model:
         b_platform: (m, 3) anchor points [m].
         offset: (m,) length offsets c_i [m].
         scale: (m,) drum scale errors s_i.
+        tension_bias: (m,) tension sensor offsets b_i [N].
+        tension_gain: (m,) tension sensor gain errors g_i.
         T_platform_cam: (4, 4) camera mount.
         T_base_tag: (4, 4) tag pose.
         T_base_platform: (K, 4, 4) platform poses.
@@ -270,6 +198,8 @@ class Model:
     b_platform: np.ndarray
     offset: np.ndarray
     scale: np.ndarray
+    tension_bias: np.ndarray
+    tension_gain: np.ndarray
     T_platform_cam: np.ndarray
     T_base_tag: np.ndarray
     T_base_platform: np.ndarray
@@ -300,8 +230,10 @@ class Problem:
     ) -> None:
         self.nominal, self.T_base_tag, self.obs = nominal, np.asarray(T_base_tag), obs
         self.priors, self.noise = priors, noise
-        self.layout = Layout(nominal.n_cables, obs.n_poses, priors, detector is not None)
+        statics = noise.force_std is not None
+        self.layout = Layout(nominal.n_cables, obs.n_poses, priors, detector is not None, statics)
         taut = np.asarray(obs.taut, bool)
+        self.force_k = np.flatnonzero(taut.all(axis=1)) if statics else np.zeros(0, int)
         counts = np.maximum(taut.sum(axis=0), 1)
         self.e_ref = np.where(taut, obs.encoder, 0.0).sum(axis=0) / counts
         self.rows_k, self.rows_i = np.nonzero(taut)
@@ -316,8 +248,10 @@ class Problem:
                  for T in obs.T_cam_tag[self.seen]]
             )  # fmt: skip
         self.n_cable_rows, self.n_tag_rows = len(self.rows_k), 6 * len(self.seen)
-        self.n_data = self.n_cable_rows + self.n_tag_rows
-        self.n_prior = self.layout.n_shared if priors.use_priors else 0
+        self.n_force_rows = 6 * len(self.force_k)
+        self.n_data = self.n_cable_rows + self.n_tag_rows + self.n_force_rows
+        self.home_k = np.flatnonzero(obs.homed) if priors.use_priors else np.zeros(0, int)
+        self.n_prior = self.layout.n_shared + 6 * len(self.home_k) if priors.use_priors else 0
 
     def model(self, x: np.ndarray) -> Model:
         """The robot and poses parameters ``x`` describe."""
@@ -328,6 +262,8 @@ class Problem:
             b_platform=g.b_platform + L.get(x, "anchor"),
             offset=L.get(x, "offset"),
             scale=L.get(x, "scale"),
+            tension_bias=L.get(x, "tension_bias"),
+            tension_gain=L.get(x, "tension_gain"),
             T_platform_cam=g.T_platform_cam @ se3_exp(L.get(x, "camera")),
             T_base_tag=self.T_base_tag @ se3_exp(L.get(x, "tag")),
             T_base_platform=poses,
@@ -335,23 +271,41 @@ class Problem:
         )
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
-        """All residuals, unitless: cables, then tag poses, then priors. Returns (n_rows,)."""
+        """All residuals, unitless: cables, tag poses, forces, priors. Returns (n_rows,)."""
         mod = self.model(x)
-        parts = [self._cables(mod), self._tags(mod)]
-        if self.n_prior:
-            parts.append(x[: self.layout.n_shared] / self.layout.sigma)
+        parts = [self._cables(mod), self._tags(mod), self._forces(mod)]
+        if self.n_prior:  # the builder's tolerances, and where the robot was homed
+            L, p = self.layout, self.priors
+            parts.append(x[: L.n_shared] / L.sigma)
+            home = [p.home_position] * 3 + [p.home_rotation] * 3
+            parts += [x[L.pose(k)] / home for k in self.home_k]
         return np.concatenate(parts)
 
     def _cables(self, mod: Model) -> np.ndarray:
         k, i, g, o = self.rows_k, self.rows_i, self.nominal, self.obs
         T = mod.T_base_platform[k]
         b = np.einsum("nij,nj->ni", T[:, :3, :3], mod.b_platform[i]) + T[:, :3, 3]
-        l_f = pulley_lengths(mod.a_base[i], g.pulley_radius[i], b)
+        l_f, _ = pulley_vectors(mod.a_base[i], g.pulley_radius[i], b)
         tau = o.tensions[k, i]
         l0_model = g.es[i] * l_f / (g.es[i] + tau)
         e = o.encoder[k, i]
         l0_enc = e + mod.offset[i] + mod.scale[i] * (e - self.e_ref[i])
         return (l0_model - l0_enc) / self.noise.length_std
+
+    def _forces(self, mod: Model) -> np.ndarray:
+        k, g, m = self.force_k, self.nominal, self.layout.m
+        T = mod.T_base_platform[k]
+        rb = np.einsum("nij,cj->nci", T[:, :3, :3], mod.b_platform)  # ᵇR_p·b_i
+        b = rb + T[:, None, :3, 3]
+        a = np.broadcast_to(mod.a_base, b.shape).reshape(-1, 3)
+        _, u = pulley_vectors(a, np.tile(g.pulley_radius, len(k)), b.reshape(-1, 3))
+        tau = (self.obs.tensions[k] - mod.tension_bias) / (1.0 + mod.tension_gain)
+        f = tau[:, :, None] * u.reshape(len(k), m, 3)  # what each cable's tension balances
+        weight = g.mass * g.gravity
+        F = f.sum(axis=1) - weight
+        M = -np.cross(rb, f).sum(axis=1) + np.cross(T[:, :3, :3] @ g.com_platform, weight)
+        n = self.noise
+        return np.hstack([F / (n.force_std or 1.0), M / n.moment_std]).ravel()
 
     def predicted_tags(self, mod: Model) -> np.ndarray:
         """The detections the model predicts where the tag was seen, (n_seen, 4, 4).
@@ -381,20 +335,22 @@ class Problem:
         """Which residual depends on which parameter: (n_rows, n) pattern of ones."""
         L = self.layout
         S = lil_matrix((self.n_data + self.n_prior, L.n), dtype=np.int8)
+        pose = [list(range(L.pose(k).start, L.pose(k).stop)) for k in range(L.n_poses)]
         for row, (k, i) in enumerate(zip(self.rows_k, self.rows_i, strict=True)):
-            cols = list(range(L.pose(k).start, L.pose(k).stop))
-            for name, width in (("exit", 3), ("anchor", 3), ("offset", 1), ("scale", 1)):
-                if name in L.blocks:
-                    start = L.blocks[name].start + width * i
-                    cols += range(start, start + width)
+            cols = pose[k] + [c for n in ("exit", "anchor", "offset", "scale")
+                              for c in L.columns(n, i)]  # fmt: skip
             S[row, cols] = 1
+        shared = [c for n in ("camera", "tag", "intrinsics") for c in L.columns(n)]
         for j, k in enumerate(self.seen):
-            cols = list(range(L.pose(k).start, L.pose(k).stop))
-            for name in ("camera", "tag", "intrinsics"):
-                if name in L.blocks:
-                    cols += range(L.blocks[name].start, L.blocks[name].stop)
-            for r in range(6):
-                S[self.n_cable_rows + 6 * j + r, cols] = 1
-        for j in range(self.n_prior):
+            S[self.n_cable_rows + 6 * j : self.n_cable_rows + 6 * j + 6, pose[k] + shared] = 1
+        shared = [c for n in ("exit", "anchor", "tension_bias", "tension_gain")
+                  for c in L.columns(n)]  # fmt: skip
+        at = self.n_cable_rows + self.n_tag_rows
+        for j, k in enumerate(self.force_k):
+            S[at + 6 * j : at + 6 * j + 6, pose[k] + shared] = 1
+        for j in range(L.n_shared if self.n_prior else 0):
             S[self.n_data + j, j] = 1
+        for j, k in enumerate(self.home_k):
+            for q in range(6):
+                S[self.n_data + L.n_shared + 6 * j + q, L.pose(k).start + q] = 1
         return S

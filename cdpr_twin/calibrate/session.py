@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -19,12 +19,19 @@ from cdpr_twin.calibrate.excitation import excitation_poses
 from cdpr_twin.calibrate.problem import NoiseModel, Priors, Problem
 from cdpr_twin.calibrate.solver import Calibration, CalibrationError, solve
 from cdpr_twin.scenario import Scenario
-from cdpr_twin.se3 import pose_distance
+from cdpr_twin.se3 import pose_distance, so3_log
 
 NOISE = NoiseModel(tag_std_per_m=6e-3, tag_rotation_std=math.radians(1.0))
 """The measurements' noise in the twin's ``acrobot`` profile: the tag's position error grows to
 ≈ 3 mm along the optical axis at 0.45 m and its rotation errors reach 1–3° (a 4 cm tag, the
-intrinsics' calibration error; seen on seed 19), the encoders' count is 31 µm."""
+intrinsics' calibration error; seen on seed 19), the encoders' count is 31 µm. The force
+balance's noise comes from the recording (:func:`noise_of`)."""
+
+FORCE_FLOOR = 0.01
+"""What the force balance misses beside the readings' noise [N per axis]: the cables' own
+weight (2.4 g/m on ACROBOT, ≈ 0.1 N over the eight, which changes a little with the pose) and
+the directions' errors; at robot 8's true geometry and poses, with each sensor's offset and
+gain fitted, the balance's residual is 0.006–0.010 N per axis (acrobot profile, 240 poses)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,6 +45,7 @@ class Session:
         excitation_s: time to choose the poses [s].
         dropped: recorded poses left out: no equation beyond their own six unknowns
             (:attr:`~cdpr_twin.calibrate.problem.Observations.redundancy`).
+        noise: the measurement noise the solver weighed the residuals with.
     """
 
     calibration: Calibration
@@ -45,13 +53,34 @@ class Session:
     priors: Priors
     excitation_s: float
     dropped: int = 0
+    noise: NoiseModel = NOISE
 
 
-def priors_of(s: Scenario, focal_px: float) -> Priors:
+MOMENT_ARM = 0.1
+"""The moment balance's noise over the force balance's [m]: the anchors' lever arm on ACROBOT
+(at robot 8's truth, fitted as for :data:`FORCE_FLOOR`: 0.0011–0.0014 N·m per axis)."""
+
+HOME_FLOOR = 1e-5
+"""Where homing is exact, the home readings' pose is still the settled robot's [m, rad]."""
+
+
+def noise_of(rec: Recording, frames: int) -> NoiseModel:
+    """:data:`NOISE` with the force balance's noise.
+
+    Each of the m readings' noise (averaged over ``frames``) counted whole on each axis, and
+    :data:`FORCE_FLOOR`.
+    """
+    reading = rec.tension_sensors[2] * math.sqrt(rec.obs.encoder.shape[1] / frames)
+    force = math.hypot(FORCE_FLOOR, reading)
+    return replace(NOISE, force_std=force, moment_std=force * MOMENT_ARM)
+
+
+def priors_of(s: Scenario, focal_px: float, tension: tuple[float, float, float]) -> Priors:
     """The builder's tolerances of a scenario's robot (its ``[truth]`` magnitudes).
 
     And the camera calibration's (the realism profile's; ``focal_px`` turns the relative focal
-    error into pixels).
+    error into pixels), and the tension sensors' (``tension``: their datasheet's offset std
+    [N] and relative gain error std, :attr:`Recording.tension_sensors`).
     """
     t, tiny = s.truth, 1e-7  # a zero tolerance: the block is known (kept at nominal)
     c = s.realism.camera
@@ -65,6 +94,10 @@ def priors_of(s: Scenario, focal_px: float) -> Priors:
         camera_rotation=max(t.camera_rotation_std, tiny),
         tag_position=max(t.tag_position_std, tiny),
         tag_rotation=max(t.tag_rotation_std, tiny),
+        tension_bias=max(tension[0], tiny),
+        tension_gain=max(tension[1], tiny),
+        home_position=max(s.realism.homing.position_std, HOME_FLOOR),
+        home_rotation=max(s.realism.homing.rotation_std, HOME_FLOOR),
         intrinsics=tuple(max(float(v), tiny) for v in intrinsics),
     )
 
@@ -99,18 +132,20 @@ def calibrate(s: Scenario, n_poses: int = 240, frames: int = 4, workers: int = 1
         )
     keep = rec.obs.redundancy > 0
     rec = rec.subset(keep)
-    priors = priors_of(s, rec.detector.focal_px)
-    problem = Problem(nominal.geometry, nominal.T_base_tag, rec.obs, priors, NOISE, rec.detector)
+    priors = priors_of(s, rec.detector.focal_px, rec.tension_sensors)
+    noise = noise_of(rec, frames)
+    problem = Problem(nominal.geometry, nominal.T_base_tag, rec.obs, priors, noise, rec.detector)
     cal = solve(problem)
-    return Session(cal, rec, priors, chosen, int(np.count_nonzero(~keep)))
+    return Session(cal, rec, priors, chosen, int(np.count_nonzero(~keep)), noise)
 
 
-def _aligned(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """P moved by the rigid motion that best fits it onto Q (Kabsch). Returns (m, 3)."""
+def _fit(P: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rigid motion that best fits P onto Q (Kabsch): R (3, 3), and P moved by it (m, 3)."""
     pc, qc = P.mean(axis=0), Q.mean(axis=0)
     U, _, Vt = np.linalg.svd((P - pc).T @ (Q - qc))
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
-    return (P - pc) @ (Vt.T @ D @ U.T).T + qc
+    R = Vt.T @ D @ U.T
+    return R, (P - pc) @ R.T + qc
 
 
 def _mm(x: np.ndarray) -> list[float]:
@@ -128,13 +163,18 @@ def truth_check(session: Session, nominal_geometry, nominal_T_base_tag) -> dict:
         ("calibrated", cal.a_base, cal.b_platform, cal.T_platform_cam, cal.T_base_tag),
     ):  # fmt: skip
         e_a = np.linalg.norm(a - g.a_base, axis=1)
-        e_shape = np.linalg.norm(_aligned(a, g.a_base) - g.a_base, axis=1)
+        R, fitted = _fit(a, g.a_base)
+        e_shape = np.linalg.norm(fitted - g.a_base, axis=1)
         e_b = np.linalg.norm(b - g.b_platform, axis=1)
         cam, tag = pose_distance(T_cam, g.T_platform_cam), pose_distance(T_tag, truth.T_base_tag)
         out[name] = {
             "exit_error_mm": _mm(e_a),
             "exit_error_median_mm": float(np.median(e_a) * 1e3),
             "exit_shape_error_median_mm": float(np.median(e_shape) * 1e3),
+            # the frame error that shape leaves out: the fit's rotation (x, y: tilt; z: about
+            # the vertical) and the exit points' centroid offset
+            "exit_frame_rotation_deg": np.round(np.degrees(so3_log(R.T)), 4).tolist(),
+            "exit_frame_shift_mm": _mm((a - g.a_base).mean(axis=0)),
             "anchor_error_median_mm": float(np.median(e_b) * 1e3),
             "camera_error_mm_deg": [cam[0] * 1e3, math.degrees(cam[1])],
             "tag_error_mm_deg": [tag[0] * 1e3, math.degrees(tag[1])],
@@ -145,6 +185,11 @@ def truth_check(session: Session, nominal_geometry, nominal_T_base_tag) -> dict:
         float(np.degrees(np.median(dr))),
     ]
     out["calibrated"]["drum_scale_error"] = np.round(cal.scale - truth.drum_scale, 6).tolist()
+    if any(n.startswith("tension_bias") for n in session.calibration.names):  # force balance
+        out["nominal"]["tension_bias_n"] = np.round(truth.tension_bias, 4).tolist()
+        out["calibrated"]["tension_bias_error_n"] = np.round(
+            cal.tension_bias - truth.tension_bias, 4
+        ).tolist()
     if "intrinsics" in session.calibration.names[-1]:  # the detector's intrinsics estimated
         est = session.calibration.estimate[-8:]
         out["nominal"]["intrinsics_error"] = np.round(truth.intrinsics_error, 6).tolist()
