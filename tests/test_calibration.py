@@ -203,7 +203,7 @@ def test_calibrates_robot_19_and_its_open_loop_run_improves(tmp_path):
     from cdpr_twin.sim import build_robot
 
     s = load_scenario("paper_open_loop")  # robot 19, acrobot realism profile
-    session = calibrate(s, n_poses=60)
+    session = calibrate(replace(s, seed=s.seed + 1), n_poses=60)  # a session homed on its own
     _, nominal, _ = build_robot(s.model.file)
     check = truth_check(session, nominal.geometry, nominal.T_base_tag)
     robot, _ = write(tmp_path, ROBOT, session.calibration, {}, session.recording.drum_radii)
@@ -219,8 +219,9 @@ def test_calibrates_robot_19_and_its_open_loop_run_improves(tmp_path):
     assert exit_cal < 0.7 * check["nominal"]["exit_error_median_mm"]
     assert check["calibrated"]["exit_shape_error_median_mm"] < 5.0
     assert p1["calibrated"] < 0.5 * p1["nominal"]
-    # the issue's goals (1 mm median exit error, < 1 mm at p1) are not met: see the README's
-    # "Self-calibration" (the base frame is fixed only by priors); this prints by how much
+    # the issue's goals (1 mm median exit error, < 1 mm at p1): see the README's
+    # "Self-calibration" (what only the tag's and the homing's tolerances place stays, and a run
+    # homed anew misses p1 by its homing's offset); this prints where this robot stands
     print(
         f"exit points {exit_cal:.2f} mm median (goal 1 mm); open-loop error at p1 "
         f"{p1['calibrated'] * 1e3:.2f} mm (goal 1 mm; nominal model {p1['nominal'] * 1e3:.2f} mm)"
@@ -305,3 +306,87 @@ def test_a_failed_report_write_leaves_no_description_under_its_final_name(tmp_pa
     robot, rep = output.write(tmp_path, tmp_path / "robot.toml", None, {}, None)
     assert robot.read_text() == "# robot\n" and json.loads(rep.read_text()) == {"fit": 1}
     assert sorted(p.name for p in tmp_path.iterdir()) == [robot.name, rep.name]
+
+
+def _leveled_frame_robot(n_poses: int = 60, seed: int = 11):
+    """A drawn robot whose whole base side (exit points, tag) sits tilted and shifted against
+    gravity, its readings at n poses: tensions from the true statics (the tension distribution
+    of :mod:`cdpr_twin.statics`, gravity along −z) read by sensors with offsets and gain
+    errors, and first the homed robot's, exactly at the start pose."""
+    from cdpr_twin.statics import InfeasibleTensionError, tension_distribution
+
+    rng = np.random.default_rng(seed)
+    g, T_tag, K, size = _nominal()
+    m = g.n_cables
+    start = se3.pose_from_vector([0.112, -0.032, 0.301, -12, -10, 0])
+    T_cmd = np.array([start, *excitation_poses(g, T_tag, K, size, n_poses, start, seed=seed)])
+    # the frame error no length or tag reading sees: 0.5° of tilt, 3.7 mm of shift, about the tag
+    G = se3.transform(se3.so3_exp(np.radians([0.4, -0.3, 0.0])), [0.003, -0.002, 0.001])
+    G = T_tag @ G @ se3.inverse(T_tag)
+    a = g.a_base + rng.normal(0, 0.012, (m, 3))
+    true = replace(
+        g, a_base=a @ G[:3, :3].T + G[:3, 3], b_platform=g.b_platform + rng.normal(0, 0.004, (m, 3))
+    )
+    # homed exactly at the start pose (in the true frame), then wherever the robot went
+    moved = [G @ T @ se3.se3_exp(rng.normal(0, 0.004, 6)) for T in T_cmd[1:]]
+    T_true, tau, keep = [], [], []
+    for k, T in enumerate([T_cmd[0], *moved]):
+        try:  # (the true robot cannot hold every pose the nominal one can)
+            tau.append(tension_distribution(true, T, tau_min=2.0))
+        except InfeasibleTensionError:
+            continue
+        T_true.append(T)
+        keep.append(k)
+    T_true, tau, T_cmd = np.array(T_true), np.array(tau), T_cmd[keep]
+    assert keep[0] == 0 and len(keep) > 0.8 * len(T_cmd)
+    bias, gain = rng.uniform(-0.24, 0.24, m), rng.normal(0, 0.001, m)
+    readings = (1 + gain) * tau + bias + rng.normal(0, 0.01, tau.shape)
+    l0 = g.es * np.array([cable_lengths(true, T, "pulley") for T in T_true]) / (g.es + tau)
+    # homed: reading what the nominal model says at the start pose, with the tensions there
+    home = g.es * cable_lengths(g, T_cmd[0], "pulley") / (g.es + tau[0])
+    enc = home + l0 - l0[0] + rng.normal(0, NOISE.length_std, l0.shape)
+    views = [se3.inverse(true.T_platform_cam) @ se3.inverse(T) @ G @ T_tag for T in T_true]
+    seen = np.array([tag_seen(T, K, size) for T in views])
+    obs = Observations(enc, readings, np.ones_like(tau, bool), np.array(views), seen, T_cmd,
+                       np.arange(len(T_true)) == 0)  # fmt: skip
+    return g, T_tag, obs, true, bias, T_true
+
+
+def tag_seen(T_cam_tag, K, size) -> bool:
+    uv = vision.project_points(K, T_cam_tag, vision.tag_corners_object(size))
+    return bool(T_cam_tag[2, 3] > 0.05 and np.all(uv > 0) and np.all(uv < [K.width, K.height]))
+
+
+def _frame_error(cal, true):
+    """The frame error between estimated and true exit points: the best-fit rotation [deg] (x, y:
+    tilt) and the centroid's offset [m]."""
+    A, B = cal.model.a_base, true.a_base
+    U, _, Vt = np.linalg.svd((A - A.mean(0)).T @ (B - B.mean(0)))
+    R = Vt.T @ np.diag([1, 1, np.linalg.det(Vt.T @ U.T)]) @ U.T
+    return np.degrees(se3.so3_log(R.T)), (A - B).mean(axis=0)
+
+
+def test_the_wrench_balance_levels_the_frame_and_with_the_homing_places_it():
+    # truth: tensions from the statics solver in a frame tilted 0.5° against gravity and
+    # shifted 3.7 mm, which lengths and tag views alone cannot see (a gauge for them)
+    g, T_tag, obs, true, bias, _ = _leveled_frame_robot()
+    blocks = ("exit", "anchor", "offset", "tension_bias", "tension_gain", "camera", "tag")
+    balance = replace(NOISE, force_std=0.02, moment_std=0.002)
+    homed, unhomed = (Priors(estimate=blocks, home_position=s, home_rotation=s) for s in (1e-5, 1))
+    fits = {
+        (h, b): solve(Problem(g, T_tag, obs, priors, noise))
+        for h, priors in (("homed", homed), ("unhomed", unhomed))
+        for b, noise in (("balance", balance), ("blind", NOISE))
+    }
+    err = {key: _frame_error(cal, true) for key, cal in fits.items()}
+    # gravity levels the frame (measured: 0.07° with the balance, 0.32° without; the tilt left
+    # is what the sensors' offsets, estimated beside it, trade with)
+    assert np.hypot(*err["unhomed", "balance"][0][:2]) < 0.1
+    assert np.hypot(*err["unhomed", "blind"][0][:2]) > 0.25
+    # the moments place the platform frame, the homed pose the base frame (measured: the exit
+    # points' centroid 0.4 mm off with both, 4.7 mm with the homing alone, 5.2 mm balance alone)
+    assert np.linalg.norm(err["homed", "balance"][1]) < 1e-3
+    assert np.linalg.norm(err["homed", "blind"][1]) > 3e-3
+    assert np.linalg.norm(err["unhomed", "balance"][1]) > 3e-3
+    # and the sensors' offsets come out (measured: 0.033 N at most, of ±0.24 N)
+    assert np.max(np.abs(fits["homed", "balance"].model.tension_bias - bias)) < 0.06

@@ -90,7 +90,9 @@ def report(cal: Calibration, extra: dict) -> dict:
     ]
     return {
         "units": "exit/anchor/offset and camera/tag x y z: m; camera/tag rx ry rz: rad "
-        "(twists on the nominal); scale: relative drum radius error; intrinsics: the tag "
+        "(twists on the nominal); scale: relative drum radius error; tension_bias: N, "
+        "tension_gain: relative (each tension sensor reads (1 + gain)·tension + bias; "
+        "estimated, reported, not written into the description); intrinsics: the tag "
         "detector's error, fx fy cx cy: px, k1 k2 p1 p2: dimensionless (estimated, reported, "
         "not written into the description)",
         "parameters": params,
@@ -111,9 +113,12 @@ def report(cal: Calibration, extra: dict) -> dict:
             "smallest_singular_values": idn.singular_values[-16:].tolist(),
             "unseen_directions": idn.null_directions,
             "prior_determined": idn.prior_determined,
-            "gauge": "no measurement sees the base frame (a rigid motion of exit points, tag "
-            "and platform poses) or the platform frame (of anchor points, camera mount and "
-            "poses); the priors (builder's tolerances) fix them",
+            "gauge": "lengths and tag views do not see the base frame (a rigid motion of exit "
+            "points, tag and platform poses) or the platform frame (of anchor points, camera "
+            "mount and poses); the wrench balance levels the first (gravity) and places the "
+            "second against the platform's centre of mass, but not along the vertical nor "
+            "about it; what is left, the priors fix (builder's tolerances, and the homing's "
+            "repeatability at the homed pose)",
         },
         **extra,
     }

@@ -37,8 +37,9 @@ Residuals, each divided by its noise so that they are unitless:
 - priors: each shared correction over the builder's tolerance (:class:`Priors`). The data
   cannot see the base and platform frames themselves (a rigid motion of exit points, tag and
   poses together, or of anchors, camera and poses, leaves every measurement unchanged; with
-  the force balance, only the base frame's position and its rotation about the vertical stay
-  unseen): the priors fix those gauges, and :mod:`cdpr_twin.calibrate.solver` reports them.
+  the wrench balance, the base frame's position and its rotation about the vertical, and the
+  platform frame's along and about the vertical stay unseen): the priors fix those gauges,
+  and :mod:`cdpr_twin.calibrate.solver` reports them.
   Among them, the pose where the encoders were homed (:attr:`Observations.home`): the robot
   stood at the pose it was homed at, within the homing's repeatability — the one reference
   of the base frame's position the robot itself has, beside the builder's tolerances.
