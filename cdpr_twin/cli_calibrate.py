@@ -149,7 +149,8 @@ def _print(cal, extra: dict, robot: Path, report: Path) -> None:
     idn, chk = cal.identifiability, extra["check_against_truth"]
     t = extra["timing_s"]
     print(
-        f"calibrated from {extra['poses']} poses (tag seen at {extra['tag_seen']}; "
+        f"calibrated from {extra['poses']} poses, the homed one first (tag seen at "
+        f"{extra['tag_seen']}; "
         f"{extra['poses_without_redundancy_left_out']} without a redundant equation left out) in "
         f"{t['total']:.1f} s (recording {t['recording']:.1f} s, solve {t['solve']:.1f} s)"
     )

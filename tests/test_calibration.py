@@ -390,3 +390,13 @@ def test_the_wrench_balance_levels_the_frame_and_with_the_homing_places_it():
     assert np.linalg.norm(err["unhomed", "balance"][1]) > 3e-3
     # and the sensors' offsets come out (measured: 0.033 N at most, of ±0.24 N)
     assert np.max(np.abs(fits["homed", "balance"].model.tension_bias - bias)) < 0.06
+
+
+def test_a_zero_noise_or_homing_tolerance_is_refused():
+    # a zero σ would divide a residual by zero (inf/nan in the solver): refused where it is set
+    with pytest.raises(ValueError, match="force_std"):
+        NoiseModel(force_std=0.0)
+    with pytest.raises(ValueError, match="moment_std"):
+        NoiseModel(force_std=0.02, moment_std=0.0)
+    with pytest.raises(ValueError, match="home_position"):
+        Priors(home_position=0.0)

@@ -42,11 +42,13 @@ class Observations:
 
     @property
     def redundancy(self) -> np.ndarray:
-        """(K,) equations beyond the pose's own six unknowns: taut cables, + 6 with the tag.
+        """(K,) equations beyond the pose's own six unknowns.
 
-        A pose without any (e.g. six taut cables and no tag) is fitted exactly whatever the
-        shared parameters are: it carries no information on them, and where its six cables are
-        ill-conditioned it only slows the solver down.
+        Taut cables, + 6 with the tag, + 6 at the homed pose (its prior). The wrench balance's
+        rows are not counted (on a robot with more than six cables, a pose with all cables taut
+        has redundant lengths anyway). A pose without any (e.g. six taut cables and no tag) is
+        fitted exactly whatever the shared parameters are: it carries no information on them,
+        and where its six cables are ill-conditioned it only slows the solver down.
         """
         return self.taut.sum(axis=1) + 6 * (self.seen.astype(int) + self.homed) - 6
 

@@ -81,6 +81,26 @@ def calibrated_description(source: Path, cal: Calibration, drum_radii: np.ndarra
     return toml_text(data, header)
 
 
+UNITS = (
+    "exit/anchor/offset and camera/tag x y z: m; camera/tag rx ry rz: rad (twists on the "
+    "nominal); scale: relative drum radius error; tension_bias: N, tension_gain: relative "
+    "(each tension sensor reads (1 + gain)·tension + bias; estimated, reported, not written "
+    "into the description); intrinsics: the tag detector's error, fx fy cx cy: px, k1 k2 p1 "
+    "p2: dimensionless (estimated, reported, not written into the description)"
+)
+"""The units of ``calibration.json``'s parameters."""
+
+GAUGE = (
+    "lengths and tag views do not see the base frame (a rigid motion of exit points, tag and "
+    "platform poses) or the platform frame (of anchor points, camera mount and poses); the "
+    "wrench balance levels the first (gravity) and places the second's horizontal position "
+    "against the platform's centre of mass (its orientation stays unseen where the centre of "
+    "mass is on the platform's origin, its vertical position is seen weakly); what is left, "
+    "the priors fix (builder's tolerances, and the homing's repeatability at the homed pose)"
+)
+"""What the data cannot see, for ``calibration.json``."""
+
+
 def report(cal: Calibration, extra: dict) -> dict:
     """The report's content (JSON-ready): estimates, σ, fit, rank; ``extra`` merged in."""
     idn = cal.identifiability
@@ -89,12 +109,7 @@ def report(cal: Calibration, extra: dict) -> dict:
         for n, e, s, p in zip(cal.names, cal.estimate, cal.sigma, cal.prior_sigma, strict=True)
     ]
     return {
-        "units": "exit/anchor/offset and camera/tag x y z: m; camera/tag rx ry rz: rad "
-        "(twists on the nominal); scale: relative drum radius error; tension_bias: N, "
-        "tension_gain: relative (each tension sensor reads (1 + gain)·tension + bias; "
-        "estimated, reported, not written into the description); intrinsics: the tag "
-        "detector's error, fx fy cx cy: px, k1 k2 p1 p2: dimensionless (estimated, reported, "
-        "not written into the description)",
+        "units": UNITS,
         "parameters": params,
         "fit": {
             "chi2_data": cal.chi2,
@@ -113,12 +128,7 @@ def report(cal: Calibration, extra: dict) -> dict:
             "smallest_singular_values": idn.singular_values[-16:].tolist(),
             "unseen_directions": idn.null_directions,
             "prior_determined": idn.prior_determined,
-            "gauge": "lengths and tag views do not see the base frame (a rigid motion of exit "
-            "points, tag and platform poses) or the platform frame (of anchor points, camera "
-            "mount and poses); the wrench balance levels the first (gravity) and places the "
-            "second against the platform's centre of mass, but not along the vertical nor "
-            "about it; what is left, the priors fix (builder's tolerances, and the homing's "
-            "repeatability at the homed pose)",
+            "gauge": GAUGE,
         },
         **extra,
     }

@@ -32,14 +32,16 @@ Residuals, each divided by its noise so that they are unitless:
   the description states them). Gravity is the one direction every recording sees in the
   base frame: a frame tilted by θ leaves m·g·θ (0.6 N per degree on ACROBOT) in every pose's
   force balance, where the length and tag residuals cannot tell it (it is a gauge for them),
-  so the balance levels the frame; and anchors placed δ off the centre of mass leave m·g·δ
-  in the moment balance (0.03 N·m per mm), which places the platform frame;
+  so the balance levels the frame; and anchors placed δ across gravity off the centre of mass
+  leave m·g·δ in the moment balance (0.03 N·m per mm), which places the platform frame's
+  horizontal position;
 - priors: each shared correction over the builder's tolerance (:class:`Priors`). The data
   cannot see the base and platform frames themselves (a rigid motion of exit points, tag and
   poses together, or of anchors, camera and poses, leaves every measurement unchanged; with
-  the wrench balance, the base frame's position and its rotation about the vertical, and the
-  platform frame's along and about the vertical stay unseen): the priors fix those gauges,
-  and :mod:`cdpr_twin.calibrate.solver` reports them.
+  the wrench balance, the base frame's position and its rotation about the vertical and the
+  platform frame's orientation stay unseen — a centre of mass on the platform's origin, as on
+  ACROBOT, turns with it — and its vertical position is seen only weakly): the priors fix
+  those gauges, and :mod:`cdpr_twin.calibrate.solver` reports them.
   Among them, the pose where the encoders were homed (:attr:`Observations.home`): the robot
   stood at the pose it was homed at, within the homing's repeatability — the one reference
   of the base frame's position the robot itself has, beside the builder's tolerances.
@@ -83,6 +85,12 @@ class NoiseModel:
     tag_rotation_std: float = math.radians(0.3)
     force_std: float | None = None
     moment_std: float = 0.002
+
+    def __post_init__(self) -> None:
+        if self.force_std is not None and not self.force_std > 0:
+            raise ValueError(f"force_std must be > 0 N (or None: no balance), got {self.force_std}")
+        if not self.moment_std > 0:
+            raise ValueError(f"moment_std must be > 0 N·m, got {self.moment_std}")
 
 
 @dataclass(frozen=True)
@@ -132,6 +140,8 @@ class Priors:
             raise ValueError(f"unknown parameter block {unknown[0]!r}; choose from {BLOCKS}")
         if len(self.intrinsics) != 8:
             raise ValueError("intrinsics: 8 values (fx, fy, cx, cy, k1, k2, p1, p2)")
+        if not (self.home_position > 0 and self.home_rotation > 0):
+            raise ValueError("home_position and home_rotation must be > 0 (exact homing: a floor)")
 
 
 @dataclass(frozen=True)
@@ -288,7 +298,8 @@ class Problem:
         b = np.einsum("nij,nj->ni", T[:, :3, :3], mod.b_platform[i]) + T[:, :3, 3]
         l_f, _ = pulley_vectors(mod.a_base[i], g.pulley_radius[i], b)
         tau = o.tensions[k, i]
-        l0_model = g.es[i] * l_f / (g.es[i] + tau)
+        l0_model = g.es[i] * l_f / (g.es[i] + tau)  # (the raw readings: offsets of 0.24 N
+        # move the stretch by under 1 µm here, and the balance alone estimates them)
         e = o.encoder[k, i]
         l0_enc = e + mod.offset[i] + mod.scale[i] * (e - self.e_ref[i])
         return (l0_model - l0_enc) / self.noise.length_std
@@ -306,7 +317,9 @@ class Problem:
         F = f.sum(axis=1) - weight
         M = -np.cross(rb, f).sum(axis=1) + np.cross(T[:, :3, :3] @ g.com_platform, weight)
         n = self.noise
-        return np.hstack([F / (n.force_std or 1.0), M / n.moment_std]).ravel()
+        if not len(k):  # no balance (force_std None), or no pose with every cable taut
+            return np.zeros(0)
+        return np.hstack([F / n.force_std, M / n.moment_std]).ravel()
 
     def predicted_tags(self, mod: Model) -> np.ndarray:
         """The detections the model predicts where the tag was seen, (n_seen, 4, 4).

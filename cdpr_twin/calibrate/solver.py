@@ -72,7 +72,7 @@ class Calibration:
         x: (n,) the parameter vector at the solution.
         names: a name per shared parameter.
         estimate: (n_shared,) shared corrections (exit/anchor [m], offset [m], scale [-],
-            camera/tag twists [m, rad]).
+            tension_bias [N], tension_gain [-], camera/tag twists [m, rad], intrinsics).
         sigma: (n_shared,) their 1σ uncertainty (same units).
         prior_sigma: (n_shared,) their prior σ.
         chi2: weighted residual sum of squares of the data (priors left out).
