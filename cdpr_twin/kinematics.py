@@ -101,8 +101,7 @@ def pulley_lengths(a: np.ndarray, r: np.ndarray, b: np.ndarray) -> np.ndarray:
     Returns:
         (k,) lengths from A_i around the sheave to B_i [m].
     """
-    _, _, _, free, wrap, _ = _pulley(a, r, b)
-    return free + wrap
+    return pulley_vectors(a, r, b)[0]
 
 
 def pulley_vectors(a: np.ndarray, r: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

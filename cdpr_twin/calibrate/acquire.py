@@ -339,18 +339,15 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
         _reset_at_start(s, physics, settle_time=0.3)
         sensors.home(s.start_pose)
         rows, truth, here = [], [], s.start_pose
-        if index == 0:  # the readings where the encoders were homed, as they were
-            look = tag_in_view(g, nominal.T_base_tag, nominal.intrinsics, nominal.tag_size, here,
-                               VIEW_MARGIN)  # fmt: skip
-            wait = s.realism.camera.latency_ticks
-            rows.append(_read(physics, sensors, period, frames, wait, look, tighten=False))
-            truth.append(np.array(physics.T_base_platform))
-        for T in poses:
-            _move(physics, sensors, g, here, T, period)
+        # the first segment first reads where the encoders were homed, as the robot stands
+        stops = [(here, False)] * (index == 0) + [(T, True) for T in poses]
+        for T, moved in stops:
+            if moved:
+                _move(physics, sensors, g, here, T, period)
             look = tag_in_view(g, nominal.T_base_tag, nominal.intrinsics, nominal.tag_size, T,
                                VIEW_MARGIN)  # fmt: skip
             wait = s.realism.camera.latency_ticks
-            rows.append(_read(physics, sensors, period, frames, wait, look))
+            rows.append(_read(physics, sensors, period, frames, wait, look, tighten=moved))
             truth.append(np.array(physics.T_base_platform))
             here = T
         detector, intrinsics_error = _detector(sensors.camera, nominal.tag_size, s.realism)
