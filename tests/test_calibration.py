@@ -107,7 +107,7 @@ def test_the_normal_equations_reach_scipys_trust_region_minimum():
     # truth: scipy's least_squares (dense exact trust-region steps) on the same residuals
     from scipy.optimize import least_squares
 
-    from cdpr_twin.calibrate.solver import grouped_jacobian
+    from cdpr_twin.calibrate.jacobian import grouped_jacobian
 
     g, T_tag, obs, _ = _synthetic(camera_error=True, n_poses=20, seed=5)
     problem = Problem(g, T_tag, obs, Priors(), NOISE)

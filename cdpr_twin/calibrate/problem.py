@@ -50,6 +50,7 @@ Residuals, each divided by its noise so that they are unitless:
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,10 +73,13 @@ class NoiseModel:
             tension errors in the stretch correction, ≈ 6 µm).
         tag_lateral_std: tag position noise across the optical axis at 0 m [m].
         tag_depth_std: tag position noise along the optical axis at 0 m [m].
-        tag_std_per_m: growth of both with the tag's distance [m per m].
+        tag_std_per_m: growth of the lateral noise (and of the depth noise, unless
+            ``tag_depth_per_m``) with the tag's distance [m per m].
         tag_rotation_std: tag orientation noise [rad].
         force_std: the force balance's residual per axis [N]; ``None``: no wrench balance.
         moment_std: the moment balance's residual per axis [N·m].
+        tag_depth_per_m: growth of the depth noise with the distance [m per m]; ``None``:
+            ``tag_std_per_m``.
     """
 
     length_std: float = 15e-6
@@ -85,6 +89,7 @@ class NoiseModel:
     tag_rotation_std: float = math.radians(0.3)
     force_std: float | None = None
     moment_std: float = 0.002
+    tag_depth_per_m: float | None = None
 
     def __post_init__(self) -> None:
         if self.force_std is not None and not self.force_std > 0:
@@ -284,13 +289,31 @@ class Problem:
     def residuals(self, x: np.ndarray) -> np.ndarray:
         """All residuals, unitless: cables, tag poses, forces, priors. Returns (n_rows,)."""
         mod = self.model(x)
-        parts = [self._cables(mod), self._tags(mod), self._forces(mod)]
-        if self.n_prior:  # the builder's tolerances, and where the robot was homed
-            L, p = self.layout, self.priors
-            parts.append(x[: L.n_shared] / L.sigma)
-            home = [p.home_position] * 3 + [p.home_rotation] * 3
-            parts += [x[L.pose(k)] / home for k in self.home_k]
-        return np.concatenate(parts)
+        return np.concatenate([self._cables(mod), self._tags(mod), self._forces(mod),
+                               self._priors(x)])  # fmt: skip
+
+    def parts(self) -> list[tuple[slice, Callable[[np.ndarray], np.ndarray]]]:
+        """The residuals in parts, each with its rows: cables, tags, forces, priors.
+
+        Each part reaches fewer parameters than the whole (for
+        :class:`~cdpr_twin.calibrate.jacobian.PartJacobian`).
+        """
+        c, t, f = self.n_cable_rows, self.n_tag_rows, self.n_force_rows
+        return [
+            (slice(0, c), lambda x: self._cables(self.model(x))),
+            (slice(c, c + t), lambda x: self._tags(self.model(x))),
+            (slice(c + t, c + t + f), lambda x: self._forces(self.model(x))),
+            (slice(self.n_data, self.n_data + self.n_prior), self._priors),
+        ]
+
+    def _priors(self, x: np.ndarray) -> np.ndarray:
+        """The builder's tolerances, and where the robot was homed."""
+        if not self.n_prior:
+            return np.zeros(0)
+        L, p = self.layout, self.priors
+        home = np.array([p.home_position] * 3 + [p.home_rotation] * 3)
+        homed = [x[L.pose(k)] / home for k in self.home_k]
+        return np.concatenate([x[: L.n_shared] / L.sigma, *homed])
 
     def _cables(self, mod: Model) -> np.ndarray:
         k, i, g, o = self.rows_k, self.rows_i, self.nominal, self.obs
@@ -339,8 +362,10 @@ class Problem:
         pred = self.predicted_tags(mod)
         meas = self.obs.T_cam_tag[self.seen]
         d = np.linalg.norm(meas[:, :3, 3], axis=1)[:, None]
+        depth_per_m = n.tag_std_per_m if n.tag_depth_per_m is None else n.tag_depth_per_m
         std = np.array([n.tag_lateral_std, n.tag_lateral_std, n.tag_depth_std])
-        dt = (meas[:, :3, 3] - pred[:, :3, 3]) / (std + n.tag_std_per_m * d)
+        per_m = np.array([n.tag_std_per_m, n.tag_std_per_m, depth_per_m])
+        dt = (meas[:, :3, 3] - pred[:, :3, 3]) / (std + per_m * d)
         R = pred[:, :3, :3].transpose(0, 2, 1) @ meas[:, :3, :3]
         dr = Rotation.from_matrix(R).as_rotvec() / n.tag_rotation_std
         return np.hstack([dt, dr]).ravel()

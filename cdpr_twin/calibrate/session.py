@@ -17,7 +17,7 @@ import numpy as np
 from cdpr_twin.calibrate.acquire import Recording, record
 from cdpr_twin.calibrate.excitation import excitation_poses
 from cdpr_twin.calibrate.problem import NoiseModel, Priors, Problem
-from cdpr_twin.calibrate.solver import Calibration, CalibrationError, solve
+from cdpr_twin.calibrate.solver import Calibration, CalibrationError, solve_weighted
 from cdpr_twin.scenario import Scenario
 from cdpr_twin.se3 import pose_distance, so3_log
 
@@ -45,7 +45,10 @@ class Session:
         excitation_s: time to choose the poses [s].
         dropped: recorded poses left out: no equation beyond their own six unknowns
             (:attr:`~cdpr_twin.calibrate.problem.Observations.redundancy`).
-        noise: the measurement noise the solver weighed the residuals with.
+        noise: the measurement noise the solver weighed the residuals with (after the
+            variance components).
+        variance_rounds: per solve, each residual group's σ̂/σ at its solution
+            (:func:`~cdpr_twin.calibrate.solver.solve_weighted`).
     """
 
     calibration: Calibration
@@ -54,6 +57,7 @@ class Session:
     excitation_s: float
     dropped: int = 0
     noise: NoiseModel = NOISE
+    variance_rounds: tuple = ()
 
 
 MOMENT_ARM = 0.1
@@ -133,10 +137,12 @@ def calibrate(s: Scenario, n_poses: int = 240, frames: int = 4, workers: int = 1
     keep = rec.obs.redundancy > 0
     rec = rec.subset(keep)
     priors = priors_of(s, rec.detector.focal_px, rec.tension_sensors)
-    noise = noise_of(rec, frames)
-    problem = Problem(nominal.geometry, nominal.T_base_tag, rec.obs, priors, noise, rec.detector)
-    cal = solve(problem)
-    return Session(cal, rec, priors, chosen, int(np.count_nonzero(~keep)), noise)
+
+    def problem(noise: NoiseModel) -> Problem:
+        return Problem(nominal.geometry, nominal.T_base_tag, rec.obs, priors, noise, rec.detector)
+
+    cal, noise, rounds = solve_weighted(problem, noise_of(rec, frames))
+    return Session(cal, rec, priors, chosen, int(np.count_nonzero(~keep)), noise, rounds)
 
 
 def _fit(P: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

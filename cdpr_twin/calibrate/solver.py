@@ -20,15 +20,19 @@ data.
 
 from __future__ import annotations
 
+import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import csc_matrix, diags
 from threadpoolctl import threadpool_limits
 
+from cdpr_twin.calibrate.jacobian import PartJacobian
 from cdpr_twin.calibrate.normal_equations import levenberg_marquardt, shared_covariance
-from cdpr_twin.calibrate.problem import Model, Problem
+from cdpr_twin.calibrate.problem import Model, NoiseModel, Problem
+from cdpr_twin.calibrate.variance import rescaled, variance_factors
 
 POSE_SCALE = 0.01
 """The scale of a pose correction in the rank analysis: 1 cm, 0.01 rad."""
@@ -101,23 +105,78 @@ class Calibration:
     identifiability: Identifiability
 
 
-def solve(problem: Problem, max_iterations: int = 100, rank_tol: float = 1e-6) -> Calibration:
+def solve(
+    problem: Problem, max_iterations: int = 100, rank_tol: float = 1e-6,
+    x0: np.ndarray | None = None,
+) -> Calibration:  # fmt: skip
     """Solve the calibration.
 
     Args:
         problem: the residuals.
         max_iterations: most Levenberg–Marquardt steps.
         rank_tol: relative singular value below which the data do not see a direction.
+        x0: (n,) where to start (default: the nominal model, zeros).
 
     Raises:
         CalibrationError: too little data, or the solver did not converge.
     """
+    started = time.perf_counter()
+    res = _minimise(problem, max_iterations, x0)
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _result(problem, res, time.perf_counter() - started, rank_tol)
+
+
+def solve_weighted(
+    make: Callable[[NoiseModel], Problem], noise: NoiseModel, rounds: int = 3,
+    tol: float = 0.05, max_iterations: int = 100, rank_tol: float = 1e-6,
+) -> tuple[Calibration, NoiseModel, list[dict[str, float]]]:  # fmt: skip
+    """Solve, estimate each residual group's noise from its residuals, solve again.
+
+    Variance components (:mod:`cdpr_twin.calibrate.variance`): after each solve every
+    group's σ is rescaled to its own scatter and the problem solved again from where it
+    stopped, until every group's σ changes by less than ``tol`` (relative) or after
+    ``rounds`` re-solves.
+
+    Args:
+        make: the problem for a noise model.
+        noise: the noise model to start from.
+        rounds: most re-solves.
+        tol: relative change of every σ below which the weights count as settled.
+        max_iterations: most Levenberg–Marquardt steps per solve.
+        rank_tol: see :func:`solve`.
+
+    Returns:
+        The calibration (solved with the last weights), those weights, and each round's
+        σ̂/σ per group.
+
+    Raises:
+        CalibrationError: as :func:`solve`.
+    """
+    started = time.perf_counter()
+    problem = make(noise)
+    res = _minimise(problem, max_iterations, None)
+    history: list[dict[str, float]] = []
+    for _ in range(rounds):
+        with threadpool_limits(limits=1, user_api="blas"):
+            factors = variance_factors(problem, res.jac, res.fun)
+        history.append({g: round(math.sqrt(v), 4) for g, v in factors.items()})
+        if all(abs(math.sqrt(v) - 1.0) < tol for v in factors.values()):
+            break
+        noise = rescaled(noise, factors)
+        problem = make(noise)
+        res = _minimise(problem, max_iterations, res.x)
+    with threadpool_limits(limits=1, user_api="blas"):
+        cal = _result(problem, res, time.perf_counter() - started, rank_tol)
+    return cal, noise, history
+
+
+def _minimise(problem: Problem, max_iterations: int, x0: np.ndarray | None, ftol: float = 1e-10):
+    """Levenberg–Marquardt on ``problem`` from ``x0`` (zeros if None); the raw solution."""
     L = problem.layout
     if problem.n_data + problem.n_prior < L.n:
         raise CalibrationError(
             f"{problem.n_data} measurements for {L.n} unknowns: record more poses (--poses)"
         )
-    started = time.perf_counter()
     pattern = problem.sparsity().tocsc()
     # One BLAS thread: the factorisations are small enough, a loaded machine (calibrations
     # side by side) makes threaded BLAS spin 10× slower, and the rounding then does not
@@ -132,51 +191,17 @@ def solve(problem: Problem, max_iterations: int = 100, rank_tol: float = 1e-6) -
             )
         res = levenberg_marquardt(
             problem.residuals,
-            lambda x: grouped_jacobian(problem.residuals, x, pattern, L.n_shared),
-            np.zeros(L.n),
+            PartJacobian(problem.parts(), pattern),
+            np.zeros(L.n) if x0 is None else np.asarray(x0, dtype=float),
             max_iterations=max_iterations,
+            ftol=ftol,
         )
-        if not res.converged or not np.all(np.isfinite(res.x)):
-            raise CalibrationError(
-                f"the solver did not converge ({res.message}); record more poses, or raise "
-                "max_iterations"
-            )
-        wall = time.perf_counter() - started
-        return _result(problem, res, wall, rank_tol)
-
-
-def grouped_jacobian(
-    fun, x: np.ndarray, pattern: csc_matrix, n_shared: int, h: float = 1e-6
-) -> tuple[csc_matrix, int]:
-    """Central differences that use the sparsity: one pair of evaluations per group.
-
-    Each shared parameter is its own group; pose parameter j of every pose forms one group
-    (pose k's parameters reach only pose k's residuals), so a Jacobian costs
-    2 · (n_shared + 6) evaluations instead of 2 · n.
-
-    Args:
-        fun: the residuals, x (n,) → (n_rows,).
-        x: (n,) where to differentiate.
-        pattern: (n_rows, n) sparsity pattern (CSC).
-        n_shared: number of shared parameters (the first ones).
-        h: step [m or rad].
-
-    Returns:
-        The (n_rows, n) Jacobian on the pattern (CSC), and the evaluations it took.
-    """
-    n = len(x)
-    data = np.zeros(pattern.nnz)
-    groups = [[j] for j in range(n_shared)]
-    groups += [list(range(n_shared + j, n, 6)) for j in range(6)]
-    for cols in groups:
-        dx = np.zeros(n)
-        dx[cols] = h
-        d = (fun(x + dx) - fun(x - dx)) / (2.0 * h)
-        for c in cols:
-            at = slice(pattern.indptr[c], pattern.indptr[c + 1])
-            data[at] = d[pattern.indices[at]]
-    J = csc_matrix((data, pattern.indices, pattern.indptr), shape=pattern.shape)
-    return J, 2 * len(groups)
+    if not res.converged or not np.all(np.isfinite(res.x)):
+        raise CalibrationError(
+            f"the solver did not converge ({res.message}); record more poses, or raise "
+            "max_iterations"
+        )
+    return res
 
 
 def _result(problem: Problem, res, wall: float, rank_tol: float) -> Calibration:

@@ -1,0 +1,100 @@
+"""Variance components: each residual group's noise from its own scatter (numpy, scipy).
+
+A calibration starts from a noise model written down beforehand (:data:`session.NOISE`): the
+encoders' count, the tag's error growing with distance, the balance's floor. Those are upper
+bounds, chosen before the data existed, and they decide how much each kind of measurement
+counts against the others and against the builder's tolerances. Too loose a bound leaves
+information unused: in the ``acrobot`` profile the tag positions were weighted as if 3 mm off
+where they scatter by under 1 mm after the fit, so the only measurement of metric scale that
+no drum radius can absorb (how far the tag moves across the image as the platform moves)
+counted for little, and the drums' common scale was left to the priors (robot 4: −0.27 % off,
+the exit points 2.0 mm out of shape).
+
+The estimate (Förstner 1979; Koch, *Parameter Estimation and Hypothesis Testing in Linear
+Models*, §3.6): for each group g of residuals (already divided by their noise),
+σ̂²_g / σ²_g = r_gᵀr_g / ρ_g, where ρ_g = n_g − tr(J_g N⁻¹ J_gᵀ) is the group's share of the
+redundancy (N = JᵀJ, priors included). The priors are not re-weighted: they are the
+builder's tolerances, not measurements of this session.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+from scipy.linalg import cho_factor, cho_solve
+from scipy.sparse import csc_matrix
+
+GROUPS = ("cable", "tag_lateral", "tag_depth", "tag_rotation", "force", "moment")
+"""The residual groups whose noise is estimated."""
+
+MIN_REDUNDANCY = 10.0
+"""A group with less redundancy than this keeps its noise (too few to estimate it)."""
+
+
+def group_rows(problem) -> dict[str, np.ndarray]:
+    """Row indices of each residual group of ``problem`` (a calibrate ``Problem``).
+
+    Returns:
+        Group name → (n_g,) row indices, for the groups the problem has.
+    """
+    at = problem.n_cable_rows
+    tag = at + np.arange(problem.n_tag_rows).reshape(-1, 6)
+    at += problem.n_tag_rows
+    wrench = at + np.arange(problem.n_force_rows).reshape(-1, 6)
+    rows = {
+        "cable": np.arange(problem.n_cable_rows),
+        "tag_lateral": tag[:, :2].ravel(),
+        "tag_depth": tag[:, 2],
+        "tag_rotation": tag[:, 3:].ravel(),
+        "force": wrench[:, :3].ravel(),
+        "moment": wrench[:, 3:].ravel(),
+    }
+    return {g: r for g, r in rows.items() if len(r)}
+
+
+def variance_factors(problem, jac: csc_matrix, r: np.ndarray) -> dict[str, float]:
+    """Each group's variance over the one it was weighted with, at a solution.
+
+    Args:
+        problem: the calibrate ``Problem`` solved.
+        jac: (n_rows, n) its Jacobian at the solution (priors included).
+        r: (n_rows,) its residuals there.
+
+    Returns:
+        Group name → σ̂²/σ² (1.0 where the group's redundancy is below
+        :data:`MIN_REDUNDANCY`).
+    """
+    J = csc_matrix(jac)
+    N = (J.T @ J).toarray()
+    N_inv = cho_solve(cho_factor(N, lower=True, check_finite=False), np.eye(len(N)))
+    Jr = J.tocsr()
+    out = {}
+    for g, rows in group_rows(problem).items():
+        Jg = Jr[rows]
+        redundancy = len(rows) - float(Jg.multiply(Jg @ N_inv).sum())
+        rg = r[rows]
+        out[g] = float(rg @ rg) / redundancy if redundancy >= MIN_REDUNDANCY else 1.0
+    return out
+
+
+def rescaled(noise, factors: dict[str, float]):
+    """``noise`` (a ``NoiseModel``) with each group's σ multiplied by √factor.
+
+    The tag's lateral and depth noise each keep their shape in distance (base and growth
+    scaled together); the lateral growth and the depth growth become separate.
+    """
+    f = {g: math.sqrt(factors.get(g, 1.0)) for g in GROUPS}
+    depth_per_m = noise.tag_std_per_m if noise.tag_depth_per_m is None else noise.tag_depth_per_m
+    return replace(
+        noise,
+        length_std=noise.length_std * f["cable"],
+        tag_lateral_std=noise.tag_lateral_std * f["tag_lateral"],
+        tag_std_per_m=noise.tag_std_per_m * f["tag_lateral"],
+        tag_depth_std=noise.tag_depth_std * f["tag_depth"],
+        tag_depth_per_m=depth_per_m * f["tag_depth"],
+        tag_rotation_std=noise.tag_rotation_std * f["tag_rotation"],
+        force_std=None if noise.force_std is None else noise.force_std * f["force"],
+        moment_std=noise.moment_std * f["moment"],
+    )
