@@ -11,6 +11,7 @@ import argparse
 import os
 import sys
 import time
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -138,6 +139,8 @@ def _solve_and_write(args, s, source: Path, out: Path, started: float) -> int:
             "total": time.perf_counter() - started,
             "simulated": rec.simulated_time,
         },
+        "noise_model": asdict(session.noise),
+        "variance_components": list(session.variance_rounds),
         "check_against_truth": truth_check(session, nominal.geometry, nominal.T_base_tag),
     }
     robot, report = write(out, source, cal, extra, rec.drum_radii)

@@ -400,3 +400,47 @@ def test_a_zero_noise_or_homing_tolerance_is_refused():
         NoiseModel(force_std=0.02, moment_std=0.0)
     with pytest.raises(ValueError, match="home_position"):
         Priors(home_position=0.0)
+
+
+def test_variance_components_find_each_measurements_noise():
+    # truth: the noise the synthetic readings were drawn with (NOISE); the solver is told a
+    # noise model off by a factor per kind of measurement, as a datasheet guess would be
+    from cdpr_twin.calibrate.solver import solve_weighted
+
+    g, T_tag, obs, _ = _synthetic(camera_error=True, n_poses=80, seed=7)
+    told = replace(NOISE, length_std=4 * NOISE.length_std, tag_lateral_std=0.3e-3 * 3,
+                   tag_depth_std=0.5e-3 / 2, tag_std_per_m=NOISE.tag_std_per_m * 3,
+                   tag_depth_per_m=NOISE.tag_std_per_m / 2,
+                   tag_rotation_std=NOISE.tag_rotation_std * 5)  # fmt: skip
+
+    def problem(noise):
+        return Problem(g, T_tag, obs, Priors(), noise)
+
+    cal, found, rounds = solve_weighted(problem, told)
+    # each σ back within 20 % of the drawn one (redundancy ≳ 150 per group: ≈ 6 % 1σ)
+    for name in ("length_std", "tag_lateral_std", "tag_depth_std", "tag_rotation_std"):
+        assert getattr(found, name) == pytest.approx(getattr(NOISE, name), rel=0.2), name
+    assert found.tag_depth_per_m == pytest.approx(NOISE.tag_std_per_m, rel=0.2)
+    assert all(abs(f - 1) < 0.05 for f in rounds[-1].values())  # the weights settled
+    # and the solution is the one the true weights give, within its uncertainty
+    exact = solve(problem(NOISE))
+    assert np.max(np.abs(cal.estimate - exact.estimate) / exact.sigma) < 0.5
+
+
+def test_the_jacobian_by_parts_is_the_whole_residuals_derivative():
+    # truth: central differences of the whole residual vector, one parameter at a time
+    from scipy.sparse import csc_matrix
+
+    from cdpr_twin.calibrate.jacobian import PartJacobian
+
+    g, T_tag, obs, *_ = _leveled_frame_robot(n_poses=8)
+    noise = replace(NOISE, force_std=0.02, moment_std=0.002)
+    problem = Problem(g, T_tag, obs, Priors(), noise)
+    x = np.random.default_rng(2).normal(0, 1e-3, problem.layout.n)
+    J, _ = PartJacobian(problem.parts(), csc_matrix(problem.sparsity()))(x)
+    h, ref = 1e-6, np.zeros(J.shape)
+    for j in range(problem.layout.n):
+        dx = np.zeros_like(x)
+        dx[j] = h
+        ref[:, j] = (problem.residuals(x + dx) - problem.residuals(x - dx)) / (2 * h)
+    assert np.allclose(J.toarray(), ref, rtol=1e-6, atol=1e-6 * np.abs(ref).max())

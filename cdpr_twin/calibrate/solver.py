@@ -1,13 +1,17 @@
 """Solve a calibration :class:`~cdpr_twin.calibrate.problem.Problem`; uncertainty and rank.
 
 Levenberg–Marquardt on the normal equations (:mod:`cdpr_twin.calibrate.normal_equations`),
-whose Jacobian uses the problem's analytic sparsity pattern: each pose's residuals depend on
-its own six parameters and the shared ones, so central differences perturb all poses' k-th
-parameter at once (6 groups) and each shared parameter alone. scipy's ``least_squares`` was
-the solver before: its exact trust-region steps take an SVD of the whole Jacobian per
-iteration (112 s at 240 poses), and its sparse route (LSMR steps) stalled on this problem
-(seed 19, 24 poses: cost 22.13 after 200 evaluations, against 20.90 in 14 with exact steps);
-a test holds the two to the same minimum.
+whose Jacobian uses the problem's analytic sparsity pattern, part by part
+(:class:`~cdpr_twin.calibrate.jacobian.PartJacobian`): each pose's residuals depend on its own
+six parameters and the shared ones, and each cable's length residuals on that cable's shared
+parameters only. scipy's ``least_squares`` was the solver before: its exact trust-region steps
+take an SVD of the whole Jacobian per iteration (112 s at 240 poses), and its sparse route
+(LSMR steps) stalled on this problem (seed 19, 24 poses: cost 22.13 after 200 evaluations,
+against 20.90 in 14 with exact steps); a test holds the two to the same minimum.
+
+:func:`solve_weighted` solves again with each residual group's noise re-estimated from its own
+residuals (variance components, :mod:`cdpr_twin.calibrate.variance`), which is what
+:func:`cdpr_twin.calibrate.session.calibrate` does.
 
 Uncertainty: the covariance (JᵀJ)⁻¹ at the solution, scaled by the residuals' variance
 χ²/(n − p). Identifiability: the singular values of the *data's* Jacobian (priors left out),
@@ -33,6 +37,10 @@ from cdpr_twin.calibrate.jacobian import PartJacobian
 from cdpr_twin.calibrate.normal_equations import levenberg_marquardt, shared_covariance
 from cdpr_twin.calibrate.problem import Model, NoiseModel, Problem
 from cdpr_twin.calibrate.variance import rescaled, variance_factors
+
+MIN_VARIANCE_RATIO = 1e-4
+"""A group's σ is not lowered below 1 % of the one it was told (noise-free readings, as in the
+``ideal`` profile, would otherwise weigh it without bound)."""
 
 POSE_SCALE = 0.01
 """The scale of a pose correction in the rank analysis: 1 cm, 0.01 rad."""
@@ -152,17 +160,19 @@ def solve_weighted(
     Raises:
         CalibrationError: as :func:`solve`.
     """
-    started = time.perf_counter()
+    started, told = time.perf_counter(), noise
     problem = make(noise)
     res = _minimise(problem, max_iterations, None)
     history: list[dict[str, float]] = []
+    total: dict[str, float] = {}  # each group's variance over the one it was told
     for _ in range(rounds):
         with threadpool_limits(limits=1, user_api="blas"):
             factors = variance_factors(problem, res.jac, res.fun)
         history.append({g: round(math.sqrt(v), 4) for g, v in factors.items()})
         if all(abs(math.sqrt(v) - 1.0) < tol for v in factors.values()):
             break
-        noise = rescaled(noise, factors)
+        total = {g: max(total.get(g, 1.0) * v, MIN_VARIANCE_RATIO) for g, v in factors.items()}
+        noise = rescaled(told, total)
         problem = make(noise)
         res = _minimise(problem, max_iterations, res.x)
     with threadpool_limits(limits=1, user_api="blas"):
