@@ -67,7 +67,7 @@ def one(
     seed: int, poses: int, out: str, workers: int, known: bool = False, changes: tuple = ()
 ) -> dict:
     from cdpr_twin.calibrate.output import write
-    from cdpr_twin.calibrate.session import calibrate, truth_check
+    from cdpr_twin.calibrate.session import calibrate, truth_check, weighting_report
     from cdpr_twin.runner import run
     from cdpr_twin.sim import build_robot
 
@@ -85,7 +85,7 @@ def one(
         Path(out) / f"robot_{seed}",
         s.model.file.parent / "robot.toml",
         session.calibration,
-        {"check_against_truth": check},
+        {**weighting_report(session), "check_against_truth": check},
         session.recording.drum_radii,
     )
     p1, exact, refused = {}, {}, None

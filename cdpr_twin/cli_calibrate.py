@@ -11,7 +11,6 @@ import argparse
 import os
 import sys
 import time
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -118,7 +117,7 @@ def _guarded(args, s, source: Path, out: Path, started: float) -> int:
 def _solve_and_write(args, s, source: Path, out: Path, started: float) -> int:
     """Excite, record, solve; write the description and the report (the long part)."""
     from cdpr_twin.calibrate.output import clear, write
-    from cdpr_twin.calibrate.session import calibrate, truth_check
+    from cdpr_twin.calibrate.session import calibrate, truth_check, weighting_report
     from cdpr_twin.sim import build_robot
 
     clear(out)  # an earlier calibration's files go first: none survives a failed one
@@ -139,8 +138,7 @@ def _solve_and_write(args, s, source: Path, out: Path, started: float) -> int:
             "total": time.perf_counter() - started,
             "simulated": rec.simulated_time,
         },
-        "noise_model": asdict(session.noise),
-        "variance_components": list(session.variance_rounds),
+        **weighting_report(session),
         "check_against_truth": truth_check(session, nominal.geometry, nominal.T_base_tag),
     }
     robot, report = write(out, source, cal, extra, rec.drum_radii)

@@ -413,18 +413,29 @@ def test_variance_components_find_each_measurements_noise():
                    tag_depth_per_m=NOISE.tag_std_per_m / 2,
                    tag_rotation_std=NOISE.tag_rotation_std * 5)  # fmt: skip
 
-    def problem(noise):
-        return Problem(g, T_tag, obs, Priors(), noise)
-
-    cal, found, rounds = solve_weighted(problem, told)
-    # each σ back within 20 % of the drawn one (redundancy ≳ 150 per group: ≈ 6 % 1σ)
+    cal, weighting = solve_weighted(Problem(g, T_tag, obs, Priors(), told))
+    found = weighting.noise
+    # each σ back within 20 % of the drawn one (redundancy 77–116 per group: ≈ 8 % 1σ)
     for name in ("length_std", "tag_lateral_std", "tag_depth_std", "tag_rotation_std"):
         assert getattr(found, name) == pytest.approx(getattr(NOISE, name), rel=0.2), name
     assert found.tag_depth_per_m == pytest.approx(NOISE.tag_std_per_m, rel=0.2)
-    assert all(abs(f - 1) < 0.05 for f in rounds[-1].values())  # the weights settled
+    assert weighting.settled and all(abs(f - 1) < 0.05 for f in weighting.rounds[-1].values())
     # and the solution is the one the true weights give, within its uncertainty
-    exact = solve(problem(NOISE))
+    exact = solve(Problem(g, T_tag, obs, Priors(), NOISE))
     assert np.max(np.abs(cal.estimate - exact.estimate) / exact.sigma) < 0.5
+
+
+def test_variance_components_where_nothing_fixes_the_frames():
+    # no priors: six directions no residual sees (the platform frame); each group's redundancy
+    # does not depend on how they are fixed, so the weights still come out (as the first test's)
+    from cdpr_twin.calibrate.solver import solve_weighted
+
+    g, T_tag, obs, _ = _synthetic(camera_error=True, n_poses=80, seed=7)
+    priors = Priors(estimate=("exit", "anchor", "offset", "scale", "camera"), use_priors=False)
+    told = replace(NOISE, length_std=3 * NOISE.length_std)
+    _, weighting = solve_weighted(Problem(g, T_tag, obs, priors, told))
+    # the cables' redundancy ≈ 110 here: ≈ 7 % 1σ on their σ
+    assert weighting.noise.length_std == pytest.approx(NOISE.length_std, rel=0.2)
 
 
 def test_the_jacobian_by_parts_is_the_whole_residuals_derivative():

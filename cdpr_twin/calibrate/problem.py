@@ -49,14 +49,16 @@ Residuals, each divided by its noise so that they are unitless:
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse import lil_matrix
+from scipy.sparse import csc_matrix, lil_matrix
 from scipy.spatial.transform import Rotation
 
+from cdpr_twin.calibrate.jacobian import PartJacobian
 from cdpr_twin.calibrate.layout import BLOCKS, Layout
 from cdpr_twin.calibrate.observations import Observations
 from cdpr_twin.geometry import CdprGeometry
@@ -268,6 +270,32 @@ class Problem:
         self.n_data = self.n_cable_rows + self.n_tag_rows + self.n_force_rows
         self.home_k = np.flatnonzero(obs.homed) if priors.use_priors else np.zeros(0, int)
         self.n_prior = self.layout.n_shared + 6 * len(self.home_k) if priors.use_priors else 0
+        self._pattern: csc_matrix | None = None
+        self._groups: list | None = None
+
+    def with_noise(self, noise: NoiseModel) -> Problem:
+        """The same problem weighted with another noise model (the balance on or off alike).
+
+        Raises:
+            ValueError: ``noise`` turns the wrench balance on or off.
+        """
+        if (noise.force_std is None) != (self.noise.force_std is None):
+            raise ValueError("with_noise cannot turn the wrench balance on or off")
+        out = copy.copy(self)
+        out.noise = noise
+        return out
+
+    def pattern(self) -> csc_matrix:
+        """:meth:`sparsity` as CSC, computed once (shared with :meth:`with_noise` copies)."""
+        if self._pattern is None:
+            self._pattern = self.sparsity().tocsc()
+        return self._pattern
+
+    def jacobian(self) -> PartJacobian:
+        """Central differences of :meth:`residuals` part by part (column groups computed once)."""
+        jac = PartJacobian(self.parts(), self.pattern(), groups=self._groups)
+        self._groups = jac.groups
+        return jac
 
     def model(self, x: np.ndarray) -> Model:
         """The robot and poses parameters ``x`` describe."""

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -18,6 +18,7 @@ from cdpr_twin.calibrate.acquire import Recording, record
 from cdpr_twin.calibrate.excitation import excitation_poses
 from cdpr_twin.calibrate.problem import NoiseModel, Priors, Problem
 from cdpr_twin.calibrate.solver import Calibration, CalibrationError, solve_weighted
+from cdpr_twin.calibrate.variance import Weighting
 from cdpr_twin.scenario import Scenario
 from cdpr_twin.se3 import pose_distance, so3_log
 
@@ -50,8 +51,8 @@ class Session:
             (:attr:`~cdpr_twin.calibrate.problem.Observations.redundancy`).
         noise: the measurement noise the solver weighed the residuals with (after the
             variance components).
-        variance_rounds: per solve, each residual group's σ̂/σ at its solution
-            (:func:`~cdpr_twin.calibrate.solver.solve_weighted`).
+        weighting: how the residuals came to be weighted (variance components,
+            :func:`~cdpr_twin.calibrate.solver.solve_weighted`); ``None``: as ``noise`` says.
     """
 
     calibration: Calibration
@@ -60,7 +61,7 @@ class Session:
     excitation_s: float
     dropped: int = 0
     noise: NoiseModel = NOISE
-    variance_rounds: tuple = ()
+    weighting: Weighting | None = None
 
 
 MOMENT_ARM = 0.1
@@ -140,12 +141,11 @@ def calibrate(s: Scenario, n_poses: int = 240, frames: int = 4, workers: int = 1
     keep = rec.obs.redundancy > 0
     rec = rec.subset(keep)
     priors = priors_of(s, rec.detector.focal_px, rec.tension_sensors)
-
-    def problem(noise: NoiseModel) -> Problem:
-        return Problem(nominal.geometry, nominal.T_base_tag, rec.obs, priors, noise, rec.detector)
-
-    cal, noise, rounds = solve_weighted(problem, noise_of(rec, frames))
-    return Session(cal, rec, priors, chosen, int(np.count_nonzero(~keep)), noise, rounds)
+    noise = noise_of(rec, frames)
+    problem = Problem(nominal.geometry, nominal.T_base_tag, rec.obs, priors, noise, rec.detector)
+    cal, weighting = solve_weighted(problem)
+    return Session(cal, rec, priors, chosen, int(np.count_nonzero(~keep)), weighting.noise,
+                   weighting)  # fmt: skip
 
 
 def _fit(P: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -208,3 +208,14 @@ def truth_check(session: Session, nominal_geometry, nominal_T_base_tag) -> dict:
         "base frame is a gauge the data cannot see: only the priors place it)"
     )
     return out
+
+
+def weighting_report(session: Session) -> dict:
+    """The noise model the solution was weighted with and how it came about (JSON-ready)."""
+    w = session.weighting
+    return {
+        "noise_model": asdict(session.noise),
+        "variance_components": None
+        if w is None
+        else {"rounds": list(w.rounds), "settled": w.settled, "note": w.note},
+    }

@@ -26,17 +26,15 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.sparse import csc_matrix, diags
 from threadpoolctl import threadpool_limits
 
-from cdpr_twin.calibrate.jacobian import PartJacobian
 from cdpr_twin.calibrate.normal_equations import levenberg_marquardt, shared_covariance
-from cdpr_twin.calibrate.problem import Model, NoiseModel, Problem
-from cdpr_twin.calibrate.variance import rescaled, variance_factors
+from cdpr_twin.calibrate.problem import Model, Problem
+from cdpr_twin.calibrate.variance import Weighting, rescaled, variance_factors
 
 MIN_VARIANCE_RATIO = 1e-4
 """A group's σ is not lowered below 1 % of the one it was told (noise-free readings, as in the
@@ -135,49 +133,57 @@ def solve(
 
 
 def solve_weighted(
-    make: Callable[[NoiseModel], Problem], noise: NoiseModel, rounds: int = 3,
-    tol: float = 0.05, max_iterations: int = 100, rank_tol: float = 1e-6,
-) -> tuple[Calibration, NoiseModel, list[dict[str, float]]]:  # fmt: skip
+    problem: Problem, rounds: int = 3, tol: float = 0.05, max_iterations: int = 100,
+    rank_tol: float = 1e-6,
+) -> tuple[Calibration, Weighting]:  # fmt: skip
     """Solve, estimate each residual group's noise from its residuals, solve again.
 
     Variance components (:mod:`cdpr_twin.calibrate.variance`): after each solve every
     group's σ is rescaled to its own scatter and the problem solved again from where it
-    stopped, until every group's σ changes by less than ``tol`` (relative) or after
-    ``rounds`` re-solves.
+    stopped, until no group's σ̂/σ differs from 1 by ``tol`` or more, or after ``rounds``
+    re-solves. A re-solve that fails keeps the solve before it (and says so).
 
     Args:
-        make: the problem for a noise model.
-        noise: the noise model to start from.
+        problem: the residuals, weighted with the noise model to start from.
         rounds: most re-solves.
         tol: relative change of every σ below which the weights count as settled.
         max_iterations: most Levenberg–Marquardt steps per solve.
         rank_tol: see :func:`solve`.
 
     Returns:
-        The calibration (solved with the last weights), those weights, and each round's
-        σ̂/σ per group.
+        The calibration (solved with the last weights; ``nfev`` and ``wall_time`` over every
+        solve), and how it was weighted.
 
     Raises:
-        CalibrationError: as :func:`solve`.
+        CalibrationError: the first solve fails (as :func:`solve`).
     """
-    started, told = time.perf_counter(), noise
-    problem = make(noise)
+    started, told = time.perf_counter(), problem.noise
     res = _minimise(problem, max_iterations, None)
-    history: list[dict[str, float]] = []
-    total: dict[str, float] = {}  # each group's variance over the one it was told
-    for _ in range(rounds):
+    nfev, history, total, settled, note = res.nfev, [], {}, False, ""
+    for k in range(rounds + 1):
         with threadpool_limits(limits=1, user_api="blas"):
             factors = variance_factors(problem, res.jac, res.fun)
-        history.append({g: round(math.sqrt(v), 4) for g, v in factors.items()})
-        if all(abs(math.sqrt(v) - 1.0) < tol for v in factors.values()):
+        history.append(
+            {g: None if v is None else round(math.sqrt(v), 4) for g, v in factors.items()}
+        )
+        seen = {g: v for g, v in factors.items() if v is not None}
+        if all(abs(math.sqrt(v) - 1.0) < tol for v in seen.values()):
+            settled = True
             break
-        total = {g: max(total.get(g, 1.0) * v, MIN_VARIANCE_RATIO) for g, v in factors.items()}
-        noise = rescaled(told, total)
-        problem = make(noise)
-        res = _minimise(problem, max_iterations, res.x)
+        if k == rounds:
+            note = f"σ̂/σ still beyond 1 ± {tol} after {rounds} re-solves"
+            break
+        total |= {g: max(total.get(g, 1.0) * v, MIN_VARIANCE_RATIO) for g, v in seen.items()}
+        trial = problem.with_noise(rescaled(told, total))
+        try:
+            res, problem = _minimise(trial, max_iterations, res.x), trial
+        except CalibrationError as exc:
+            note = f"re-solve {k + 1} failed ({exc}); the solve before it is kept"
+            break
+        nfev += res.nfev
     with threadpool_limits(limits=1, user_api="blas"):
         cal = _result(problem, res, time.perf_counter() - started, rank_tol)
-    return cal, noise, history
+    return replace(cal, nfev=nfev), Weighting(problem.noise, tuple(history), settled, note)
 
 
 def _minimise(problem: Problem, max_iterations: int, x0: np.ndarray | None, ftol: float = 1e-10):
@@ -187,7 +193,7 @@ def _minimise(problem: Problem, max_iterations: int, x0: np.ndarray | None, ftol
         raise CalibrationError(
             f"{problem.n_data} measurements for {L.n} unknowns: record more poses (--poses)"
         )
-    pattern = problem.sparsity().tocsc()
+    pattern = problem.pattern()
     # One BLAS thread: the factorisations are small enough, a loaded machine (calibrations
     # side by side) makes threaded BLAS spin 10× slower, and the rounding then does not
     # depend on the core count.
@@ -201,7 +207,7 @@ def _minimise(problem: Problem, max_iterations: int, x0: np.ndarray | None, ftol
             )
         res = levenberg_marquardt(
             problem.residuals,
-            PartJacobian(problem.parts(), pattern),
+            problem.jacobian(),
             np.zeros(L.n) if x0 is None else np.asarray(x0, dtype=float),
             max_iterations=max_iterations,
             ftol=ftol,

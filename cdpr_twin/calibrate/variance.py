@@ -20,17 +20,35 @@ builder's tolerances, not measurements of this session.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve
+from scipy.linalg import LinAlgError, cho_factor, cho_solve
 from scipy.sparse import csc_matrix
 
 GROUPS = ("cable", "tag_lateral", "tag_depth", "tag_rotation", "force", "moment")
 """The residual groups whose noise is estimated."""
 
 MIN_REDUNDANCY = 10.0
-"""A group with less redundancy than this keeps its noise (too few to estimate it)."""
+"""A group with less redundancy than this is not estimated that round (too few residuals)."""
+
+
+@dataclass(frozen=True)
+class Weighting:
+    """How a calibration's residuals came to be weighted.
+
+    Attributes:
+        noise: the noise model of the last solve (a ``NoiseModel``).
+        rounds: per solve, each group's σ̂/σ at its solution (``None``: not estimated, its
+            redundancy below :data:`MIN_REDUNDANCY`).
+        settled: whether the last solve's σ̂/σ were all within the tolerance of 1.
+        note: why it stopped unsettled ("" when settled).
+    """
+
+    noise: object
+    rounds: tuple[dict[str, float | None], ...]
+    settled: bool
+    note: str = ""
 
 
 def group_rows(problem) -> dict[str, np.ndarray]:
@@ -54,7 +72,7 @@ def group_rows(problem) -> dict[str, np.ndarray]:
     return {g: r for g, r in rows.items() if len(r)}
 
 
-def variance_factors(problem, jac: csc_matrix, r: np.ndarray) -> dict[str, float]:
+def variance_factors(problem, jac: csc_matrix, r: np.ndarray) -> dict[str, float | None]:
     """Each group's variance over the one it was weighted with, at a solution.
 
     Args:
@@ -63,19 +81,22 @@ def variance_factors(problem, jac: csc_matrix, r: np.ndarray) -> dict[str, float
         r: (n_rows,) its residuals there.
 
     Returns:
-        Group name → σ̂²/σ² (1.0 where the group's redundancy is below
+        Group name → σ̂²/σ² (``None`` where the group's redundancy is below
         :data:`MIN_REDUNDANCY`).
     """
     J = csc_matrix(jac)
     N = (J.T @ J).toarray()
-    N_inv = cho_solve(cho_factor(N, lower=True, check_finite=False), np.eye(len(N)))
+    try:
+        N_inv = cho_solve(cho_factor(N, lower=True, check_finite=False), np.eye(len(N)))
+    except LinAlgError:  # directions nothing sees (no priors): how they are fixed changes
+        N_inv = np.linalg.pinv(N, hermitian=True)  # no residual's redundancy
     Jr = J.tocsr()
-    out = {}
+    out: dict[str, float | None] = {}
     for g, rows in group_rows(problem).items():
         Jg = Jr[rows]
         redundancy = len(rows) - float(Jg.multiply(Jg @ N_inv).sum())
         rg = r[rows]
-        out[g] = float(rg @ rg) / redundancy if redundancy >= MIN_REDUNDANCY else 1.0
+        out[g] = float(rg @ rg) / redundancy if redundancy >= MIN_REDUNDANCY else None
     return out
 
 
