@@ -28,8 +28,8 @@ position error grows to ≈ 3 mm along the optical axis at 0.45 m and its rotati
 1–3° (a 4 cm tag, the intrinsics' calibration error, before that error is estimated; seen on
 seed 19), the encoders' count is 31 µm. The force balance's noise comes from the recording
 (:func:`noise_of`). The solve then re-estimates each group's noise from its own residuals
-(:func:`~cdpr_twin.calibrate.solver.solve_weighted`; robots 4, 7, 8: the tag's lateral noise
-≈ 0.06× this, its depth 0.2–0.27×, its rotation 0.33–0.47×, the cables 0.59×)."""
+(:func:`~cdpr_twin.calibrate.solver.solve_weighted`; robots 1–20: the tag's lateral noise
+0.06–0.09× this, its depth 0.20–0.27×, its rotation 0.32–0.47×, the cables 0.54–0.62×)."""
 
 FORCE_FLOOR = 0.01
 """What the force balance misses beside the readings' noise [N per axis]: the cables' own
