@@ -61,43 +61,13 @@ from scipy.spatial.transform import Rotation
 from cdpr_twin.calibrate.jacobian import PartJacobian
 from cdpr_twin.calibrate.layout import BLOCKS, Layout
 from cdpr_twin.calibrate.observations import Observations
+from cdpr_twin.calibrate.variance import NoiseModel
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import pulley_vectors
 from cdpr_twin.se3 import inverse, se3_exp
 
-
-@dataclass(frozen=True)
-class NoiseModel:
-    """The measurements' noise (1σ), which weighs the residuals.
-
-    Attributes:
-        length_std: encoder length noise [m] (quantisation 2πr/N/√12 ≈ 9 µm, plus the E·S and
-            tension errors in the stretch correction, ≈ 6 µm).
-        tag_lateral_std: tag position noise across the optical axis at 0 m [m].
-        tag_depth_std: tag position noise along the optical axis at 0 m [m].
-        tag_std_per_m: growth of the lateral noise (and of the depth noise, unless
-            ``tag_depth_per_m``) with the tag's distance [m per m].
-        tag_rotation_std: tag orientation noise [rad].
-        force_std: the force balance's residual per axis [N]; ``None``: no wrench balance.
-        moment_std: the moment balance's residual per axis [N·m].
-        tag_depth_per_m: growth of the depth noise with the distance [m per m]; ``None``:
-            ``tag_std_per_m``.
-    """
-
-    length_std: float = 15e-6
-    tag_lateral_std: float = 0.3e-3
-    tag_depth_std: float = 0.5e-3
-    tag_std_per_m: float = 4e-3
-    tag_rotation_std: float = math.radians(0.3)
-    force_std: float | None = None
-    moment_std: float = 0.002
-    tag_depth_per_m: float | None = None
-
-    def __post_init__(self) -> None:
-        if self.force_std is not None and not self.force_std > 0:
-            raise ValueError(f"force_std must be > 0 N (or None: no balance), got {self.force_std}")
-        if not self.moment_std > 0:
-            raise ValueError(f"moment_std must be > 0 N·m, got {self.moment_std}")
+DEFAULT_NOISE = NoiseModel()
+"""The noise model a :class:`Problem` is weighted with when none is given."""
 
 
 @dataclass(frozen=True)
@@ -243,7 +213,7 @@ class Problem:
         T_base_tag: np.ndarray,
         obs: Observations,
         priors: Priors = Priors(),
-        noise: NoiseModel = NoiseModel(),
+        noise: NoiseModel = DEFAULT_NOISE,
         detector: Detector | None = None,
     ) -> None:
         self.nominal, self.T_base_tag, self.obs = nominal, np.asarray(T_base_tag), obs

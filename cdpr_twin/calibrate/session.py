@@ -16,9 +16,9 @@ import numpy as np
 
 from cdpr_twin.calibrate.acquire import Recording, record
 from cdpr_twin.calibrate.excitation import excitation_poses
-from cdpr_twin.calibrate.problem import NoiseModel, Priors, Problem
+from cdpr_twin.calibrate.problem import Priors, Problem
 from cdpr_twin.calibrate.solver import Calibration, CalibrationError, solve_weighted
-from cdpr_twin.calibrate.variance import Weighting
+from cdpr_twin.calibrate.variance import NoiseModel, Weighting
 from cdpr_twin.scenario import Scenario
 from cdpr_twin.se3 import pose_distance, so3_log
 
