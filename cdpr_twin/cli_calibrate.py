@@ -160,6 +160,15 @@ def _print(cal, extra: dict, robot: Path, report: Path) -> None:
         f"{cal.rms_tag[0] * 1e3:.2f} mm / {np.degrees(cal.rms_tag[1]):.2f}°; "
         f"rank {idn.rank} of {idn.n_params} (unseen: {len(idn.null_directions)} directions)"
     )
+    vc = extra.get("variance_components")
+    if vc:
+        n = extra["noise_model"]
+        print(
+            f"weights: each measurement's noise re-estimated from its residuals over "
+            f"{len(vc['rounds'])} solves ({'settled' if vc['settled'] else vc['note']}): cables "
+            f"{n['length_std'] * 1e6:.1f} µm, tag {n['tag_lateral_std'] * 1e3:.2f} mm lateral + "
+            f"{n['tag_std_per_m'] * 1e3:.2f} mm/m, {np.degrees(n['tag_rotation_std']):.2f}°"
+        )
     sig = cal.sigma[[i for i, n in enumerate(cal.names) if n.startswith("exit")]]
     print(f"exit points: median 1σ {np.median(sig) * 1e3:.2f} mm per axis")
     if idn.prior_determined:
