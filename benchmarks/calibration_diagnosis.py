@@ -32,10 +32,18 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from calibration_study import scenario
 
 
+def true_views(rec) -> np.ndarray:
+    """(K, 4, 4) the tag poses the camera would see at the truth, at every recorded pose."""
+    from cdpr_twin.se3 import inverse
+
+    tr = rec.truth
+    cam = inverse(tr.geometry.T_platform_cam)
+    return np.array([cam @ inverse(T) @ tr.T_base_tag for T in tr.T_base_platform])
+
+
 def at_truth(rec) -> None:
     """Part 1: drum scales from the encoders, tag views against the truth."""
     from cdpr_twin.kinematics import pulley_vectors
-    from cdpr_twin.se3 import inverse
 
     o, tr = rec.obs, rec.truth
     g, T = tr.geometry, tr.T_base_platform
@@ -53,7 +61,7 @@ def at_truth(rec) -> None:
         print(f"  cable {i + 1}: {coef[1] * 100:+.4f} / {tr.drum_scale[i] * 100:+.4f}"
               f"  ({rms * 1e6:.1f} µm)")  # fmt: skip
     seen = np.flatnonzero(o.seen)
-    true = np.array([inverse(g.T_platform_cam) @ inverse(T[k]) @ tr.T_base_tag for k in seen])
+    true = true_views(rec)[seen]
     meas = o.T_cam_tag[seen]
     ratio = np.linalg.norm(meas[:, :3, 3], axis=1) / np.linalg.norm(true[:, :3, 3], axis=1) - 1
     P = true[:, :3, 3] - true[:, :3, 3].mean(axis=0)
@@ -69,13 +77,9 @@ def solves(session, nominal, frames: int) -> None:
     from cdpr_twin.calibrate.problem import Problem
     from cdpr_twin.calibrate.session import noise_of, truth_check
     from cdpr_twin.calibrate.solver import solve, solve_weighted
-    from cdpr_twin.se3 import inverse
 
     rec, tr = session.recording, session.recording.truth
-    g = tr.geometry
-    exact = np.array(
-        [inverse(g.T_platform_cam) @ inverse(T) @ tr.T_base_tag for T in tr.T_base_platform]
-    )
+    exact = true_views(rec)
     exact_obs = replace(rec.obs, T_cam_tag=np.where(rec.obs.seen[:, None, None], exact,
                                                     rec.obs.T_cam_tag))  # fmt: skip
     for label, obs, weighted in (

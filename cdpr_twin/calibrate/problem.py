@@ -360,9 +360,8 @@ class Problem:
         pred = self.predicted_tags(mod)
         meas = self.obs.T_cam_tag[self.seen]
         d = np.linalg.norm(meas[:, :3, 3], axis=1)[:, None]
-        depth_per_m = n.tag_std_per_m if n.tag_depth_per_m is None else n.tag_depth_per_m
         std = np.array([n.tag_lateral_std, n.tag_lateral_std, n.tag_depth_std])
-        per_m = np.array([n.tag_std_per_m, n.tag_std_per_m, depth_per_m])
+        per_m = np.array([n.tag_std_per_m, n.tag_std_per_m, n.depth_growth])
         dt = (meas[:, :3, 3] - pred[:, :3, 3]) / (std + per_m * d)
         R = pred[:, :3, :3].transpose(0, 2, 1) @ meas[:, :3, :3]
         dr = Rotation.from_matrix(R).as_rotvec() / n.tag_rotation_std

@@ -111,23 +111,19 @@ class Calibration:
     identifiability: Identifiability
 
 
-def solve(
-    problem: Problem, max_iterations: int = 100, rank_tol: float = 1e-6,
-    x0: np.ndarray | None = None,
-) -> Calibration:  # fmt: skip
+def solve(problem: Problem, max_iterations: int = 100, rank_tol: float = 1e-6) -> Calibration:
     """Solve the calibration.
 
     Args:
         problem: the residuals.
         max_iterations: most Levenberg–Marquardt steps.
         rank_tol: relative singular value below which the data do not see a direction.
-        x0: (n,) where to start (default: the nominal model, zeros).
 
     Raises:
         CalibrationError: too little data, or the solver did not converge.
     """
     started = time.perf_counter()
-    res = _minimise(problem, max_iterations, x0)
+    res = _minimise(problem, max_iterations, None)
     with threadpool_limits(limits=1, user_api="blas"):
         return _result(problem, res, time.perf_counter() - started, rank_tol)
 
@@ -186,7 +182,7 @@ def solve_weighted(
     return replace(cal, nfev=nfev), Weighting(problem.noise, tuple(history), settled, note)
 
 
-def _minimise(problem: Problem, max_iterations: int, x0: np.ndarray | None, ftol: float = 1e-10):
+def _minimise(problem: Problem, max_iterations: int, x0: np.ndarray | None):
     """Levenberg–Marquardt on ``problem`` from ``x0`` (zeros if None); the raw solution."""
     L = problem.layout
     if problem.n_data + problem.n_prior < L.n:
@@ -210,7 +206,6 @@ def _minimise(problem: Problem, max_iterations: int, x0: np.ndarray | None, ftol
             problem.jacobian(),
             np.zeros(L.n) if x0 is None else np.asarray(x0, dtype=float),
             max_iterations=max_iterations,
-            ftol=ftol,
         )
     if not res.converged or not np.all(np.isfinite(res.x)):
         raise CalibrationError(

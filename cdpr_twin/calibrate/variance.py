@@ -54,6 +54,11 @@ class NoiseModel:
     moment_std: float = 0.002
     tag_depth_per_m: float | None = None
 
+    @property
+    def depth_growth(self) -> float:
+        """Growth of the depth noise with the distance [m per m] (``tag_depth_per_m`` if set)."""
+        return self.tag_std_per_m if self.tag_depth_per_m is None else self.tag_depth_per_m
+
     def __post_init__(self) -> None:
         if self.force_std is not None and not self.force_std > 0:
             raise ValueError(f"force_std must be > 0 N (or None: no balance), got {self.force_std}")
@@ -73,14 +78,14 @@ class Weighting:
     """How a calibration's residuals came to be weighted.
 
     Attributes:
-        noise: the noise model of the last solve (a ``NoiseModel``).
+        noise: the noise model of the last solve.
         rounds: per solve, each group's σ̂/σ at its solution (``None``: not estimated, its
             redundancy below :data:`MIN_REDUNDANCY`).
         settled: whether the last solve's σ̂/σ were all within the tolerance of 1.
         note: why it stopped unsettled ("" when settled).
     """
 
-    noise: object
+    noise: NoiseModel
     rounds: tuple[dict[str, float | None], ...]
     settled: bool
     note: str = ""
@@ -135,21 +140,20 @@ def variance_factors(problem, jac: csc_matrix, r: np.ndarray) -> dict[str, float
     return out
 
 
-def rescaled(noise, factors: dict[str, float]):
-    """``noise`` (a ``NoiseModel``) with each group's σ multiplied by √factor.
+def rescaled(noise: NoiseModel, factors: dict[str, float]) -> NoiseModel:
+    """``noise`` with each group's σ multiplied by √factor.
 
     The tag's lateral and depth noise each keep their shape in distance (base and growth
     scaled together); the lateral growth and the depth growth become separate.
     """
     f = {g: math.sqrt(factors.get(g, 1.0)) for g in GROUPS}
-    depth_per_m = noise.tag_std_per_m if noise.tag_depth_per_m is None else noise.tag_depth_per_m
     return replace(
         noise,
         length_std=noise.length_std * f["cable"],
         tag_lateral_std=noise.tag_lateral_std * f["tag_lateral"],
         tag_std_per_m=noise.tag_std_per_m * f["tag_lateral"],
         tag_depth_std=noise.tag_depth_std * f["tag_depth"],
-        tag_depth_per_m=depth_per_m * f["tag_depth"],
+        tag_depth_per_m=noise.depth_growth * f["tag_depth"],
         tag_rotation_std=noise.tag_rotation_std * f["tag_rotation"],
         force_std=None if noise.force_std is None else noise.force_std * f["force"],
         moment_std=noise.moment_std * f["moment"],
