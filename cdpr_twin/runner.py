@@ -10,12 +10,11 @@ One tick (:func:`_loop`)::
     recorders.tick(m, truth, estimates, deviations, command, plan)  # record.py → timeseries.py
 
 The runner knows no controller or estimator by name: each controller supplies its goal pose,
-checkpoints, summary fields and the status of a run that ran out of time.
-
-Before the loop (:func:`prepare`, :func:`start`): the controller may learn its task by being
-shown a pose (teach-by-showing, :meth:`Controller.teach`); then the true robot is put at the
-start pose moved by this run's homing offset (``[realism.homing]``), while the encoders are
-homed, and the estimators and controller reset, at the *nominal* start pose.
+checkpoints, summary fields and the status of a run that ran out of time. Before the loop
+(:func:`prepare`, :func:`start`): the controller may learn its task by being shown a pose
+(teach-by-showing, :meth:`Controller.teach`); then the true robot is put at the start pose moved
+by this run's homing offset (``[realism.homing]``), while the encoders are homed, and the
+estimators and controller reset, at the *nominal* start pose.
 """
 
 from __future__ import annotations
@@ -32,6 +31,7 @@ from cdpr_twin import plugins
 from cdpr_twin.controllers.base import Controller
 from cdpr_twin.estimators.base import Estimator, update_order
 from cdpr_twin.events import EventSchedule, TagOcclusion
+from cdpr_twin.interrupts import interruption
 from cdpr_twin.metrics import RunMetrics
 from cdpr_twin.outputs import (
     OutputDir,
@@ -294,13 +294,13 @@ def run(
     tally, status, commit, started = Tally(), "running", True, time.perf_counter()
     try:
         status = _loop(setup, metrics, recorders, progress, tally)
-    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM as the command raises it
-        status = Status.TERMINATED if isinstance(exc, Terminated) else Status.INTERRUPTED
-        raise
     except OutputError:  # nothing is renamed: what was written stays *.partial
         status, commit = "failed: output", False
         raise
-    except (Exception, SystemExit) as exc:  # diverged, impossible, a plugin's sys.exit(): failed
+    except BaseException as exc:  # diverged, impossible, a plugin's sys.exit(): failed
+        if (stop := interruption(exc)) is not None:  # Ctrl-C, or SIGTERM as the command raises it
+            status = Status.TERMINATED if isinstance(stop, Terminated) else Status.INTERRUPTED
+            raise stop from None  # (also when it landed in compiled code)
         status = f"failed: {type(exc).__name__}: {exc}"
         if isinstance(exc, SystemExit):  # its code is not the command's exit code
             raise RuntimeError(f"sys.exit({exc.code!r}) called during the run") from None
