@@ -179,7 +179,7 @@ def _unexpected(exc: BaseException, show_traceback: bool) -> tuple[str, str]:
 
 def _run(args: argparse.Namespace) -> int:
     from cdpr_twin.cli_tools import live_url, run_notes
-    from cdpr_twin.outputs import sigterm_raises
+    from cdpr_twin.interrupts import sigterm_raises
     from cdpr_twin.runner import run
     from cdpr_twin.scenario import ScenarioError, load_scenario
 
@@ -222,7 +222,7 @@ def _run(args: argparse.Namespace) -> int:
 
 def _reproduce(args: argparse.Namespace) -> int:
     from cdpr_twin import study
-    from cdpr_twin.outputs import sigterm_raises
+    from cdpr_twin.interrupts import sigterm_raises
     from cdpr_twin.realism import RUN_SOURCES
 
     count, failed = [0, 0], []  # runs finished, planned

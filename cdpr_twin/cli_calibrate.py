@@ -95,7 +95,8 @@ def _calibrate(args: argparse.Namespace) -> int:
 def _guarded(args, s, source: Path, out: Path, started: float) -> int:
     """:func:`_solve_and_write`, its errors turned into one line and an exit code."""
     from cdpr_twin.calibrate.solver import CalibrationError
-    from cdpr_twin.outputs import OutputError, Terminated, sigterm_raises
+    from cdpr_twin.interrupts import sigterm_raises
+    from cdpr_twin.outputs import OutputError, Terminated
     from cdpr_twin.scenario import ScenarioError
     from cdpr_twin.sim import ModelError
 

@@ -52,7 +52,8 @@ def campaign_command(args: argparse.Namespace) -> int:
         run_campaign,
     )
     from cdpr_twin.campaign.report import write_report
-    from cdpr_twin.outputs import OutputDirError, OutputError, Terminated, sigterm_raises
+    from cdpr_twin.interrupts import sigterm_raises
+    from cdpr_twin.outputs import OutputDirError, OutputError, Terminated
 
     if args.workers is not None and args.workers < 1:
         print("cdpr-twin: error: --workers must be ≥ 1", file=sys.stderr)

@@ -22,7 +22,8 @@ The promises (issue 13), for any reader of an output directory:
    ``summary.json`` is written: what was written stays ``*.partial``.
 
 SIGTERM is turned into :class:`Terminated` (a :class:`KeyboardInterrupt`) by
-:func:`sigterm_raises`, which the command installs around a run; a run handles it as Ctrl-C.
+:func:`~cdpr_twin.interrupts.sigterm_raises`, which the command installs around a run; a run
+handles it as Ctrl-C.
 """
 
 from __future__ import annotations
@@ -73,7 +74,7 @@ class OutputError(Exception):
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised by :func:`sigterm_raises`'s handler; a run handles it as Ctrl-C."""
+    """SIGTERM, raised by :func:`~cdpr_twin.interrupts.sigterm_raises`; a run takes it as Ctrl-C."""
 
 
 @contextlib.contextmanager
@@ -379,21 +380,3 @@ def shielded() -> Iterator[None]:
     for sig in dict.fromkeys(held):  # each kind once, in the order they came
         if not (isinstance(stopping, KeyboardInterrupt) and sig == absorbed):
             signal.raise_signal(sig)  # now, to the handler it was meant for (a worker: exit)
-
-
-@contextlib.contextmanager
-def sigterm_raises() -> Iterator[None]:
-    """Within: SIGTERM raises :class:`Terminated`; the previous handler is restored on leaving.
-
-    Once: a second SIGTERM is ignored while the outputs are completed. The main thread only.
-    """
-
-    def handler(signum, frame) -> None:
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        raise Terminated()
-
-    previous = signal.signal(signal.SIGTERM, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)

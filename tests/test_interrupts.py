@@ -42,3 +42,30 @@ def test_only_an_interrupt_behind_a_system_error_counts():
     assert interruption(_through_compiled_code(Terminated())).__class__ is Terminated
     assert interruption(SystemError("a real one")) is None
     assert interruption(ValueError("x")) is None
+
+
+def test_a_command_gets_the_stop_not_the_system_error_that_carried_it():
+    # truth: the exception raised inside, and CPython's own SystemError left alone
+    from cdpr_twin.interrupts import sigterm_raises
+
+    with pytest.raises(Terminated), sigterm_raises():
+        raise _through_compiled_code(Terminated())
+    with pytest.raises(KeyboardInterrupt), sigterm_raises():
+        raise _through_compiled_code(KeyboardInterrupt())
+    with pytest.raises(SystemError, match="a real one"), sigterm_raises():
+        raise SystemError("a real one")
+
+
+def test_calibrate_stopped_inside_compiled_code_exits_terminated(tmp_path, monkeypatch, capsys):
+    # truth: the exit code and line a SIGTERM gets in `cdpr-twin calibrate` anywhere else (143,
+    # "terminated"), and nothing left behind in the directory it made
+    from cdpr_twin import cli, cli_calibrate
+
+    def solve(*args):
+        raise _through_compiled_code(Terminated())
+
+    monkeypatch.setattr(cli_calibrate, "_solve_and_write", solve)
+    out = tmp_path / "cal"
+    assert cli.main(["calibrate", "paper_open_loop", "--out", str(out)]) == 143
+    assert "cdpr-twin calibrate: terminated" in capsys.readouterr().err
+    assert not out.exists()
