@@ -159,16 +159,47 @@ def _p1_error(run, s, name: str) -> tuple[float, str | None]:
 
 
 def _median(values) -> float:
-    """The median, or nan with no values (a study of robots that all stop before p1)."""
-    values = list(values)
+    """The median of the finite values (a robot that stopped before p1 has none), or nan."""
+    values = [v for v in values if math.isfinite(v)]
     return statistics.median(values) if values else math.nan
 
 
 def _median_where_reached(rows: list[dict], key: str) -> float:
-    """Median p1 error of the calibrated model over the robots that reached p1 with it, those
-    it refuses planned with a 1 N floor."""
+    """Median p1 error of the calibrated model over every robot that reached p1 with it (those
+    whose waypoint it refuses at the robot's 2 N floor planned with a 1 N floor)."""
     errors = [r[key].get("calibrated_1N", r[key]["calibrated"]) for r in rows]
-    return _median(e for e in errors if math.isfinite(e))
+    return _median(errors)
+
+
+def medians(rows: list[dict]) -> dict:
+    """The study's medians over robots (and counts) from its rows."""
+    return {
+        "exit_calibrated_mm": _median(r["exit_median_mm"]["calibrated"] for r in rows),
+        "exit_shape_mm": _median(r["exit_shape_median_mm"] for r in rows),
+        "exit_nominal_mm": _median(r["exit_median_mm"]["nominal"] for r in rows),
+        "p1_nominal_mm": _median(r["p1_error_mm"]["nominal"] for r in rows),
+        "p1_calibrated_mm": _median(
+            r["p1_error_mm"]["calibrated"] for r in rows if not r["refused"]
+        ),
+        "p1_calibrated_exact_homing_mm": _median(
+            r["p1_error_exact_homing_mm"]["calibrated"] for r in rows if not r["refused"]
+        ),
+        "p1_nominal_exact_homing_mm": _median(
+            r["p1_error_exact_homing_mm"]["nominal"] for r in rows if not r["refused"]
+        ),
+        "p1_calibrated_all_robots_mm": _median_where_reached(rows, "p1_error_mm"),
+        "p1_calibrated_all_robots_exact_homing_mm": _median_where_reached(
+            rows, "p1_error_exact_homing_mm"
+        ),
+        "p1_calibrated_holds_as_truth": sum(
+            r["p1_wrench_feasible"]["calibrated"] == r["p1_wrench_feasible"]["truth"] for r in rows
+        ),
+        "p1_nominal_holds_as_truth": sum(
+            r["p1_wrench_feasible"]["nominal"] == r["p1_wrench_feasible"]["truth"] for r in rows
+        ),
+        "calibration_s": _median(r["calibration_s"] for r in rows),
+        "p1_not_reached_with_calibrated_model": sum(bool(r["refused"]) for r in rows),
+    }
 
 
 def main() -> None:
@@ -208,33 +239,7 @@ def main() -> None:
         if "tag_known_exit_median_mm" in r:
             k = r["tag_known_exit_median_mm"]
             print(f"      tag pose known: exit {k['']:.2f} mm (shape {k['shape_']:.2f} mm)")
-    med = {
-        "exit_calibrated_mm": _median(r["exit_median_mm"]["calibrated"] for r in rows),
-        "exit_shape_mm": _median(r["exit_shape_median_mm"] for r in rows),
-        "exit_nominal_mm": _median(r["exit_median_mm"]["nominal"] for r in rows),
-        "p1_nominal_mm": _median(r["p1_error_mm"]["nominal"] for r in rows),
-        "p1_calibrated_mm": _median(
-            r["p1_error_mm"]["calibrated"] for r in rows if not r["refused"]
-        ),
-        "p1_calibrated_exact_homing_mm": _median(
-            r["p1_error_exact_homing_mm"]["calibrated"] for r in rows if not r["refused"]
-        ),
-        "p1_nominal_exact_homing_mm": _median(
-            r["p1_error_exact_homing_mm"]["nominal"] for r in rows if not r["refused"]
-        ),
-        "p1_calibrated_1N_floor_where_refused_mm": _median_where_reached(rows, "p1_error_mm"),
-        "p1_calibrated_1N_floor_where_refused_exact_homing_mm": _median_where_reached(
-            rows, "p1_error_exact_homing_mm"
-        ),
-        "p1_calibrated_holds_as_truth": sum(
-            r["p1_wrench_feasible"]["calibrated"] == r["p1_wrench_feasible"]["truth"] for r in rows
-        ),
-        "p1_nominal_holds_as_truth": sum(
-            r["p1_wrench_feasible"]["nominal"] == r["p1_wrench_feasible"]["truth"] for r in rows
-        ),
-        "calibration_s": _median(r["calibration_s"] for r in rows),
-        "p1_not_reached_with_calibrated_model": sum(bool(r["refused"]) for r in rows),
-    }
+    med = medians(rows)
     if a.tag_known:
         for k in ("", "shape_"):
             med[f"exit_{k}tag_known_mm"] = statistics.median(
