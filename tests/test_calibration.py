@@ -296,7 +296,7 @@ def test_a_failed_report_write_leaves_no_description_under_its_final_name(tmp_pa
             raise outputs.OutputError(outputs.partial_of(path), "No space left on device")
         return real(path, data)
 
-    monkeypatch.setattr(output, "calibrated_description", lambda *a: "# robot\n")
+    monkeypatch.setattr(output, "calibrated_description", lambda *a, **k: "# robot\n")
     monkeypatch.setattr(output, "report", lambda *a: {"fit": 1})
     monkeypatch.setattr(outputs, "write_partial", disk_full_at_the_report)
     with pytest.raises(outputs.OutputError, match="No space"):

@@ -149,3 +149,32 @@ def test_a_recording_reads_with_the_radii_its_drives_are_set_to(tmp_path):
     finally:
         setup.close()
     np.testing.assert_allclose(rec.truth.drum_scale, true / rec.drum_radii - 1, rtol=1e-12)
+
+
+def test_a_calibrated_description_moved_with_its_tree_still_finds_its_tag(tmp_path):
+    """The texture is named relative to the calibration's directory: the tree holding both
+    (a clone, a copy) can move, and the scene the description builds still compiles with the
+    tag — MuJoCo's compiler is the judge."""
+    import shutil
+    from types import SimpleNamespace
+
+    import mujoco
+
+    from cdpr_twin.calibrate.output import calibrated_description
+    from cdpr_twin.sim import nominal_robot
+    from cdpr_twin.sim.generate import build_files
+
+    shutil.copytree(MODELS_DIR / "acrobot", tmp_path / "a" / "models" / "acrobot")
+    source, out = tmp_path / "a" / "models" / "acrobot" / "robot.toml", tmp_path / "a" / "cal"
+    g = nominal_robot("acrobot").geometry
+    model = SimpleNamespace(a_base=g.a_base, b_platform=g.b_platform, scale=np.zeros(8),
+                            T_platform_cam=g.T_platform_cam, T_base_tag=np.eye(4))  # fmt: skip
+    out.mkdir()
+    text = calibrated_description(source, SimpleNamespace(model=model), np.full(8, 0.02), out)
+    (out / "calibrated_robot.toml").write_text(text)
+    assert not Path(tomllib.loads(text)["tag"]["texture"]).is_absolute()
+    (tmp_path / "a").rename(tmp_path / "b")
+    _, scene = build_files(tmp_path / "b" / "cal" / "calibrated_robot.toml")
+    model = mujoco.MjModel.from_xml_path(str(scene))
+    tag = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXTURE, "tag36h11_00000")
+    assert tag >= 0 and model.tex_width[tag] * model.tex_height[tag] > 0

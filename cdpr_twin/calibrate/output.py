@@ -46,7 +46,9 @@ def toml_text(data: dict, header: str = "") -> str:
     return "\n".join(lines) + "\n"
 
 
-def calibrated_description(source: Path, cal: Calibration, drum_radii: np.ndarray) -> str:
+def calibrated_description(
+    source: Path, cal: Calibration, drum_radii: np.ndarray, beside: Path | None = None
+) -> str:
     """The robot description ``source`` with the calibration's estimates, as TOML text.
 
     Args:
@@ -54,6 +56,9 @@ def calibrated_description(source: Path, cal: Calibration, drum_radii: np.ndarra
         cal: the calibration.
         drum_radii: (m,) the radii the drives and encoders were set to while recording [m]
             (``Physics.drum_radius_set``): the drum scale errors s_i are relative to them.
+        beside: the directory the text will be written in: the tag's texture is named relative
+            to it (a clone or copy of the tree that holds both still finds it); ``None``: an
+            absolute path.
     """
     data = tomllib.loads(source.read_text(encoding="utf-8"))
     mod = cal.model
@@ -72,7 +77,10 @@ def calibrated_description(source: Path, cal: Calibration, drum_radii: np.ndarra
         data["tag"]["position_m"] = np.round(mod.T_base_tag[:3, 3], 7).tolist()
         q = quat_wxyz_from_matrix(mod.T_base_tag[:3, :3])
         data["tag"]["quat_wxyz"] = np.round(q, 9).tolist()
-        data["tag"]["texture"] = str((source.parent / data["tag"]["texture"]).resolve())
+        texture = (source.parent / data["tag"]["texture"]).resolve()
+        if beside is not None:
+            texture = Path(os.path.relpath(texture, Path(beside).resolve()))
+        data["tag"]["texture"] = str(texture)
     header = (
         f"{data.get('name', 'robot')}, calibrated by `cdpr-twin calibrate` from {source}.\n"
         "Exit and anchor points, drum radii (scale), camera mount and tag pose estimated\n"
@@ -167,7 +175,7 @@ def write(
     with writing(out):
         out.mkdir(parents=True, exist_ok=True)
     robot, rep = (out / n for n in NAMES)
-    write_partial(robot, calibrated_description(source, cal, drum_radii))
+    write_partial(robot, calibrated_description(source, cal, drum_radii, beside=out))
     write_partial(rep, json_text(report(cal, extra)))
     with shielded():  # a signal between the renames would split the pair
         for path in (robot, rep):  # the report last: it marks completion
