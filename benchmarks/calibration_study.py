@@ -23,6 +23,7 @@ camera mount is exact, ``--set truth.camera_rotation_std_deg=0``.
 import argparse
 import json
 import math
+import shutil
 import statistics
 import tempfile
 import time
@@ -104,6 +105,8 @@ def one(
             into[name], why = _p1_error(run, case, name)
             if name != "calibrated_1N":
                 refused = refused or why
+    if not holds["calibrated"]:
+        shutil.rmtree(models[-1][1].parent)
     return {
         "seed": seed,
         "calibration_s": wall,
