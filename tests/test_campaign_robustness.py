@@ -133,6 +133,7 @@ def test_sigterm_ends_the_runs_under_way_and_says_nothing_was_recorded(tmp_path)
     # before: the worker finished both queued runs (≈ 2 × 20 s), and neither was recorded
     assert waited < 12.0, f"the campaign took {waited:.1f} s to stop"
     assert "terminated; no run finished now" in err
+    assert "Traceback" not in err
     assert json.loads((out / "campaign.json").read_text())["status"] == "terminated"
     assert not (out / "results.parquet").exists()
     time.sleep(0.5)
@@ -254,3 +255,24 @@ def test_a_resume_that_cannot_write_its_table_leaves_no_stale_table(tmp_path, mo
     again = run_campaign(three, out, workers=1, resume=True)
     assert again["ran_now"] == 0 and again["status"] == "completed"
     assert sorted(load_table(out).column("seed").to_pylist()) == [1, 2, 3]
+
+
+def test_a_stopped_local_executor_ends_its_workers_without_a_thread_traceback(monkeypatch):
+    # truth: Python's own report of an exception escaping a thread (threading.excepthook).
+    # Before: a stop while the workers were still starting cancelled the queued future here,
+    # and the pool's thread, failing the futures of its ended workers, raised InvalidStateError
+    import threading
+
+    from cdpr_twin.campaign.executor import run_local
+
+    escaped = []
+    monkeypatch.setattr(threading, "excepthook", escaped.append)
+    results = run_local(time.sleep, [5.0] * 8, 2)  # fn(item): each run takes 5 s
+    stop = threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGINT))  # Ctrl-C, workers starting
+    stop.start()
+    t0 = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        next(results)
+    assert time.monotonic() - t0 < 4.0  # the runs under way were ended, not waited for
+    time.sleep(0.5)  # the pool's thread has gone through its workers' end
+    assert escaped == []

@@ -47,10 +47,11 @@ def run_local(
                 done, pending = wait(pending, return_when=FIRST_COMPLETED)
                 yield from (f.result() for f in done)
         except BaseException:
-            for f in pending:
-                f.cancel()
+            # the pool's own thread cancels the queued runs (a future cancelled here, then
+            # failed by the pool as its workers end, is Python 3.11's InvalidStateError trace)
+            pool.shutdown(wait=False, cancel_futures=True)
             stop_workers(pool)  # a stop ends the runs under way, not after them
-            pool.shutdown(wait=True, cancel_futures=True)
+            pool.shutdown(wait=True)
             raise
 
 
