@@ -329,7 +329,9 @@ def load_robot(path: str | Path) -> Robot:
             raise RobotError(f"{path}: [{name}] must be a table")
         return _Table(path, v, name)
 
-    name = top.string("name")
+    name = top.string("name")  # it names the MJCF files `model build` writes: a plain name
+    if name.startswith(".") or not all(c.isalnum() or c in "_-." for c in name):
+        raise top.fail("name", f"must be a plain file name (letters, digits, _ - .), got {name!r}")
     top.string("description", "-")
     sim = table("simulation")
     fields: dict[str, Any] = {"name": name, "source": path}

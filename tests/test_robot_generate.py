@@ -17,7 +17,7 @@ from cdpr_twin import MODELS_DIR
 from cdpr_twin.cli import main
 from cdpr_twin.robot import RobotError, load_robot
 from cdpr_twin.sim import Physics
-from cdpr_twin.sim.generate import model_texts
+from cdpr_twin.sim.generate import build_files, model_texts
 
 FIXTURES = Path(__file__).parent / "fixtures"
 HANDWRITTEN = FIXTURES / "acrobot_handwritten" / "scene.xml"
@@ -204,3 +204,14 @@ def test_cogiro_files_are_generated_and_carry_casprs_platform():
         np.sort(model.body_inertia[body]), np.linalg.eigvalsh(tensor), rtol=1e-12
     )
     np.testing.assert_allclose(r.es, 68.5e9 * np.pi * 0.002**2, rtol=1e-8)
+
+
+@pytest.mark.parametrize("name", ["../../evil", "sub/x", "..", ".hidden", "a b", "c:\\\\x"])
+def test_a_robot_name_that_is_not_a_plain_file_name_is_refused(tmp_path, name):
+    # the name makes `<name>.xml`: "../../evil" wrote outside --out before
+    path = tmp_path / "d" / "robot.toml"
+    path.parent.mkdir()
+    path.write_text(ACROBOT.read_text().replace('name = "acrobot"', f'name = "{name}"', 1))
+    with pytest.raises(RobotError, match=r"name: must be a plain file name"):
+        build_files(path, tmp_path / "d" / "out")
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["d", "robot.toml"]
