@@ -59,6 +59,7 @@ def _remove_empty(made: list[Path]) -> None:
 
 def _calibrate(args: argparse.Namespace) -> int:
     from cdpr_twin.calibrate.acquire import check
+    from cdpr_twin.calibrate.output import NAMES
     from cdpr_twin.outputs import OutputDir, OutputDirError, OutputError, others
     from cdpr_twin.scenario import ScenarioError, load_scenario
 
@@ -76,7 +77,7 @@ def _calibrate(args: argparse.Namespace) -> int:
         out = Path(args.out or Path("runs") / f"{s.name}_calibration")
         made = _missing(out)
         # a run's, campaign's or study's directory is refused (its files are not ours to clear)
-        owner = OutputDir(out, outputs=(), foreign=others("calibration"))
+        owner = OutputDir(out, outputs=(), foreign=others("calibration"), partials=NAMES)
         owner.claim()  # refuses a directory another calibration is writing
     except (ScenarioError, OutputDirError, OutputError) as exc:
         _remove_empty(made)

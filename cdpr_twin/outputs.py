@@ -250,6 +250,8 @@ class OutputDir:
             a run's by default.
         foreign: names whose presence means the directory holds another command's outputs
             (e.g. a run's in a campaign's directory): the claim is refused, nothing touched.
+        partials: glob patterns of the final names whose ``*.partial`` a claim removes (the
+            owner's unfinished files; another ``x.partial`` there is not ours): ``outputs``'.
 
     Attributes:
         path: the directory, or ``None``.
@@ -261,10 +263,12 @@ class OutputDir:
         path: Path | None,
         outputs: tuple[str, ...] = OUTPUT_NAMES,
         foreign: tuple[str, ...] = (),
+        partials: tuple[str, ...] | None = None,
     ) -> None:
         self.path = None if path is None else Path(path)
         self.lock = None if path is None else self.path / LOCK_NAME
         self.outputs, self.foreign = outputs, foreign
+        self.partials = outputs if partials is None else partials
         self._held = False
 
     def claim(self) -> None:
@@ -321,8 +325,9 @@ class OutputDir:
             os.close(fd)
 
     def _clear(self) -> None:
-        """Remove an earlier run's outputs: final names and ``*.partial``."""
-        stale = [self.path / n for n in self.outputs] + sorted(self.path.glob("*.partial"))
+        """Remove an earlier run's outputs: final names and their owner's ``*.partial``."""
+        unfinished = {p for pattern in self.partials for p in self.path.glob(f"{pattern}.partial")}
+        stale = [self.path / n for n in self.outputs] + sorted(unfinished)
         for path in stale:
             with writing(path):
                 path.unlink(missing_ok=True)

@@ -270,3 +270,24 @@ def test_lock_of_a_live_owner_is_kept_and_a_dead_owners_is_taken(tmp_path):
     assert (tmp_path / LOCK_NAME).read_text().split()[0] == str(os.getpid())
     owner.release()
     assert not (tmp_path / LOCK_NAME).exists()
+
+
+@pytest.mark.parametrize(
+    ("partials", "ours"),
+    [
+        (None, "summary.json.partial"),  # a run's
+        (("results.parquet", "report.md", "*.png", "campaign.json"), "effect_seed.png.partial"),
+    ],
+)
+def test_a_claim_removes_its_owners_partial_files_not_the_users(tmp_path, partials, ours):
+    # before: every *.partial in --out went, a user's unfinished "thesis.tex.partial" too
+    from cdpr_twin.outputs import OutputDir
+
+    out = tmp_path / "out"
+    out.mkdir()
+    for name in (ours, "thesis.tex.partial", "notes.partial"):
+        (out / name).write_text("x")
+    owner = OutputDir(out, partials=partials) if partials else OutputDir(out)
+    owner.claim()
+    owner.release()
+    assert sorted(p.name for p in out.iterdir()) == ["notes.partial", "thesis.tex.partial"]

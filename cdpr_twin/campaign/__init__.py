@@ -29,6 +29,9 @@ from cdpr_twin.outputs import (
     writing,
 )
 
+CAMPAIGN_FILES = (RESULTS, "report.md", "*.png", "campaign.json")
+"""Patterns of a campaign's own files beside its ``parts/`` and ``runs/``."""
+
 __all__ = [
     "Campaign",
     "CampaignError",
@@ -72,7 +75,7 @@ def run_campaign(
         ExecutorError: Ray is asked for but cannot start.
     """
     # a single run's or a study's directory is refused (it would be emptied or mixed)
-    owner = OutputDir(out, outputs=(), foreign=others("campaign"))
+    owner = OutputDir(out, outputs=(), foreign=others("campaign"), partials=CAMPAIGN_FILES)
     owner.claim()
     try:
         # parts of ≤ 1/10 of the runs (≤ 20 rows): a kill loses at most that much work

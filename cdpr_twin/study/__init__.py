@@ -21,7 +21,7 @@ from pathlib import Path
 
 from cdpr_twin.outputs import OutputDir, others
 from cdpr_twin.study.analysis import accuracy_at_p1, analyse
-from cdpr_twin.study.files import clear_earlier_study
+from cdpr_twin.study.files import STUDY_FILES, clear_earlier_study
 from cdpr_twin.study.findings import FINDINGS, Finding, evaluate
 from cdpr_twin.study.plan import (
     Progress,
@@ -154,7 +154,7 @@ def reproduce_runs(
         OutputError: a file cannot be written (it is left ``*.partial``).
     """
     # a single run's or a campaign's directory is refused (it would be emptied or mixed)
-    owner = OutputDir(out, outputs=(), foreign=others("study"))
+    owner = OutputDir(out, outputs=(), foreign=others("study"), partials=STUDY_FILES)
     owner.claim()  # the lock, then *.partial removed
     try:
         clear_earlier_study(out)

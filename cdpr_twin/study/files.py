@@ -23,7 +23,7 @@ import contextlib
 import re
 from pathlib import Path
 
-from cdpr_twin.outputs import OutputDir, writing
+from cdpr_twin.outputs import OutputDir, partial_of, writing
 
 FIGURES = ("fig5a", "fig5b", "fig7a", "fig7b", "fig8")
 """The study's figures (``<name>.png``)."""
@@ -43,7 +43,7 @@ def clear_earlier_study(out: Path) -> None:
         OutputDirError: a run directory under ``runs/`` is in use by a live run.
         OutputError: a file cannot be removed.
     """
-    for path in [out / n for n in STUDY_FILES] + sorted(out.glob("*.partial")):
+    for path in [out / n for n in STUDY_FILES] + [partial_of(out / n) for n in STUDY_FILES]:
         with writing(path):
             path.unlink(missing_ok=True)
     runs = out / "runs"
