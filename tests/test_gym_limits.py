@@ -12,6 +12,7 @@ import pytest
 
 from cdpr_twin.gym import CdprEnv
 from cdpr_twin.gym.env import FAILURE_REWARD
+from cdpr_twin.gym.tasks import ReachPose, ServoToTag
 from cdpr_twin.kinematics import cable_lengths
 from cdpr_twin.scenario import load_scenario
 from cdpr_twin.scenario_tables import MonitorConfig
@@ -144,6 +145,34 @@ def test_a_malformed_action_is_a_value_error_naming_the_shape(action, match):
 def test_bad_construction_arguments_are_value_errors(kwargs, match):
     with pytest.raises(ValueError, match=match):
         CdprEnv(**kwargs)
+
+
+@pytest.mark.parametrize(
+    ("make", "match"),
+    [
+        (lambda: ReachPose(horizon=-1.0), "reach: horizon must be a finite number > 0, got -1.0"),
+        (lambda: ReachPose(horizon=float("nan")), "reach: horizon must be a finite number > 0"),
+        (lambda: ReachPose(horizon=float("inf")), "reach: horizon must be a finite number > 0"),
+        (lambda: ReachPose(goal=(0.1, 0.0, 0.3)), r"reach: goal must be 6 finite numbers"),
+        (lambda: ReachPose(goal=(0.1, 0, float("nan"), 0, 0, 0)), r"goal must be 6 finite"),
+        (lambda: ReachPose(position_tolerance=0.0), "position_tolerance must be a finite"),
+        (lambda: ReachPose(rotation_weight=-0.1), "rotation_weight must be a finite number ≥ 0"),
+        (lambda: ServoToTag(goal_view="p1"), "servo: goal_view must be 6 finite numbers"),
+        (lambda: ServoToTag(rotation_tolerance_deg=True), "rotation_tolerance_deg must be"),
+    ],
+)
+def test_a_task_with_bad_numbers_is_refused_when_made(make, match):
+    # before: a negative horizon made 1-step episodes, NaN/inf raised from round(), a bad
+    # goal only at the first step
+    with pytest.raises(ValueError, match=match):
+        make()
+
+
+def test_a_reach_goal_outside_the_frame_is_refused_when_the_env_is_built():
+    # truth: the frame's inner box of the robot description (1.2 m cube): x = 5 m is outside
+    with pytest.raises(ValueError, match=r"reach: goal: .*outside|reach: goal: .*frame"):
+        CdprEnv(task=ReachPose(goal=(5.0, 0.0, 0.3, 0.0, 0.0, 0.0)), realism="ideal")
+    CdprEnv(task=ReachPose(goal=(0.1, 0.0, 0.3, 0.0, 0.0, 0.0)), realism="ideal").close()
 
 
 def test_unknown_reset_options_are_refused():

@@ -155,6 +155,12 @@ class CdprEnv(gym.Env):
         self._period = self.scenario.model.control_period
         self._horizon = max(1, round(self.task.horizon / self._period))
         self._setup: RunSetup | None = prepare(self.scenario)  # the robot: cable count, camera
+        if isinstance(goal := getattr(self.task, "goal_pose", None), np.ndarray):
+            try:  # a goal no platform can reach scores every step the same
+                self._setup.nominal.geometry.check_pose_inside(goal, "the task's goal")
+            except ValueError as exc:
+                self.close()
+                raise ValueError(f"reach: goal: {exc}") from None
         n = self._setup.physics.n_cables
         self._max_rates = np.minimum(
             -self._setup.physics.rate_range[0], self._setup.physics.rate_range[1]

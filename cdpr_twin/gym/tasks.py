@@ -6,6 +6,7 @@ not what it sees) and never the observation. Numpy only.
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -50,6 +51,25 @@ class Score:
     rotation_error: float
 
 
+def _check_task(name: str, pose_key: str, pose, **positive: float) -> None:
+    """A task's numbers, checked when it is made (not at its first step).
+
+    Raises:
+        ValueError: naming the field: a pose that is not 6 finite numbers, a tolerance or
+            horizon that is not a finite number > 0, a weight < 0.
+    """
+    p = np.asarray(pose, dtype=float) if np.ndim(pose) == 1 else np.full(1, np.nan)
+    if p.shape != (6,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"{name}: {pose_key} must be 6 finite numbers [x, y, z, rx, ry, rz] "
+                         f"(m, deg), got {pose!r}")  # fmt: skip
+    for key, value in positive.items():
+        low = "≥ 0" if key == "rotation_weight" else "> 0"
+        real = isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
+        ok = real and np.isfinite(value)
+        if not (ok and (value >= 0 if key == "rotation_weight" else value > 0)):
+            raise ValueError(f"{name}: {key} must be a finite number {low}, got {value!r}")
+
+
 @dataclass(frozen=True)
 class ReachPose:
     """Bring the platform to a pose.
@@ -69,6 +89,11 @@ class ReachPose:
     horizon: float = 15.0
     name: ClassVar[str] = "reach"
     needs_camera: ClassVar[bool] = False
+
+    def __post_init__(self) -> None:
+        _check_task("reach", "goal", self.goal, position_tolerance=self.position_tolerance,
+                    rotation_tolerance_deg=self.rotation_tolerance_deg,
+                    rotation_weight=self.rotation_weight, horizon=self.horizon)  # fmt: skip
 
     @property
     def goal_pose(self) -> np.ndarray:
@@ -102,6 +127,12 @@ class ServoToTag:
     horizon: float = 20.0
     name: ClassVar[str] = "servo"
     needs_camera: ClassVar[bool] = True
+
+    def __post_init__(self) -> None:
+        _check_task("servo", "goal_view", self.goal_view,
+                    position_tolerance=self.position_tolerance,
+                    rotation_tolerance_deg=self.rotation_tolerance_deg,
+                    rotation_weight=self.rotation_weight, horizon=self.horizon)  # fmt: skip
 
     @property
     def goal_T_cam_tag(self) -> np.ndarray:
