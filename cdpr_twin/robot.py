@@ -271,9 +271,14 @@ def _camera(t: _Table) -> Camera:
 
 
 def _tag(t: _Table) -> Tag:
+    family, tag_id = t.string("family"), t.integer("id")
+    if (family, tag_id) != ("tag36h11", 0):  # what the camera's detector looks for
+        bad = "family" if family != "tag36h11" else "id"
+        raise t.fail(bad, f"the twin detects tag36h11 id 0 only, got {family} id {tag_id}; "
+                          "use that tag (and its texture, make_tag_texture.py)")  # fmt: skip
     return Tag(
-        family=t.string("family"),
-        id=t.integer("id"),
+        family=family,
+        id=tag_id,
         size=t.number("size_m", positive=True),
         plate_half_size=t.number("plate_half_size_m", positive=True),
         plate_thickness=t.number("plate_thickness_m", positive=True),

@@ -215,3 +215,15 @@ def test_a_robot_name_that_is_not_a_plain_file_name_is_refused(tmp_path, name):
     with pytest.raises(RobotError, match=r"name: must be a plain file name"):
         build_files(path, tmp_path / "d" / "out")
     assert sorted(p.name for p in tmp_path.rglob("*")) == ["d", "robot.toml"]
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "key"),
+    [('family = "tag36h11"', 'family = "tag25h9"', "family"), ("\nid = 0", "\nid = 3", "id")],
+)
+def test_a_tag_the_camera_would_never_detect_is_refused(tmp_path, old, new, key):
+    # the detector looks for tag36h11 id 0: another tag would be rendered, then never found
+    path = tmp_path / "robot.toml"
+    path.write_text(ACROBOT.read_text().replace(old, new, 1))
+    with pytest.raises(RobotError, match=rf"tag\.{key}: the twin detects tag36h11 id 0 only"):
+        load_robot(path)
