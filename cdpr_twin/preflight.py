@@ -60,10 +60,52 @@ def check_task(scenario: Scenario, nominals: dict | None = None) -> None:
     except (Exception, SystemExit) as exc:  # a plugin's own failure (or exit): no traceback
         raise ScenarioError(f"{s.source}: controller: {type(exc).__name__}: {exc}") from None
     if goal is not None:
-        check_goal(s, nominal.geometry, goal)
+        check_goal(s, nominal, controller, goal)
 
 
-def check_goal(s: Scenario, geometry, goal: np.ndarray) -> None:
+def check_goal(s: Scenario, nominal, controller, goal: np.ndarray) -> None:
+    """Refuse an unreachable goal or a goal view without the whole tag, before a run.
+
+    :func:`check_goal_pose` and :func:`check_goal_view`, as ``runner.prepare`` and campaigns
+    check them.
+
+    Raises:
+        ScenarioError: naming the file and field at fault.
+    """
+    check_goal_pose(s, nominal.geometry, goal)
+    view = getattr(controller.options, "goal_T_cam_tag", None)
+    if view is not None and nominal.intrinsics is not None and nominal.tag_size > 0:
+        check_goal_view(s, nominal.intrinsics, nominal.tag_size, np.asarray(view, dtype=float))
+
+
+def check_goal_view(s: Scenario, intrinsics, tag_size: float, T_cam_tag: np.ndarray) -> None:
+    """Refuse a goal view in which the camera would not see the whole tag.
+
+    The servo measures its feature from the tag's detection: with a corner outside the image it
+    loses the tag as it nears the goal, and the run times out with a stale detection.
+
+    Raises:
+        ScenarioError: naming ``controller.goal_tag_pose_visp`` and the corners' pixels.
+    """
+    from cdpr_twin.vision import project_points, tag_corners_object
+
+    corners = tag_corners_object(tag_size) @ T_cam_tag[:3, :3].T + T_cam_tag[:3, 3]
+    size = np.array([intrinsics.width, intrinsics.height])
+    if np.all(corners[:, 2] > 0):
+        uv = project_points(intrinsics, T_cam_tag, tag_corners_object(tag_size))
+        if np.all((uv >= 0) & (uv <= size - 1)):
+            return
+        seen = f"its corners at {np.round(uv).astype(int).tolist()} px"
+    else:
+        seen = "the tag behind the camera"
+    raise ScenarioError(
+        f"{s.source}: controller.goal_tag_pose_visp: at this goal view the camera would not see "
+        f"the whole tag ({seen}, image {size[0]}×{size[1]} px): the servo would lose it; "
+        "choose a view with the tag inside the image"
+    )
+
+
+def check_goal_pose(s: Scenario, geometry, goal: np.ndarray) -> None:
     """Refuse a goal view the nominal robot could only reach outside its workspace.
 
     Such a goal cannot be reached: the run would go on to its time limit (or stop on a fault).

@@ -211,7 +211,7 @@ def _assemble(s: Scenario, physics, sensors, nominal) -> RunSetup:
     monitor = _monitor(s, physics)
     goal = controller.goal_pose(nominal.T_base_tag)
     if goal is not None and shown_view is None:  # a goal the nominal model predicts: reachable?
-        check_goal(s, nominal.geometry, goal)
+        check_goal(s, nominal, controller, goal)
     return RunSetup(
         s, physics, sensors, nominal, estimators, order, controller, goal, events, monitor,
         true_start, offset, shown_view,

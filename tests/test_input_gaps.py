@@ -45,6 +45,24 @@ def test_the_papers_goal_is_accepted():
     prepare(_pbvs()).close()
 
 
+def test_a_pbvs_goal_view_that_cuts_the_tag_is_refused_by_runs_and_campaigns(tmp_path):
+    # truth: the pinhole projection of the tag's corners, by hand: at 9 cm, 4.5 cm off the
+    # optical axis, the 4 cm tag's far edge sits at y = 0.065 m, v = cy + fy·0.065/0.09 > 480
+    from cdpr_twin.preflight import check_task
+    from cdpr_twin.sim import nominal_robot
+
+    K = nominal_robot("acrobot").intrinsics
+    assert K.cy + K.fy * (0.045 + 0.02) / 0.09 > K.height  # the far edge below the image
+    assert K.cy + K.fy * (0.01 + 0.02) / 0.09 < K.height - 1  # 1 cm off: inside
+    s = _pbvs(**{"controller.goal_tag_pose_visp": [0.0, 0.045, 0.09, 180, 0, 180]})
+    with pytest.raises(ScenarioError, match=r"goal_tag_pose_visp: .* would not see the whole tag"):
+        prepare(s)
+    with pytest.raises(ScenarioError, match=r"would not see the whole tag"):
+        check_task(s)  # what a campaign checks of every run before the first starts
+    s = _pbvs(**{"controller.goal_tag_pose_visp": [0.0, 0.01, 0.09, 180, 0, 180]})
+    prepare(s).close()  # 1 cm off: the whole tag in the image
+
+
 def test_an_event_the_run_does_not_reach_is_listed_in_the_summary():
     s = load_scenario("fault_cable_break").with_overrides(duration=0.2, camera=False)
     summary = run(s, None).summary
