@@ -52,6 +52,7 @@ def check_task(scenario: Scenario, nominals: dict | None = None) -> None:
         except ValueError as exc:
             raise ScenarioError(f"{s.source}: model: {exc}") from None
     nominal = nominals[key]
+    check_start(s, nominal.geometry)
     controller = controller_for(s, nominal.geometry)
     if getattr(controller.options, "goal", None) == "taught":  # (pbvs) checked when shown to the
         return  # true robot, as runner.prepare does: its pose, not the nominal model's view
@@ -61,6 +62,25 @@ def check_task(scenario: Scenario, nominals: dict | None = None) -> None:
         raise ScenarioError(f"{s.source}: controller: {type(exc).__name__}: {exc}") from None
     if goal is not None:
         check_goal(s, nominal, controller, goal)
+
+
+def check_start(s: Scenario, geometry) -> None:
+    """Refuse a start pose outside the frame or that no tension distribution holds.
+
+    The nominal robot's (``runner.prepare`` places the true robot there, moved by its homing
+    offset, and refuses the same).
+
+    Raises:
+        ScenarioError: naming ``start.pose``.
+    """
+    from cdpr_twin.workspace import infeasible_reason, is_feasible
+
+    try:
+        geometry.check_pose_inside(s.start_pose, "start.pose")
+    except ValueError as exc:
+        raise ScenarioError(f"{s.source}: start.pose: {exc}") from None
+    if not is_feasible(geometry, s.start_pose):
+        raise ScenarioError(f"{s.source}: start.pose {infeasible_reason(geometry)}")
 
 
 def check_goal(s: Scenario, nominal, controller, goal: np.ndarray) -> None:

@@ -46,6 +46,12 @@ high = 1000
 """
 
 
+_START_AXIS = (
+    'key = "seed"\nvalues = [1, 2]',
+    'key = "start.pose"\nvalues = [[0.112, -0.032, 0.301, -12, -10, 0], [9, 9, 9, 0, 0, 0]]',
+)
+
+
 @pytest.fixture(scope="module")
 def small(tmp_path_factory):
     path = tmp_path_factory.mktemp("campaign") / "small.toml"
@@ -295,6 +301,12 @@ def test_ctrl_c_stops_with_a_valid_table(small, tmp_path):
         (("values = [0.0, 0.012]", "values = [0.0, -1.0]"), "exit_point_std"),
         (('draw = "integers"', 'draw = "gaussian"'), "axes[2].draw: must be one of"),
         (("samples = 3", "samples = 0"), "samples: must be an integer ≥ 1"),
+        # a start pose the run would refuse: refused before any run, as `run` refuses it
+        (_START_AXIS, "start.pose: start.pose at position [9.0, 9.0, 9.0] m puts"),
+        (
+            (_START_AXIS[0], _START_AXIS[1].replace("9, 9, 9", "0.5, 0.5, 0.0")),
+            "start.pose is outside the wrench-feasible workspace",
+        ),
     ],
 )
 def test_a_bad_campaign_is_a_one_line_error_before_anything_runs(tmp_path, capsys, change, message):

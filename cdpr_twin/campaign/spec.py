@@ -271,7 +271,9 @@ def _tasks(source: Path, block: _Block, seed: int, where: str) -> list[Task]:
                 _swap_in_loop(data, block.base)
             try:
                 scenario = scenario_from_data(data, block.scenario)
-                task_key = json.dumps([data.get("model"), data.get("controller")], default=str)
+                task_key = json.dumps(
+                    [data.get(k) for k in ("model", "controller", "start")], default=str
+                )
                 if task_key not in checked:  # the robot and the task: the twin's own checks
                     check_task(scenario, nominals)  # (truth draws and seeds do not change them)
                     checked.add(task_key)
