@@ -51,6 +51,7 @@ def campaign_command(args: argparse.Namespace) -> int:
         load_campaign,
         run_campaign,
     )
+    from cdpr_twin.campaign.executor import check_address
     from cdpr_twin.campaign.report import write_report
     from cdpr_twin.interrupts import sigterm_raises
     from cdpr_twin.outputs import OutputDirError, OutputError, Terminated
@@ -66,6 +67,12 @@ def campaign_command(args: argparse.Namespace) -> int:
     out = args.out if args.out is not None else Path("runs") / campaign.name
     progress, since = CampaignProgress(campaign.name), time.time()
     ray = False if args.ray is None else (args.ray or True)
+    try:
+        if isinstance(ray, str):  # before its directory is made: a wrong address writes nothing
+            check_address(ray)
+    except ExecutorError as exc:
+        print(f"cdpr-twin: error: {exc}", file=sys.stderr)
+        return 2
     try:
         with sigterm_raises():
             info = run_campaign(campaign, out, args.workers, ray, args.resume, progress)

@@ -1,29 +1,43 @@
-"""Ctrl-C and SIGTERM seen through compiled code.
+"""Ctrl-C and SIGTERM seen through compiled code and through other libraries.
 
 SIGTERM raises :class:`~cdpr_twin.outputs.Terminated` (and Ctrl-C ``KeyboardInterrupt``) from
-the signal handler, wherever the main thread is. Inside a numba-compiled function the handler
-runs when the function hands back, and CPython reports the pair as ``SystemError: …returned a
-result with an exception set``, the interrupt as its cause: the run would be recorded as
-failed where it was stopped. :func:`sigterm_raises`, around each command, hands either on as
-the stop it is.
+the signal handler, wherever the main thread is. Two paths lose what it was:
+
+- inside a numba-compiled function the handler runs when the function hands back, and CPython
+  reports the pair as ``SystemError: …returned a result with an exception set``, the interrupt
+  as its cause: the run would be recorded as failed where it was stopped;
+- a library that checks signals in its own loop (Ray's ``ray.get``/``ray.wait``) re-raises
+  the interrupt as a plain ``KeyboardInterrupt``: a SIGTERM would be told as a Ctrl-C.
+
+:func:`interruption` recovers the stop either way (the SIGTERM handler notes its signal), and
+:func:`sigterm_raises`, around each command, hands it on as the stop it is.
 """
 
 from __future__ import annotations
 
 import contextlib
 import signal
+import threading
 from collections.abc import Iterator
 
 from cdpr_twin.outputs import Terminated
 
+_SIGTERM = threading.Event()
+"""Set by :func:`sigterm_raises`' handler: a SIGTERM arrived (cleared on entering it)."""
+
 
 def interruption(exc: BaseException) -> KeyboardInterrupt | None:
-    """The Ctrl-C or SIGTERM ``exc`` is, or that surfaced as it through compiled code; else None."""
-    if isinstance(exc, KeyboardInterrupt):
-        return exc
+    """The Ctrl-C or SIGTERM ``exc`` is, or that surfaced as it; else ``None``.
+
+    A plain ``KeyboardInterrupt`` after a SIGTERM (a library re-raised its
+    :class:`~cdpr_twin.outputs.Terminated` as the base class) is a ``Terminated``.
+    """
+    stop = exc if isinstance(exc, KeyboardInterrupt) else None
     if isinstance(exc, SystemError) and isinstance(exc.__cause__, KeyboardInterrupt):
-        return exc.__cause__
-    return None
+        stop = exc.__cause__
+    if stop is not None and not isinstance(stop, Terminated) and _SIGTERM.is_set():
+        return Terminated()
+    return stop
 
 
 @contextlib.contextmanager
@@ -31,19 +45,20 @@ def sigterm_raises() -> Iterator[None]:
     """Within: SIGTERM raises :class:`~cdpr_twin.outputs.Terminated`; restored on leaving.
 
     Once: a second SIGTERM is ignored while the outputs are completed. The main thread only.
-    A Ctrl-C or SIGTERM that surfaced through compiled code (:func:`interruption`) leaves as
-    itself, not as the ``SystemError`` that carried it.
+    A Ctrl-C or SIGTERM that surfaced otherwise (:func:`interruption`) leaves as itself.
     """
 
     def handler(signum, frame) -> None:
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        _SIGTERM.set()
         raise Terminated()
 
+    _SIGTERM.clear()
     previous = signal.signal(signal.SIGTERM, handler)
     try:
         yield
-    except SystemError as exc:
-        if (stop := interruption(exc)) is None:
+    except (SystemError, KeyboardInterrupt) as exc:
+        if (stop := interruption(exc)) is None or stop is exc:
             raise
         raise stop from None
     finally:

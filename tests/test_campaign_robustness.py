@@ -276,3 +276,51 @@ def test_a_stopped_local_executor_ends_its_workers_without_a_thread_traceback(mo
     assert time.monotonic() - t0 < 4.0  # the runs under way were ended, not waited for
     time.sleep(0.5)  # the pool's thread has gone through its workers' end
     assert escaped == []
+
+
+def test_a_ray_address_nothing_answers_is_a_one_line_error_before_anything_is_written(tmp_path):
+    # before: Ray retried the connection for minutes, after the directory had been made
+    import socket
+
+    with socket.socket() as probe:  # a port that was free a moment ago: nothing listens there
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    src = _campaign(tmp_path, "c", 1.0, camera=False, seeds=(1,))
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "cdpr_twin", "campaign", str(src), "--out", str(out),
+           "--ray", f"127.0.0.1:{port}"]  # fmt: skip
+    t0 = time.monotonic()
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert time.monotonic() - t0 < 60.0
+    assert proc.stderr.count("\n") == 1 and f"cannot start Ray on 127.0.0.1:{port}" in proc.stderr
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_sigterm_stops_a_ray_campaign_as_terminated(tmp_path):
+    # before: Ray's own SIGTERM handler made it `error: sys.exit(1) called`, exit 1, status
+    # failed; then Ray's signal check re-raised the Terminated as a plain Ctrl-C (exit 130)
+    pytest.importorskip("ray", reason="Ray has no wheel for this platform")
+    src = _campaign(tmp_path, "slow", 30.0, camera=True, seeds=(1, 2))
+    out = tmp_path / "ray_out"
+    cmd = [sys.executable, "-m", "cdpr_twin", "campaign", str(src), "--out", str(out), "--ray"]
+    env = {**os.environ, "MUJOCO_GL": "egl"}
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env,
+        start_new_session=True,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "campaign.json").exists() and time.monotonic() < deadline:
+            time.sleep(0.2)  # the campaign claimed its directory
+        time.sleep(15.0)  # the local cluster started, its actors imported the package and run
+        assert proc.poll() is None
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=90)
+    finally:
+        if _group_alive(proc.pid):
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 143, err
+    assert "cdpr-twin: terminated;" in err and "Traceback" not in err
+    assert json.loads((out / "campaign.json").read_text())["status"] == "terminated"

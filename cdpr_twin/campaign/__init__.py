@@ -20,6 +20,7 @@ from cdpr_twin.campaign.report import report_files
 from cdpr_twin.campaign.spec import Campaign, CampaignError, Task, load_campaign
 from cdpr_twin.campaign.table import RESULTS, ResultTable, load_table
 from cdpr_twin.campaign.worker import run_task
+from cdpr_twin.interrupts import interruption
 from cdpr_twin.outputs import (
     OutputDir,
     OutputDirError,
@@ -129,9 +130,12 @@ def _execute(campaign, out, table, todo, workers, ray_address, progress) -> dict
             n += 1
             if progress is not None:
                 progress(n, len(todo), row)
-    except KeyboardInterrupt as exc:
-        status = "terminated" if isinstance(exc, Terminated) else "interrupted"
-        raise
+    except KeyboardInterrupt as exc:  # (a SIGTERM that Ray re-raised as a plain Ctrl-C too)
+        stop = interruption(exc)
+        status = "terminated" if isinstance(stop, Terminated) else "interrupted"
+        if stop is exc:
+            raise
+        raise stop from None
     except BaseException:  # e.g. a worker lost: the campaign.json must not say completed
         status = "failed"
         raise

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -92,6 +93,33 @@ def stop_workers(pool: ProcessPoolExecutor, grace: float = 2.0) -> None:
             process.kill()
 
 
+CONNECT_TIMEOUT_S = 10.0
+"""How long a Ray cluster's address is given to accept a connection before it is refused."""
+
+
+def check_address(address: str) -> None:
+    """Refuse a cluster address that accepts no TCP connection within the timeout.
+
+    ``host:port`` (the head's GCS) and ``ray://host:port`` (Ray Client) are tried; ``auto``
+    and other forms are left to Ray.
+
+    Raises:
+        ExecutorError: naming the address and the socket's error.
+    """
+    import socket
+
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not port.isdigit() or not host:
+        return
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), CONNECT_TIMEOUT_S).close()
+    except OSError as exc:
+        raise ExecutorError(
+            f"cannot start Ray on {address}: nothing accepts a connection there "
+            f"({exc.strerror or exc}); start the cluster (ray start --head) or fix the address"
+        ) from None
+
+
 def run_ray(
     fn: Callable[..., Any],
     items: Iterable[Any],
@@ -113,11 +141,17 @@ def run_ray(
         ) from None
     started = not ray.is_initialized()
     if started:
+        if address is not None:
+            check_address(address)  # Ray itself retries an unreachable cluster for minutes
+        ours = signal.getsignal(signal.SIGTERM)
         try:
             ray.init(address=address, include_dashboard=False, log_to_driver=False)
         except Exception as exc:  # Ray's own connection errors are of many types
             where = address or "a local cluster"
             raise ExecutorError(f"cannot start Ray on {where}: {exc}") from None
+        finally:  # Ray's SIGTERM handler exits; the campaign's stops it cleanly (exit 143)
+            if threading.current_thread() is threading.main_thread() and callable(ours):
+                signal.signal(signal.SIGTERM, ours)
     try:
         n = workers or max(1, int(ray.available_resources().get("CPU", 1)))
 
