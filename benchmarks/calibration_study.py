@@ -97,16 +97,18 @@ def one(
     models = [("nominal", None), ("calibrated", robot)]
     if not holds["calibrated"]:  # planned anyway, the waypoint check's floor lowered to 1 N
         models.append(("calibrated_1N", floor_lowered(robot, 1.0)))
-    for name, nom in models:
-        sc = replace(s, model=replace(s.model, nominal=nom)).with_overrides(
-            duration=10.0, camera=False
-        )
-        for into, case in ((p1, sc), (exact, replace(sc, realism=at_start))):
-            into[name], why = _p1_error(run, case, name)
-            if name != "calibrated_1N":
-                refused = refused or why
-    if not holds["calibrated"]:
-        shutil.rmtree(models[-1][1].parent)
+    try:
+        for name, nom in models:
+            sc = replace(s, model=replace(s.model, nominal=nom)).with_overrides(
+                duration=10.0, camera=False
+            )
+            for into, case in ((p1, sc), (exact, replace(sc, realism=at_start))):
+                into[name], why = _p1_error(run, case, name)
+                if name != "calibrated_1N":
+                    refused = refused or why
+    finally:
+        if not holds["calibrated"]:
+            shutil.rmtree(models[-1][1].parent)
     return {
         "seed": seed,
         "calibration_s": wall,

@@ -23,7 +23,8 @@ from collections.abc import Iterator
 from cdpr_twin.outputs import Terminated
 
 _SIGTERM = threading.Event()
-"""Set by :func:`sigterm_raises`' handler: a SIGTERM arrived (cleared on entering it)."""
+"""Set by :func:`sigterm_raises`' handler: a SIGTERM arrived (cleared on entering and leaving
+it)."""
 
 
 def interruption(exc: BaseException) -> KeyboardInterrupt | None:
@@ -63,3 +64,4 @@ def sigterm_raises() -> Iterator[None]:
         raise stop from None
     finally:
         signal.signal(signal.SIGTERM, previous)
+        _SIGTERM.clear()  # a later Ctrl-C, outside this command, is a Ctrl-C

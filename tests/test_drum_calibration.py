@@ -4,6 +4,7 @@ the cable paid out is the cable commanded. Checked end to end on the paper's ope
 whose only error is its drums' radii misses p1 by millimetres with the nominal model, and by the
 model's own residual once its description carries the true radii."""
 
+import os
 import tomllib
 from pathlib import Path
 
@@ -173,6 +174,13 @@ def test_a_calibrated_description_moved_with_its_tree_still_finds_its_tag(tmp_pa
     text = calibrated_description(source, SimpleNamespace(model=model), np.full(8, 0.02), out)
     (out / "calibrated_robot.toml").write_text(text)
     assert not Path(tomllib.loads(text)["tag"]["texture"]).is_absolute()
+    if Path(os.path.commonpath([MODELS_DIR.resolve(), tmp_path.resolve()])) == Path("/"):
+        apart = calibrated_description(  # sharing only the root: the absolute path, which holds
+            MODELS_DIR / "acrobot" / "robot.toml", SimpleNamespace(model=model), np.full(8, 0.02),
+            tmp_path,
+        )  # fmt: skip
+        texture = Path(tomllib.loads(apart)["tag"]["texture"])
+        assert texture.is_absolute() and texture.is_file()
     (tmp_path / "a").rename(tmp_path / "b")
     _, scene = build_files(tmp_path / "b" / "cal" / "calibrated_robot.toml")
     model = mujoco.MjModel.from_xml_path(str(scene))

@@ -69,3 +69,24 @@ def test_calibrate_stopped_inside_compiled_code_exits_terminated(tmp_path, monke
     assert cli.main(["calibrate", "paper_open_loop", "--out", str(out)]) == 143
     assert "cdpr-twin calibrate: terminated" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_sigterm_re_raised_as_a_plain_ctrl_c_is_still_a_sigterm_and_only_within_its_command():
+    # truth: the signal actually delivered (raise_signal), against what the code then sees: a
+    # library (Ray's signal check) re-raising our Terminated as its base class
+    import signal
+
+    from cdpr_twin.interrupts import sigterm_raises
+
+    def library_call():
+        try:
+            signal.raise_signal(signal.SIGTERM)
+        except KeyboardInterrupt:
+            raise KeyboardInterrupt from None  # what Ray's ray.wait makes of it
+
+    with pytest.raises(Terminated), sigterm_raises():
+        library_call()
+    assert type(interruption(KeyboardInterrupt())) is KeyboardInterrupt  # a later Ctrl-C
+    with pytest.raises(KeyboardInterrupt) as caught, sigterm_raises():
+        raise KeyboardInterrupt
+    assert type(caught.value) is KeyboardInterrupt

@@ -276,12 +276,15 @@ def test_lock_of_a_live_owner_is_kept_and_a_dead_owners_is_taken(tmp_path):
     ("partials", "ours"),
     [
         (None, "summary.json.partial"),  # a run's
-        (("results.parquet", "report.md", "*.png", "campaign.json"), "effect_seed.png.partial"),
+        ("campaign", "effect_seed.png.partial"),  # CAMPAIGN_FILES: what a campaign passes
     ],
 )
 def test_a_claim_removes_its_owners_partial_files_not_the_users(tmp_path, partials, ours):
     # before: every *.partial in --out went, a user's unfinished "thesis.tex.partial" too
+    from cdpr_twin.campaign import CAMPAIGN_FILES
     from cdpr_twin.outputs import OutputDir
+
+    partials = CAMPAIGN_FILES if partials == "campaign" else partials
 
     out = tmp_path / "out"
     out.mkdir()

@@ -57,8 +57,8 @@ def calibrated_description(
         drum_radii: (m,) the radii the drives and encoders were set to while recording [m]
             (``Physics.drum_radius_set``): the drum scale errors s_i are relative to them.
         beside: the directory the text will be written in: the tag's texture is named relative
-            to it (a clone or copy of the tree that holds both still finds it); ``None``: an
-            absolute path.
+            to it when both lie in one tree below the root (a clone or copy of that tree still
+            finds it); otherwise, or ``None``, by its absolute path.
     """
     data = tomllib.loads(source.read_text(encoding="utf-8"))
     mod = cal.model
@@ -78,8 +78,10 @@ def calibrated_description(
         q = quat_wxyz_from_matrix(mod.T_base_tag[:3, :3])
         data["tag"]["quat_wxyz"] = np.round(q, 9).tolist()
         texture = (source.parent / data["tag"]["texture"]).resolve()
-        if beside is not None:
-            texture = Path(os.path.relpath(texture, Path(beside).resolve()))
+        here = None if beside is None else Path(beside).resolve()
+        if here is not None and Path(os.path.commonpath([texture, here])) != Path(texture.anchor):
+            texture = Path(os.path.relpath(texture, here))  # (sharing no more than the root or
+            # drive, e.g. a package installed apart from the output: absolute)
         data["tag"]["texture"] = str(texture)
     header = (
         f"{data.get('name', 'robot')}, calibrated by `cdpr-twin calibrate` from {source}.\n"

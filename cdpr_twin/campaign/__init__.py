@@ -34,6 +34,7 @@ CAMPAIGN_FILES = (RESULTS, "report.md", "*.png", "campaign.json")
 """Patterns of a campaign's own files beside its ``parts/`` and ``runs/``."""
 
 __all__ = [
+    "CAMPAIGN_FILES",
     "Campaign",
     "CampaignError",
     "ExecutorError",

@@ -49,10 +49,14 @@ def run_local(
                 yield from (f.result() for f in done)
         except BaseException:
             # the pool's own thread cancels the queued runs (a future cancelled here, then
-            # failed by the pool as its workers end, is Python 3.11's InvalidStateError trace)
+            # failed by that thread as the workers end, is Python 3.11's InvalidStateError
+            # trace); shutdown forgets the workers and the thread: both are taken first
+            processes = list((getattr(pool, "_processes", None) or {}).values())
+            manager = getattr(pool, "_executor_manager_thread", None)
             pool.shutdown(wait=False, cancel_futures=True)
-            stop_workers(pool)  # a stop ends the runs under way, not after them
-            pool.shutdown(wait=True)
+            stop_workers(pool, processes)  # a stop ends the runs under way, not after them
+            if manager is not None:
+                manager.join(timeout=10.0)
             raise
 
 
@@ -71,17 +75,22 @@ def _exit_with(parent: int) -> None:
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
-def stop_workers(pool: ProcessPoolExecutor, grace: float = 2.0) -> None:
+def stop_workers(
+    pool: ProcessPoolExecutor, processes: list | None = None, grace: float = 2.0
+) -> None:
     """End the pool's worker processes now (their tasks are abandoned, not recorded).
 
     ``shutdown`` alone lets every task already handed to a worker finish (40 s for a PBVS run),
     past a supervisor's grace period. Each worker gets SIGTERM; one still alive ``grace``
     seconds later (all share the deadline) is killed. Python ≥ 3.14 has ``terminate_workers``;
-    before it the processes are only reachable by the pool's private ``_processes``.
+    before it the processes are only reachable by the pool's private ``_processes`` (which a
+    ``shutdown`` clears: give ``processes``, taken before it, after one).
     """
-    processes = list((getattr(pool, "_processes", None) or {}).values())
+    given = processes is not None
+    if not given:
+        processes = list((getattr(pool, "_processes", None) or {}).values())
     terminate = getattr(pool, "terminate_workers", None)
-    if terminate is not None:
+    if terminate is not None and not given:
         terminate()
     else:
         for process in processes:

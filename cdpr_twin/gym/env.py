@@ -155,12 +155,7 @@ class CdprEnv(gym.Env):
         self._period = self.scenario.model.control_period
         self._horizon = max(1, round(self.task.horizon / self._period))
         self._setup: RunSetup | None = prepare(self.scenario)  # the robot: cable count, camera
-        if isinstance(goal := getattr(self.task, "goal_pose", None), np.ndarray):
-            try:  # a goal no platform can reach scores every step the same
-                self._setup.nominal.geometry.check_pose_inside(goal, "the task's goal")
-            except ValueError as exc:
-                self.close()
-                raise ValueError(f"reach: goal: {exc}") from None
+        self._check_goal()
         n = self._setup.physics.n_cables
         self._max_rates = np.minimum(
             -self._setup.physics.rate_range[0], self._setup.physics.rate_range[1]
@@ -365,6 +360,17 @@ class CdprEnv(gym.Env):
         if self.render_mode != "rgb_array" or self._setup is None:
             return None
         return self._setup.sensors.render()
+
+    def _check_goal(self) -> None:
+        """Refuse a task's goal pose outside the frame (every step would score the same)."""
+        goal = getattr(self.task, "goal_pose", None)
+        if not isinstance(goal, np.ndarray):
+            return
+        try:
+            self._setup.nominal.geometry.check_pose_inside(goal, "the task's goal")
+        except ValueError as exc:
+            self.close()
+            raise ValueError(f"reach: goal: {exc}") from None
 
     def close(self) -> None:
         """Free the renderer (safe to call more than once)."""

@@ -6,7 +6,7 @@ not what it sees) and never the observation. Numpy only.
 
 from __future__ import annotations
 
-import numbers
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -58,15 +58,21 @@ def _check_task(name: str, pose_key: str, pose, **positive: float) -> None:
         ValueError: naming the field: a pose that is not 6 finite numbers, a tolerance or
             horizon that is not a finite number > 0, a weight < 0.
     """
-    p = np.asarray(pose, dtype=float) if np.ndim(pose) == 1 else np.full(1, np.nan)
-    if p.shape != (6,) or not np.all(np.isfinite(p)):
+    try:
+        p = np.asarray(pose, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        p = np.full(1, np.nan)
+    if p.shape != (6,) or not np.all(np.isfinite(p)) or np.asarray(pose).dtype == bool:
         raise ValueError(f"{name}: {pose_key} must be 6 finite numbers [x, y, z, rx, ry, rz] "
                          f"(m, deg), got {pose!r}")  # fmt: skip
     for key, value in positive.items():
         low = "≥ 0" if key == "rotation_weight" else "> 0"
-        real = isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
-        ok = real and np.isfinite(value)
-        if not (ok and (value >= 0 if key == "rotation_weight" else value > 0)):
+        try:
+            v = float(value)
+        except (TypeError, ValueError, OverflowError):
+            v = math.nan
+        ok = math.isfinite(v) and not isinstance(value, bool | np.bool_)
+        if not (ok and (v >= 0 if key == "rotation_weight" else v > 0)):
             raise ValueError(f"{name}: {key} must be a finite number {low}, got {value!r}")
 
 
