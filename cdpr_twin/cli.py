@@ -123,10 +123,12 @@ def _print_ends(s: dict) -> None:
             f"{err['rotation_deg']:.3f}° from waypoint {np.round(end['waypoint'], 4).tolist()}"
         )
     if "pbvs" in s and s["pbvs"]["final_tag_error"] is not None:
-        e = s["pbvs"]["final_tag_error"]
+        e, seen = s["pbvs"]["final_tag_error"], s["pbvs"]["final_tag_error"].get("detected_at_s")
+        stale = seen is not None and seen < s["simulated_time_s"] - 1e-6
         print(
-            f"final tag pose error (detected): {e['translation_m'] * 1e3:.2f} mm / "
-            f"{e['rotation_deg']:.3f}°"
+            f"{'last' if stale else 'final'} tag pose error (detected): "
+            f"{e['translation_m'] * 1e3:.2f} mm / {e['rotation_deg']:.3f}°"
+            + (f" at t = {seen:.2f} s; the tag was not seen after it" if stale else "")
         )
 
 

@@ -388,7 +388,7 @@ def _loop(setup: RunSetup, metrics: RunMetrics, recorders: Recorders, progress, 
         physics.advance(period, command.cable_rates)
         setup.events.fire(physics.time + 0.5 * physics.timestep)  # due before this tick's read
         m = sensors.read(command)
-        tally.last_tag = m.tag if m.tag is not None else tally.last_tag
+        tally.seen(m)
         estimates = setup.estimate(m)
         fault = record(m, estimates, command)
         if progress is not None:

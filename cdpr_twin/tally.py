@@ -22,14 +22,21 @@ class Tally:
 
     Attributes:
         last_tag: the last tag detection after a command, or ``None``.
+        last_tag_time: the time of the read that delivered it [s], or ``None``.
         clipped: (m,) clipped tension readings per cable (every read of the run, t = 0
             included), or ``None`` (the sensors never clip).
         faults: the robot's faults (:class:`cdpr_twin.sim.Fault`), in time order.
     """
 
     last_tag: object = None
+    last_tag_time: float | None = None
     clipped: np.ndarray | None = None
     faults: list = dataclasses.field(default_factory=list)
+
+    def seen(self, m: Measurement) -> None:
+        """Keep the read's tag detection (and its time) when it has one."""
+        if m.tag is not None:
+            self.last_tag, self.last_tag_time = m.tag, float(m.time)
 
     def add(self, m: Measurement) -> None:
         """Count one measurement's clipped tension readings."""
@@ -54,7 +61,7 @@ def summarize(setup, metrics: RunMetrics, status: str, tally: Tally) -> dict:
     true_tag_error = None
     if view is not None and p.has_camera and p.has_tag:  # truth stays here: only the error
         true_tag_error = pose_error(p.T_cam_tag, view)
-    end = RunEnd(status=status, last_tag=tally.last_tag, true_tag_error=true_tag_error)
+    end = RunEnd(status, tally.last_tag, true_tag_error, tally.last_tag_time)
     truth = {"time": p.time, "T_base_platform": p.T_base_platform, "tensions": p.tensions}
     extra = setup.controller.summary(end)
     out = run_summary(setup.scenario, status, metrics, truth, setup.goal_pose, extra)

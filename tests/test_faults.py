@@ -355,3 +355,18 @@ def test_pbvs_holds_still_while_the_tag_is_hidden_and_resumes_after(tmp_path):
     stats = subprocess.run([rerun, "rrd", "stats", str(out / "recording.rrd")],
                            capture_output=True, text=True, env=env).stdout  # fmt: skip
     assert "/events:" in stats  # the events text log, on the run's timeline
+
+
+def test_a_run_ending_with_the_tag_hidden_says_its_last_detection_is_old(tmp_path, capsys):
+    # truth: the image estimator's validity in the timeseries (it is valid exactly when a tag
+    # detection was read); before, the console called the 1 s old detection "final"
+    out = tmp_path / "hidden_at_the_end"
+    source = str(ROOT / "scenarios" / "fault_tag_occlusion.toml")
+    assert main(["run", source, "--duration", "4.0", "--out", str(out)]) == 0  # hidden from 3 s
+    printed = capsys.readouterr().out
+    seen = json.loads((out / "summary.json").read_text())["pbvs"]["final_tag_error"]
+    ts = Timeseries.load(out / "timeseries.csv")
+    assert seen["detected_at_s"] == pytest.approx(ts.t[ts.columns["image_valid"] == 1].max())
+    assert 2.9 < seen["detected_at_s"] < 3.3
+    assert f"last tag pose error (detected): {seen['translation_m'] * 1e3:.2f} mm" in printed
+    assert f"at t = {seen['detected_at_s']:.2f} s; the tag was not seen after it" in printed

@@ -33,11 +33,13 @@ class RunEnd:
         true_tag_error: ground-truth distance of the final tag view to :attr:`Controller.
             goal_view` (``translation_m``, ``rotation_deg``), computed by the runner; ``None``
             without a goal view, camera or tag. The controller sees this error, never truth.
+        last_tag_time: when ``last_tag`` was read [s] (``None``: no detection, or not known).
     """
 
     status: str
     last_tag: TagDetection | None
     true_tag_error: dict | None
+    last_tag_time: float | None = None
 
 
 class Controller(ABC):
