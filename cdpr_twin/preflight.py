@@ -48,7 +48,7 @@ def check_task(scenario: Scenario, nominals: dict | None = None) -> None:
         try:
             nominals[key] = nominal_robot(m.file, m.nominal, (m.payload, m.payload_com))
         except ModelError as exc:
-            raise ScenarioError(f"{s.source}: model.file: {exc}") from None
+            raise ScenarioError(f"{s.source}: {exc.field}: {exc}") from None
         except ValueError as exc:
             raise ScenarioError(f"{s.source}: model: {exc}") from None
     nominal = nominals[key]

@@ -177,7 +177,7 @@ def prepare(scenario: Scenario) -> RunSetup:
             tag_window=s.sensors.tag_window,
         )
     except ModelError as exc:
-        raise ScenarioError(f"{src}: model.file: {exc}") from None
+        raise ScenarioError(f"{src}: {exc.field}: {exc}") from None
     except SimulationError as exc:
         raise ScenarioError(f"{src}: sensors.camera: {exc}") from None
     except ValueError as exc:

@@ -364,3 +364,16 @@ def test_ctrl_c_while_a_command_starts_is_one_line_not_a_traceback(monkeypatch, 
     monkeypatch.setattr(scenario, "load_scenario", interrupted)
     assert main(["run", "paper_open_loop", "--duration", "0.2"]) == 130
     assert capsys.readouterr().err == "cdpr-twin run: interrupted\n"
+
+
+def test_a_bad_nominal_description_is_named_by_its_own_key_and_a_directory_as_one(tmp_path):
+    # before: both said model.file, and a directory was "not found"
+    bad = tmp_path / "robot.toml"
+    bad.write_text('name = "acrobot"\n')  # a description without its tables
+    s = _pbvs(**{"model.nominal": str(bad)})
+    with pytest.raises(ScenarioError, match=r": model\.nominal: .*robot\.toml"):
+        prepare(s)
+    data = tomllib.loads((ROOT / "scenarios" / "paper_open_loop.toml").read_text())
+    data["model"] = {"file": str(tmp_path)}
+    with pytest.raises(ScenarioError, match=r": model\.file: model file .* is a directory"):
+        prepare(scenario_from_data(data, ROOT / "scenarios" / "paper_open_loop.toml"))

@@ -28,6 +28,15 @@ TAG_BODY = "tag"
 class ModelError(ValueError):
     """A model file is missing, malformed, or lacks an element the twin needs."""
 
+    field = "model.file"
+    """The scenario key that named the file at fault."""
+
+
+class NominalError(ModelError):
+    """The robot description given as the nominal model (``[model] nominal``) is unusable."""
+
+    field = "model.nominal"
+
 
 class SimulationError(RuntimeError):
     """The simulation diverged or was asked for something it cannot do."""
@@ -97,6 +106,9 @@ def _spec_cable_count(spec: mujoco.MjSpec) -> int:
 
 def _load_spec(path: Path) -> mujoco.MjSpec:
     path = Path(path)
+    if path.is_dir():
+        raise ModelError(f"model file {path} is a directory; give an MJCF file in it, such as "
+                         "models/acrobot/scene.xml")  # fmt: skip
     if not path.is_file():
         raise ModelError(
             f"model file {path} not found; pass the path of an MJCF file such as "

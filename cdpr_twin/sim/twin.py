@@ -26,6 +26,7 @@ from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim.model import (
     TAG_BODY,
     ModelError,
+    NominalError,
     SimulationError,
     add_payload,
     build_model,
@@ -76,10 +77,10 @@ def nominal_from_description(path: str | Path, model_nominal: NominalRobot) -> N
     try:
         r = load_robot(path)
     except RobotError as exc:
-        raise ModelError(str(exc)) from None
+        raise NominalError(str(exc)) from None
     geom, known = geometry_of(r), model_nominal.geometry
     if geom.n_cables != known.n_cables:
-        raise ModelError(
+        raise NominalError(
             f"{path}: {geom.n_cables} cables, but the model has "
             f"{known.n_cables}; give the same robot's description"
         )
@@ -186,7 +187,7 @@ def build_robot(
         try:
             physics.set_drum_radii(nominal.drum_radii)
         except ValueError as exc:  # the description's drum_radius_m is not the robot's
-            raise ModelError(f"{nominal_path}: [winches] drum_radius_m × scale: {exc}") from None
+            raise NominalError(f"{nominal_path}: [winches] drum_radius_m × scale: {exc}") from None
     return physics, nominal, deviations
 
 
