@@ -20,11 +20,11 @@ TRACEBACK_HELP = "on an unexpected error (e.g. a plugin's bug), also print its t
 REPRODUCE_DOC = (
     "Run the paper's study into --out: runs/<run>/, runs.json, fig*.png, report.json, report.md "
     "(last). The directory is locked as a run's: a second writer is refused (exit 2). Before any "
-    "run starts, an earlier study's report.md, report.json, runs.json, figures, *.partial and "
-    "runs under runs/ are removed (give another --out to keep them). Every file is written as "
-    "<name>.partial, then renamed. Ctrl-C/SIGTERM stops the workers (exit 130/143), keeping the "
-    "finished runs, without a report. Exit 0 done, 1 a run or a write failed, 2 bad options or "
-    "--out in use."
+    "run starts, an earlier study's report.md, report.json, runs.json, figures (and their "
+    "*.partial), runs under runs/ are removed (give another --out to keep them). Each file is "
+    "written as <name>.partial, then renamed. Ctrl-C/SIGTERM stops the workers (exit 130/143), "
+    "keeping the finished runs, without a report. Exit 0 done, 1 a run or a write failed, 2 bad "
+    "options or --out in use."
 )
 """``cdpr-twin reproduce --help``'s description: what the study writes, and what it removes."""
 
