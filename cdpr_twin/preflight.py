@@ -16,7 +16,12 @@ from cdpr_twin.scenario import Scenario, ScenarioError
 
 
 def controller_for(scenario: Scenario, geom) -> Controller:
-    """The scenario's controller for the nominal geometry, checked against its control period."""
+    """The scenario's controller for the nominal geometry, checked against its control period.
+
+    The start pose is checked first (:func:`check_start`), as the open-loop waypoints are: the
+    nominal robot holds it. ``run`` and a campaign's checks refuse it alike.
+    """
+    check_start(scenario, geom)
     src = scenario.source
     cls = plugins.lookup("controller", scenario.controller.type)
     try:
@@ -52,8 +57,7 @@ def check_task(scenario: Scenario, nominals: dict | None = None) -> None:
         except ValueError as exc:
             raise ScenarioError(f"{s.source}: model: {exc}") from None
     nominal = nominals[key]
-    check_start(s, nominal.geometry)
-    controller = controller_for(s, nominal.geometry)
+    controller = controller_for(s, nominal.geometry)  # the start pose too
     if getattr(controller.options, "goal", None) == "taught":  # (pbvs) checked when shown to the
         return  # true robot, as runner.prepare does: its pose, not the nominal model's view
     try:
@@ -67,8 +71,8 @@ def check_task(scenario: Scenario, nominals: dict | None = None) -> None:
 def check_start(s: Scenario, geometry) -> None:
     """Refuse a start pose outside the frame or that no tension distribution holds.
 
-    The nominal robot's (``runner.prepare`` places the true robot there, moved by its homing
-    offset, and refuses the same).
+    For the nominal robot, as the open-loop waypoints are checked (``runner.prepare`` also
+    places the true robot there, moved by its homing offset, and refuses what it cannot hold).
 
     Raises:
         ScenarioError: naming ``start.pose``.
