@@ -111,21 +111,16 @@ def check_goal_view(s: Scenario, intrinsics, tag_size: float, T_cam_tag: np.ndar
     Raises:
         ScenarioError: naming ``controller.goal_tag_pose_visp`` and the corners' pixels.
     """
-    from cdpr_twin.vision import project_points, tag_corners_object
+    from cdpr_twin.vision import inside_image, tag_pixels
 
-    corners = tag_corners_object(tag_size) @ T_cam_tag[:3, :3].T + T_cam_tag[:3, 3]
-    size = np.array([intrinsics.width, intrinsics.height])
-    if np.all(corners[:, 2] > 0):
-        uv = project_points(intrinsics, T_cam_tag, tag_corners_object(tag_size))
-        if np.all((uv >= 0) & (uv <= size - 1)):
-            return
-        seen = f"its corners at {np.round(uv).astype(int).tolist()} px"
-    else:
-        seen = "the tag behind the camera"
+    uv, in_front = tag_pixels(intrinsics, T_cam_tag, tag_size)
+    if in_front and inside_image(intrinsics, uv):
+        return
+    seen = f"its corners at {np.round(uv).astype(int).tolist()} px" if in_front else "behind it"
     raise ScenarioError(
         f"{s.source}: controller.goal_tag_pose_visp: at this goal view the camera would not see "
-        f"the whole tag ({seen}, image {size[0]}×{size[1]} px): the servo would lose it; "
-        "choose a view with the tag inside the image"
+        f"the whole tag ({seen}, image {intrinsics.width}×{intrinsics.height} px): the servo "
+        "would lose it; choose a view with the tag inside the image"
     )
 
 

@@ -86,6 +86,29 @@ def project_points(
     return uv * [intrinsics.fx, intrinsics.fy] + [intrinsics.cx, intrinsics.cy]
 
 
+def tag_pixels(intrinsics: CameraIntrinsics, T_cam_tag: np.ndarray, tag_size: float):
+    """The tag's corners in the image, and whether the whole tag is in front of the camera.
+
+    Args:
+        intrinsics: camera intrinsics.
+        T_cam_tag: (4, 4) tag pose in the camera frame.
+        tag_size: edge of the tag's black square [m].
+
+    Returns:
+        ``(uv, in_front)``: (4, 2) pinhole pixels of the corners (meaningless for corners
+        behind the camera) and whether every corner is in front of it.
+    """
+    corners = tag_corners_object(tag_size)
+    in_front = bool(np.all(corners @ T_cam_tag[2, :3] + T_cam_tag[2, 3] > 0))
+    return project_points(intrinsics, T_cam_tag, corners), in_front
+
+
+def inside_image(intrinsics: CameraIntrinsics, uv: np.ndarray, margin: float = 0.0) -> bool:
+    """Whether every pixel of ``uv`` (n, 2) lies ``margin`` px or more inside the image."""
+    hi = np.array([intrinsics.width, intrinsics.height]) - margin
+    return bool(np.all(uv >= margin) and np.all(uv <= hi))
+
+
 UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
 """OpenCV's iterative undistortion to convergence (its default stops after 5 iterations)."""
 

@@ -18,7 +18,7 @@ from scipy.stats import qmc
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.se3 import inverse, matrix_from_euler_xyz, transform
 from cdpr_twin.types import CameraIntrinsics
-from cdpr_twin.vision import project_points, tag_corners_object
+from cdpr_twin.vision import inside_image, tag_pixels
 from cdpr_twin.workspace import inside_frame, is_feasible
 
 
@@ -34,9 +34,8 @@ def tag_in_view(
     T_cam_tag = inverse(geom.T_platform_cam) @ inverse(T_base_platform) @ T_base_tag
     if T_cam_tag[2, 3] <= 0.05 or T_cam_tag[2, 2] < 0.3:  # behind, or edge-on (z into the tag)
         return False
-    uv = project_points(intrinsics, T_cam_tag, tag_corners_object(tag_size))
-    lo, hi = pixel_margin, np.array([intrinsics.width, intrinsics.height]) - pixel_margin
-    return bool(np.all(uv >= lo) and np.all(uv <= hi))
+    uv, _ = tag_pixels(intrinsics, T_cam_tag, tag_size)
+    return inside_image(intrinsics, uv, pixel_margin)
 
 
 def _draw(

@@ -370,7 +370,7 @@ class CdprEnv(gym.Env):
             self._setup.nominal.geometry.check_pose_inside(goal, "the task's goal")
         except ValueError as exc:
             self.close()
-            raise ValueError(f"reach: goal: {exc}") from None
+            raise ValueError(f"{getattr(self.task, 'name', 'task')}: goal: {exc}") from None
 
     def close(self) -> None:
         """Free the renderer (safe to call more than once)."""
