@@ -29,6 +29,7 @@ from cdpr_twin.estimators.base import (
     NOT_CONVERGED,
     Estimator,
 )
+from cdpr_twin.estimators import newton
 from cdpr_twin.estimators.selection import (
     N_USED,
     SELECTIONS,
@@ -131,6 +132,12 @@ class ModelEstimator(Estimator):
         self.max_residual = float(o.max_residual)
         radii = geometry.pulley_radius if self.pulley else None
         self._cables = _cable_tuples(geometry.a_base, geometry.b_platform, radii)
+        self._cable_array = np.array(self._cables)
+        # the compiled Newton treats a zero sheave radius as a point exit: same branch only if
+        # every pulley of a pulley model has a sheave
+        self._compiled = self.backend == "fast" and (radii is None or bool(np.all(radii > 0)))
+        if self._compiled:
+            newton.warm_up()
 
     def corrected_lengths(self, lengths: np.ndarray, tensions: np.ndarray) -> np.ndarray:
         """Encoder lengths, plus the stretch of eq. 14 in the elastic variants. (m,) [m]."""
@@ -145,7 +152,13 @@ class ModelEstimator(Estimator):
             ``(T, residual, iterations)``.
         """
         if self.backend == "fast":
-            goal = [targets[i] for i in cables] if isinstance(targets, list) else targets[cables]
+            goal = np.asarray(targets, dtype=float)[cables]
+            if self._compiled:  # the same operations compiled; the reference where it must
+                T, residual, it, outcome = newton.newton(
+                    self._cable_array[cables], goal, T0, 30, 1e-12
+                )
+                if outcome == newton.MAIN:
+                    return T, residual, it
             return _newton([self._cables[i] for i in cables], self.pulley, goal, T0)
         cables = np.asarray(cables)
         g = self.geometry
