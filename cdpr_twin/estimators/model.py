@@ -21,6 +21,7 @@ from typing import ClassVar, Literal
 import numpy as np
 from scipy.optimize import least_squares
 
+from cdpr_twin.estimators import newton
 from cdpr_twin.estimators.base import (
     FEW_TAUT_CABLES,
     ILL_CONDITIONED,
@@ -29,7 +30,6 @@ from cdpr_twin.estimators.base import (
     NOT_CONVERGED,
     Estimator,
 )
-from cdpr_twin.estimators import newton
 from cdpr_twin.estimators.selection import (
     N_USED,
     SELECTIONS,

@@ -28,7 +28,7 @@ MAIN, FALLBACK = 0, 1
 
 @jit
 def compose_exp(T: np.ndarray, d0, d1, d2, d3, d4, d5) -> np.ndarray:
-    """``T · exp(d)`` for d = [v, ω] in the platform frame; ``solvers._compose_exp``'s operations."""
+    """``T · exp(d)``, d = [v, ω] in the platform frame: ``solvers._compose_exp``'s operations."""
     vx, vy, vz, wx, wy, wz = d0, d1, d2, d3, d4, d5
     th2 = wx * wx + wy * wy + wz * wz
     a, b, c = exp_coefficients(th2)
@@ -95,7 +95,7 @@ def newton(cables: np.ndarray, goal: np.ndarray, T0: np.ndarray, max_iterations:
         it += 1
         try:  # LAPACK's dgesv; it raises on a singular or non-finite system
             x = np.linalg.solve(rows, -r)
-        except Exception:  # noqa: BLE001  (Numba catches no narrower class)
+        except Exception:  # Numba catches no narrower class
             return T, 0.0, it, FALLBACK
         sq = 0.0
         for i in range(6):
