@@ -165,13 +165,7 @@ class Monitor:
     def __init__(self, physics, limits: MonitorLimits) -> None:
         self.physics, self.limits = physics, limits
         self.faults: list[Fault] = []
-        self._lo, self._hi = np.array(limits.frame_min), np.array(limits.frame_max)
-        self._corners = (
-            np.array(
-                [[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float
-            )
-            * physics.platform_half_size
-        )
+        self._half = tuple(map(float, physics.platform_half_size))  # (3,) [m]
         self._active: set[FaultKind] = set()
         self._slack_since = math.nan
         self._other = np.array(_OTHER_WARNINGS)
@@ -219,17 +213,21 @@ class Monitor:
         self._active = set(seen)
 
     def _placement(self, seen: dict) -> None:
+        """Frame, floor and speed limits, on Python floats (a check runs twice a tick)."""
         p, lim = self.physics, self.limits
         q, v = p.platform_state  # views: no copy on the hot path
-        pos = q[:3]
-        if np.any(pos < self._lo) or np.any(pos > self._hi):
-            seen[FaultKind.OUTSIDE_FRAME] = (f"origin at {np.round(pos, 3).tolist()} m", 0)
-        w, x, y, z = q[3:]
-        row_z = np.array([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)])
-        low = float(np.min(self._corners @ row_z) + pos[2])  # third row of R: the corners' z
+        x0, y0, z0, w, x, y, z = q.tolist()
+        box = zip(lim.frame_min, (x0, y0, z0), lim.frame_max, strict=True)
+        if any(c < lo or c > hi for lo, c, hi in box):
+            pos = [round(c, 3) for c in (x0, y0, z0)]
+            seen[FaultKind.OUTSIDE_FRAME] = (f"origin at {pos} m", 0)
+        # the lowest corner: the third row of R against the half sizes, each at its worst sign
+        row_z = (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y))
+        low = z0 - sum(h * abs(r) for h, r in zip(self._half, row_z, strict=True))
         if low <= lim.floor_z:
             seen[FaultKind.ON_FLOOR] = (f"lowest corner at z = {low:.4f} m", 0)
-        speed, turn = math.sqrt(float(v[:3] @ v[:3])), math.sqrt(float(v[3:] @ v[3:]))
+        vx, vy, vz, wx, wy, wz = v.tolist()
+        speed, turn = math.sqrt(vx * vx + vy * vy + vz * vz), math.sqrt(wx * wx + wy * wy + wz * wz)
         if speed > lim.max_speed or turn > lim.max_angular_speed:
             seen[FaultKind.SPEED] = (
                 f"{speed:.2f} m/s, {turn:.2f} rad/s > {lim.max_speed:g} m/s, "
