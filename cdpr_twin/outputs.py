@@ -332,6 +332,17 @@ class OutputDir:
             with writing(path):
                 path.unlink(missing_ok=True)
 
+    def abandon(self) -> None:
+        """Remove the owner's files begun since the claim, then release: nothing was recorded.
+
+        For a command stopped while opening its outputs (a Ctrl-C then leaves no header-only
+        ``*.partial`` behind). Nothing is touched unless this claim holds the directory.
+        """
+        if self._held:
+            with contextlib.suppress(OutputError):
+                self._clear()
+        self.release()
+
     def release(self) -> None:
         """Remove the lock (if this claim still holds it)."""
         if self._held:

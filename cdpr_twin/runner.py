@@ -326,9 +326,9 @@ def _claim(setup: RunSetup, out_dir, record_rrd, spawn, connect) -> tuple:
         checkpoints = setup.controller.checkpoints(s.duration)
         metrics = RunMetrics(s.estimators.names, checkpoints, s.model.control_period)
         return owner, metrics, _recorders(setup, out_dir, record_rrd, spawn, connect)
-    except BaseException:
+    except BaseException as exc:  # nothing recorded: no header-only *.partial but a failed write's
         setup.close()
-        owner.release()
+        owner.release() if isinstance(exc, OutputError) else owner.abandon()
         raise
 
 

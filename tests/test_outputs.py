@@ -176,6 +176,26 @@ def test_a_full_disk_is_a_one_line_error_and_no_final_name(tmp_path, monkeypatch
     assert {p.name for p in out.iterdir()} == {"timeseries.csv.partial", "recording.rrd.partial"}
 
 
+def test_a_stop_while_the_outputs_open_leaves_nothing(tmp_path, monkeypatch, capsys):
+    """Ctrl-C after the CSV was begun, while the Rerun file opens: no header-only partial, no
+    lock, the earlier run's outputs gone as the claim said; a user's file is kept."""
+    from cdpr_twin import recorders
+
+    def interrupted(*args, **kwargs):
+        assert (out / "timeseries.csv.partial").exists()  # the CSV was begun
+        raise KeyboardInterrupt
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "summary.json").write_text("{}")  # an earlier run's
+    (out / "notes.txt").write_text("mine")
+    monkeypatch.setattr(recorders, "RerunRecorder", interrupted)
+    code = main(["run", str(OPEN_LOOP), "--out", str(out), "--no-camera", "--duration", "1"])
+    line = _one_error_line(capsys.readouterr().err)
+    assert code == 130 and "interrupted before this run saved any output" in line
+    assert {p.name for p in out.iterdir()} == {"notes.txt"}
+
+
 @pytest.mark.parametrize("limit", [100_000, 150_000], ids=["csv_first", "rrd_end"])
 def test_a_file_size_limit_is_a_one_line_error_and_no_final_name(tmp_path, limit):
     """A real failing write (RLIMIT_FSIZE: EFBIG, as a full disk gives ENOSPC), whichever file
