@@ -15,12 +15,14 @@ from cdpr_twin.plugins import OptionError
 from cdpr_twin.scenario import Scenario, ScenarioError
 
 
-def controller_for(scenario: Scenario, geom) -> Controller:
-    """The scenario's controller for the nominal geometry, checked against its control period.
+def controller_for(scenario: Scenario, nominal) -> Controller:
+    """The scenario's controller for the nominal robot, checked against its control period.
 
     The start pose is checked first (:func:`check_start`), as the open-loop waypoints are: the
-    nominal robot holds it. ``run`` and a campaign's checks refuse it alike.
+    nominal robot holds it; a plan, after (:func:`check_plan`). ``run`` and a campaign's checks
+    refuse them alike.
     """
+    geom = nominal.geometry
     check_start(scenario, geom)
     src = scenario.source
     cls = plugins.lookup("controller", scenario.controller.type)
@@ -31,7 +33,56 @@ def controller_for(scenario: Scenario, geom) -> Controller:
         raise ScenarioError(f"{src}: controller.{exc.field}: {exc.problem}") from None
     except (Exception, SystemExit) as exc:  # a plugin's own failure (or exit): no traceback
         raise ScenarioError(f"{src}: controller: {type(exc).__name__}: {exc}") from None
+    check_plan(scenario, nominal.rate_range, controller)
     return controller
+
+
+def check_plan(s: Scenario, rate_range, controller: Controller) -> None:
+    """Refuse commands the winches cannot follow, before a run (which would stop at the first).
+
+    A plan (open loop): the rates it will command, tick by tick (they read no sensor), on the
+    nominal robot. A servo with speed caps (PBVS): the fastest cable rate the caps allow.
+
+    Args:
+        s: the scenario.
+        rate_range: ((m,), (m,)) the winches' rate range [m/s], or ``None`` (nothing checked).
+        controller: the scenario's controller.
+
+    Raises:
+        ScenarioError: naming ``controller.durations[i]`` (the segment at fault) or
+            ``controller.max_linear_speed``.
+    """
+    planned = getattr(controller, "planned_rates", None)
+    capped = getattr(controller, "peak_cable_rate", None)
+    if rate_range is None:
+        return
+    if capped is not None:
+        peak, limit = capped(), float(min(rate_range[1].min(), -rate_range[0].max()))
+        if peak > limit:
+            raise ScenarioError(
+                f"{s.source}: controller.max_linear_speed: with max_angular_speed_deg, the "
+                f"speed caps let the servo command cable rates up to {peak:.3g} m/s "
+                f"(v_max + (|t_pc| + max |b_i|)·ω_max), beyond the winches' {limit:.3g} m/s; "
+                "lower them"
+            )
+    if planned is None:
+        return
+    period = s.model.control_period
+    rates = planned(s.start_pose, period, s.duration)
+    lo, hi = rate_range
+    over = np.flatnonzero(((rates < lo) | (rates > hi)).any(axis=1))
+    if not over.size:
+        return
+    k = int(over[0])
+    t = (k + 0.5) * period
+    i = int(np.searchsorted(np.cumsum(controller.durations), t))
+    cable = int(np.argmax(np.maximum(rates[k] - hi, lo - rates[k])))
+    raise ScenarioError(
+        f"{s.source}: controller.durations[{i}]: at t = {t:.3g} s the plan drives cable "
+        f"{cable + 1} out at {rates[k, cable]:.3g} m/s, beyond its winch's range "
+        f"[{lo[cable]:.3g}, {hi[cable]:.3g}] m/s (peak {np.abs(rates).max():.3g} m/s over the "
+        "plan); make the segment longer"
+    )
 
 
 def check_task(scenario: Scenario, nominals: dict | None = None) -> None:
@@ -57,7 +108,8 @@ def check_task(scenario: Scenario, nominals: dict | None = None) -> None:
         except ValueError as exc:
             raise ScenarioError(f"{s.source}: model: {exc}") from None
     nominal = nominals[key]
-    controller = controller_for(s, nominal.geometry)  # the start pose too
+    check_camera(s, nominal.intrinsics)
+    controller = controller_for(s, nominal)  # the start pose and a plan's rates too
     if getattr(controller.options, "goal", None) == "taught":  # (pbvs) checked when shown to the
         return  # true robot, as runner.prepare does: its pose, not the nominal model's view
     try:
@@ -66,6 +118,29 @@ def check_task(scenario: Scenario, nominals: dict | None = None) -> None:
         raise ScenarioError(f"{s.source}: controller: {type(exc).__name__}: {exc}") from None
     if goal is not None:
         check_goal(s, nominal, controller, goal)
+
+
+def check_camera(s: Scenario, intrinsics) -> None:
+    """Refuse camera settings the run's camera would refuse when built (its exposure, its size).
+
+    Raises:
+        ScenarioError: naming the field.
+    """
+    from cdpr_twin.sim.camera import check_frame_size
+
+    cam = s.realism.camera
+    if not s.sensors.camera or intrinsics is None:
+        return
+    period = s.model.control_period
+    if cam.exposure_s > period:
+        raise ScenarioError(
+            f"{s.source}: realism.camera.exposure_s: {cam.exposure_s:g} s is longer than the "
+            f"camera's read period ({period:g} s, one frame a control tick); shorten it"
+        )
+    try:
+        check_frame_size(intrinsics.width, intrinsics.height, cam.supersample)
+    except ValueError as exc:
+        raise ScenarioError(f"{s.source}: {exc}") from None
 
 
 def check_start(s: Scenario, geometry) -> None:

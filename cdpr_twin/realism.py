@@ -29,6 +29,34 @@ from cdpr_twin.plugins import OptionError, option
 PROFILES = ("ideal", "acrobot")
 
 
+MAX_RELATIVE_STD = 0.1
+"""The largest per-robot relative std of a positive quantity (a radius, a focal length, a
+gain): a non-positive draw is then a 10σ event; built and calibrated parts are within 1 %."""
+MAX_FULL_WELL_E = 1e30
+"""The largest full well [e-] the float32 frame arithmetic holds without overflow."""
+MAX_LATENCY_TICKS = 100
+"""The longest camera latency [control ticks] (4 s at 25 Hz)."""
+
+
+def check_relative_std(field: str, std: float, what: str) -> None:
+    """Refuse a relative std that could draw a non-positive ``what`` (> :data:`MAX_RELATIVE_STD`).
+
+    Raises:
+        OptionError: naming ``field``.
+    """
+    if std > MAX_RELATIVE_STD:
+        raise OptionError(
+            field,
+            f"must be ≤ {MAX_RELATIVE_STD:g} (a relative std: at {std:g} a draw of 1 + std·z "
+            f"makes the {what} ≤ 0 once in {1 / _tail(1 / std):.3g} robots), got {std:g}",
+        )
+
+
+def _tail(k: float) -> float:
+    """P(z < −k) for a standard normal z."""
+    return 0.5 * math.erfc(k / math.sqrt(2.0))
+
+
 @dataclass(frozen=True)
 class CameraRealism:
     """The onboard camera's imperfections (all off: an ideal pinhole, noise-free, instantaneous).
@@ -76,6 +104,19 @@ class CameraRealism:
         for name in ("distortion", "distortion_error_std"):
             if len(getattr(self, name)) != 4:
                 raise OptionError(name, "must list 4 values, for k1, k2, p1, p2")
+        check_relative_std("focal_error_std", self.focal_error_std, "focal length")
+        if self.full_well_e > MAX_FULL_WELL_E:
+            raise OptionError(
+                "full_well_e",
+                f"must be ≤ {MAX_FULL_WELL_E:g} e- (the frame is formed in float32; sensors "
+                f"hold 1e3-1e6), got {self.full_well_e:g}",
+            )
+        if self.latency_ticks > MAX_LATENCY_TICKS:
+            raise OptionError(
+                "latency_ticks",
+                f"must be ≤ {MAX_LATENCY_TICKS} (every frame in flight is held in memory; "
+                f"cameras deliver within a few frames), got {self.latency_ticks}",
+            )
 
 
 @dataclass(frozen=True)
@@ -97,6 +138,9 @@ class WinchRealism:
     encoder_counts: int = option(0, minimum=0)
     drum_radius: float = option(math.nan, minimum=0.0, exclusive=True, unit="m")
     drum_radius_error_std: float = option(0.0, minimum=0.0)
+
+    def __post_init__(self) -> None:
+        check_relative_std("drum_radius_error_std", self.drum_radius_error_std, "drum radius")
 
 
 @dataclass(frozen=True)
@@ -149,6 +193,7 @@ class TensionRealism:
             self.range_min < self.range_max
         ):
             raise OptionError("range_max", f"must exceed range_min = {self.range_min} N")
+        check_relative_std("gain_error_std", self.gain_error_std, "sensor's gain")
 
 
 @dataclass(frozen=True)

@@ -136,9 +136,9 @@ def _update_order(estimators: dict[str, Estimator], s: Scenario) -> tuple[str, .
         raise ScenarioError(f"{s.source}: estimators: {exc}") from None
 
 
-def _build_plugins(scenario: Scenario, geom) -> tuple[Controller, dict[str, Estimator]]:
-    src = scenario.source
-    controller = controller_for(scenario, geom)
+def _build_plugins(scenario: Scenario, nominal) -> tuple[Controller, dict[str, Estimator]]:
+    src, geom = scenario.source, nominal.geometry
+    controller = controller_for(scenario, nominal)
     estimators = {}
     for name in scenario.estimators.names:
         est_cls = plugins.lookup("estimator", name)
@@ -202,7 +202,7 @@ def _assemble(s: Scenario, physics, sensors, nominal) -> RunSetup:
             event.check(physics.n_cables)
         except OptionError as exc:
             raise ScenarioError(f"{src}: events[{i}].{exc.field}: {exc.problem}") from None
-    controller, estimators = _build_plugins(s, nominal.geometry)
+    controller, estimators = _build_plugins(s, nominal)
     order = _update_order(estimators, s)
     shown_view = teach(s, physics, sensors, controller)  # before events can act
     events = EventSchedule(s.events, physics, sensors)

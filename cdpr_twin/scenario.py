@@ -186,7 +186,7 @@ class Scenario:
             s = replace(s, duration=float(duration))
             done["duration"] = float(duration)
         ticks = s.duration / s.model.control_period
-        if not 0.5 <= ticks <= MAX_TICKS:  # round(ticks) ≥ 1: a run makes at least one tick
+        if not (round(ticks) >= 1 and ticks <= MAX_TICKS):  # as the run rounds: ≥ 1 tick
             where = "--duration" if duration is not None else f"{s.source}: duration"
             raise ScenarioError(
                 f"{where}: {s.duration:g} s must span 1 to {MAX_TICKS:.0e} control periods "
@@ -321,8 +321,9 @@ def _model(top: OptionReader, source: Path) -> ModelConfig:
     nominal = scenario_tables.read_nominal(m, source)
     payload = m.number("payload_kg", 0.0, minimum=0, unit="kg"), read_payload_com(m)
     m.done(("file", "nominal"))
-    steps = 1.0 / control_rate / timestep
-    if abs(steps - round(steps)) > 1e-6 * steps or round(steps) < 1:
+    steps = 1.0 / control_rate / timestep  # whole as the run steps it (winch.whole_steps)
+    whole = math.isclose(round(steps) * timestep, 1.0 / control_rate, rel_tol=1e-9, abs_tol=1e-12)
+    if not whole or round(steps) < 1:
         raise m.fail(
             "control_rate",
             f"the control period 1/{control_rate:g} s is not a whole "

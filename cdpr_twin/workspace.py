@@ -124,9 +124,9 @@ def _grid_box(geom: CdprGeometry) -> tuple[np.ndarray, np.ndarray]:
 
 def _grid_points(lo: np.ndarray, hi: np.ndarray, spacing: float) -> float:
     """The number of grid points (``np.arange``'s lengths, ``inf`` if huge), without a grid."""
-    with np.errstate(over="ignore", divide="ignore"):
+    with np.errstate(over="ignore", divide="ignore"):  # (the product too: 1e-300 m spacing)
         n = np.ceil((hi - (lo + spacing / 2)) / spacing)
-    return float(np.prod(np.maximum(n, 0.0)))
+        return float(np.prod(np.maximum(n, 0.0)))
 
 
 def spacing_problem(geom: CdprGeometry, spacing: float) -> str | None:

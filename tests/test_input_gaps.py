@@ -136,7 +136,7 @@ def test_an_open_loop_segment_shorter_than_a_control_tick_is_refused():
     source = ROOT / "scenarios" / "paper_open_loop.toml"
     data = tomllib.loads(source.read_text())
     set_dotted(data, "controller.durations", [0.001, 5.0, 10.0])  # was skipped: 326 mm off p1
-    with pytest.raises(ScenarioError, match=r"durations\[0\]: 0.001 s is shorter than one"):
+    with pytest.raises(ScenarioError, match=r"durations\[0\]: 0.001 s is shorter than 5 control"):
         prepare(scenario_from_data(data, source).with_overrides(camera=False))
 
 

@@ -119,6 +119,21 @@ def run_id(data: dict) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+def _as_read(value: Any) -> Any:
+    """``value`` with every integer as a float (bools kept): two runs' data equal so are one run.
+
+    A float field reads 0 and 0.0 alike, and an integer field refuses 1.0, so data that differ
+    only there were either one scenario or refused.
+    """
+    if isinstance(value, dict):
+        return {k: _as_read(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_as_read(v) for v in value]
+    if isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    return value
+
+
 def _fail(source: Path, where: str, problem: str) -> CampaignError:
     return CampaignError(f"{source}: {where}: {problem}")
 
@@ -271,9 +286,8 @@ def _tasks(source: Path, block: _Block, seed: int, where: str) -> list[Task]:
                 _swap_in_loop(data, block.base)
             try:
                 scenario = scenario_from_data(data, block.scenario)
-                task_key = json.dumps(
-                    [data.get(k) for k in ("model", "controller", "start")], default=str
-                )
+                checks = ("model", "controller", "start", "realism", "sensors", "duration")
+                task_key = json.dumps([data.get(k) for k in checks], default=str)
                 if task_key not in checked:  # the robot and the task: the twin's own checks
                     check_task(scenario, nominals)  # (truth draws and seeds do not change them)
                     checked.add(task_key)
@@ -324,7 +338,8 @@ def load_campaign(path: str | Path) -> Campaign:
              f"blocks[{i}]." if blocks else "")]  # fmt: skip
     seen: dict[str, str] = {}
     for t in tasks:
-        if t.run_id in seen:
-            raise _fail(source, "axes", f"runs {seen[t.run_id]} and {t.name} are identical")
-        seen[t.run_id] = t.name
+        key = run_id(_as_read(t.data))  # 0 and 0.0: one value, as the scenario reads both
+        if key in seen:
+            raise _fail(source, "axes", f"runs {seen[key]} and {t.name} are identical")
+        seen[key] = t.name
     return Campaign(name, source, str(top.get("description", "")), tuple(tasks))

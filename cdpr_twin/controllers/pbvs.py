@@ -251,6 +251,17 @@ class PbvsController(Controller):
             out["taught_vs_file_goal"] = pose_error(self.goal, file_goal)
         return {"pbvs": out}
 
+    def peak_cable_rate(self) -> float:
+        """The fastest cable rate the speed caps allow [m/s], whatever the gain and the pose.
+
+        A cable's rate is u·v_p + (b_i × u)·ω with |u| = 1 (eq. 6, straight or pulley), and the
+        platform's v_p = R v_c + t_pc × R ω_c: so |l̇_i| ≤ v_max + (|t_pc| + max |b_i|)·ω_max.
+        """
+        g = self.geometry
+        reach = float(np.linalg.norm(g.T_platform_cam[:3, 3]))
+        reach += float(np.linalg.norm(g.b_platform, axis=1).max())
+        return self.max_linear_speed + reach * self.max_angular_speed
+
     def command(
         self, t: float, period: float, estimate: PoseEstimate, measurement: Measurement
     ) -> Command:

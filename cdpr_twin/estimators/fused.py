@@ -125,6 +125,11 @@ class FusedOptions:
         for name, value in vars(self).items():
             if name not in flags and not (math.isfinite(value) and value >= 0):
                 raise OptionError(name, f"must be a finite number ≥ 0, got {value}")
+            if name.endswith("_std") and name != "distortion_error_std" and value > 1e6:
+                raise OptionError(  # (its square and products must stay finite floats)
+                    name,
+                    f"must be ≤ 1e6 in its unit (a std that says nothing is known), got {value:g}",
+                )
         d = self.distortion_error_std
         if len(d) != 4 or not all(math.isfinite(v) and v >= 0 for v in d):
             raise OptionError("distortion_error_std", f"must be 4 finite numbers ≥ 0, got {d}")

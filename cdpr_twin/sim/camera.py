@@ -20,6 +20,50 @@ R_MJCAM_CV = rot_x(np.pi)
 CAMERA_NAME = "platform_cam"
 MAX_BUFFER_PX = 16384
 """The largest offscreen buffer side of Mesa's renderers (llvmpipe's) [px]."""
+BYTES_PER_SAMPLE = 160
+"""A run's peak memory per rendered sample (supersampled pixel) [B]: measured 112-145 B with
+``supersample`` 4, 8 and 10 on ``paper_pbvs`` (GL buffers, the renders of the exposure and of
+the latency pipeline, the float32 images formed from them), above a 0.5 GB run."""
+
+
+def check_frame_size(width: int, height: int, scale: int = 1) -> None:
+    """Refuse a render the offscreen buffer cannot hold, or that would exhaust the memory.
+
+    Args:
+        width: the camera's resolution across [px].
+        height: the camera's resolution down [px].
+        scale: samples per pixel side (``realism.camera.supersample``).
+
+    Raises:
+        ValueError: saying which limit and what to lower.
+    """
+    field = "realism.camera.supersample" if scale > 1 else "the camera's resolution"
+    side = max(width, height) * scale
+    if side > MAX_BUFFER_PX:
+        raise ValueError(
+            f"the camera renders {width * scale}×{height * scale} px: more than an offscreen "
+            f"buffer can hold ({MAX_BUFFER_PX} px a side with Mesa); lower {field}"
+        )
+    need = BYTES_PER_SAMPLE * width * height * scale * scale
+    free = _available_memory()
+    if free is not None and need > free:
+        raise ValueError(
+            f"the camera renders {width * scale}×{height * scale} px, which takes about "
+            f"{need / 1e9:.1f} GB of images ({BYTES_PER_SAMPLE} B a sample), more than the "
+            f"{free / 1e9:.1f} GB of memory available; lower {field}"
+        )
+
+
+def _available_memory() -> int | None:
+    """Memory the kernel can give without swapping [B] (Linux's MemAvailable), or ``None``."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
 
 
 def has_camera(model: mujoco.MjModel, name: str = CAMERA_NAME) -> bool:
@@ -76,6 +120,7 @@ class CameraRenderer:
         self.intrinsics = intrinsics(model, name)
         self.render_intrinsics = self.intrinsics.scaled(scale)
         w, h = self.intrinsics.width, self.intrinsics.height
+        check_frame_size(w, h, scale)
         if scale > 1:
             g = model.vis.global_
             w, h = self.render_intrinsics.width, self.render_intrinsics.height
@@ -89,12 +134,6 @@ class CameraRenderer:
         try:
             self._renderer = mujoco.Renderer(model, height=h, width=w)
         except Exception as exc:
-            if scale > 1 and max(w, h) > MAX_BUFFER_PX:
-                raise ValueError(
-                    f"the camera renders {w}×{h} px (supersample = {scale}): more than an "
-                    f"offscreen buffer can hold ({MAX_BUFFER_PX} px a side with Mesa; {exc}); "
-                    "lower realism.camera.supersample"
-                ) from None
             raise RuntimeError(
                 f"offscreen rendering failed ({exc}). MuJoCo chose its GL backend from "
                 f"MUJOCO_GL={os.environ.get('MUJOCO_GL')!r} when it was first imported: import "

@@ -36,6 +36,8 @@ class NominalRobot:
         drum_radii: (m,) the drums' radii [m] a calibrated robot description states
             (``drum_radius_m`` × ``drum_radius_scale``): the drives and encoders are set to
             them; ``None``: the robot's own radius.
+        rate_range: ((m,), (m,)) the winches' lowest and highest rates [m/s] (the model's
+            ``ctrlrange``), or ``None`` when the model names no winch actuators.
     """
 
     geometry: CdprGeometry
@@ -43,6 +45,7 @@ class NominalRobot:
     tag_size: float
     T_base_tag: np.ndarray | None
     drum_radii: np.ndarray | None = None
+    rate_range: tuple[np.ndarray, np.ndarray] | None = None
 
 
 class Sensors:

@@ -28,6 +28,7 @@ from cdpr_twin.sim.model import (
     ModelError,
     NominalError,
     SimulationError,
+    actuator_name,
     add_payload,
     build_model,
     cable_count,
@@ -53,11 +54,18 @@ def _nominal_robot(model: mujoco.MjModel) -> NominalRobot:
     tag_size = 0.0
     if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "tag_size") >= 0:
         tag_size = float(numeric(model, "tag_size")[0])
+    geometry = read_geometry(model)
+    winches = [
+        mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, actuator_name(i))
+        for i in range(geometry.n_cables)
+    ]
+    rates = None if min(winches) < 0 else tuple(model.actuator_ctrlrange[winches].T.copy())
     return NominalRobot(
-        geometry=read_geometry(model),
+        geometry=geometry,
         intrinsics=cam_mod.intrinsics(model) if has_cam else None,
         tag_size=tag_size,
         T_base_tag=T_base_tag,
+        rate_range=rates,
     )
 
 

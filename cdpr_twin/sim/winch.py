@@ -189,9 +189,10 @@ def checked_rates(rates: np.ndarray, n: int, lo: np.ndarray, hi: np.ndarray) -> 
             f"cable_rates must be finite, got {rates.tolist()} (NaN or inf from the controller?)"
         )
     if (rates < lo).any() or (rates > hi).any():
+        out = [f"{r:.3g}" for r in rates]  # (significant digits: a tiny range stays legible)
         raise WinchLimitError(
-            f"cable rates {np.round(rates, 4).tolist()} m/s exceed the winches' "
-            f"range [{lo.min()}, {hi.max()}] m/s"
+            f"cable rates [{', '.join(out)}] m/s exceed the winches' range "
+            f"[{lo.min():.3g}, {hi.max():.3g}] m/s"
         )
     return rates
 
