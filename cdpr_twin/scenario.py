@@ -186,7 +186,7 @@ class Scenario:
             s = replace(s, duration=float(duration))
             done["duration"] = float(duration)
         ticks = s.duration / s.model.control_period
-        if not (round(ticks) >= 1 and ticks <= MAX_TICKS):  # as the run rounds: ≥ 1 tick
+        if not (ticks <= MAX_TICKS and round(ticks) >= 1):  # as the run rounds: ≥ 1 tick
             where = "--duration" if duration is not None else f"{s.source}: duration"
             raise ScenarioError(
                 f"{where}: {s.duration:g} s must span 1 to {MAX_TICKS:.0e} control periods "
