@@ -20,33 +20,30 @@ import math
 
 import numpy as np
 
+from cdpr_twin.estimators import solvers
 from cdpr_twin.estimators.fused_kernels import exp_coefficients, jit, kernel
 
 MAIN, FALLBACK = 0, 1
 """Outcomes of :func:`newton`: solved on the main path, or the reference must solve."""
 
 
+exp_terms = jit(solvers.exp_terms)
+"""``solvers.exp_terms``, compiled: exp(d)'s rotation (9 floats, row-major) and V·v (3)."""
+
+
 @jit
 def compose_exp(T: np.ndarray, d0, d1, d2, d3, d4, d5) -> np.ndarray:
     """``T · exp(d)``, d = [v, ω] in the platform frame: ``solvers._compose_exp``'s operations."""
-    vx, vy, vz, wx, wy, wz = d0, d1, d2, d3, d4, d5
-    th2 = wx * wx + wy * wy + wz * wz
+    th2 = d3 * d3 + d4 * d4 + d5 * d5
     a, b, c = exp_coefficients(th2)
-    xx, yy, zz, xy, xz, yz = wx * wx, wy * wy, wz * wz, wx * wy, wx * wz, wy * wz
-    d00, d11, d22 = 1.0 + b * (xx - th2), 1.0 + b * (yy - th2), 1.0 + b * (zz - th2)
-    d01, d10 = b * xy - a * wz, b * xy + a * wz
-    d02, d20 = b * xz + a * wy, b * xz - a * wy
-    d12, d21 = b * yz - a * wx, b * yz + a * wx
-    px = (1.0 + c * (xx - th2)) * vx + (c * xy - b * wz) * vy + (c * xz + b * wy) * vz
-    py = (c * xy + b * wz) * vx + (1.0 + c * (yy - th2)) * vy + (c * yz - b * wx) * vz
-    pz = (c * xz - b * wy) * vx + (c * yz + b * wx) * vy + (1.0 + c * (zz - th2)) * vz
+    e = exp_terms(d0, d1, d2, d3, d4, d5, th2, a, b, c)
     out = np.zeros((4, 4))
     for i in range(3):
         ri0, ri1, ri2 = T[i, 0], T[i, 1], T[i, 2]
-        out[i, 0] = ri0 * d00 + ri1 * d10 + ri2 * d20
-        out[i, 1] = ri0 * d01 + ri1 * d11 + ri2 * d21
-        out[i, 2] = ri0 * d02 + ri1 * d12 + ri2 * d22
-        out[i, 3] = T[i, 3] + ri0 * px + ri1 * py + ri2 * pz
+        out[i, 0] = ri0 * e[0] + ri1 * e[3] + ri2 * e[6]
+        out[i, 1] = ri0 * e[1] + ri1 * e[4] + ri2 * e[7]
+        out[i, 2] = ri0 * e[2] + ri1 * e[5] + ri2 * e[8]
+        out[i, 3] = T[i, 3] + ri0 * e[9] + ri1 * e[10] + ri2 * e[11]
     out[3, 3] = 1.0
     return out
 

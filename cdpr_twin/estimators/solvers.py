@@ -82,15 +82,16 @@ def _kernel(
     return lengths, rows
 
 
-def _compose_exp(pose: Pose, d: list[float]) -> Pose:
-    """``pose · exp(d)`` for a twist d = [v, ω] in the platform frame, in scalar arithmetic.
+def exp_terms(
+    vx: float, vy: float, vz: float, wx: float, wy: float, wz: float,
+    th2: float, a: float, b: float, c: float,
+) -> tuple[float, ...]:  # fmt: skip
+    """exp(d) of a twist d = [v, ω] as 12 floats: its rotation row-major (9), then V·v (3).
 
-    The same map as :func:`cdpr_twin.se3.se3_exp` (Rodrigues and its left Jacobian).
+    dR = I + a[ω]× + b[ω]×², V = I + b[ω]× + c[ω]×², with [ω]×² = ωωᵀ − θ² I and (a, b, c) the
+    coefficients of :func:`cdpr_twin.se3.exp_coefficients` for θ² = ``th2``. Plain float
+    arithmetic: :mod:`cdpr_twin.estimators.newton` compiles this same function.
     """
-    vx, vy, vz, wx, wy, wz = d
-    th2 = wx * wx + wy * wy + wz * wz
-    a, b, c = exp_coefficients(th2)
-    # dR = I + a[ω]× + b[ω]×², V = I + b[ω]× + c[ω]×², with [ω]×² = ωωᵀ − θ² I
     xx, yy, zz, xy, xz, yz = wx * wx, wy * wy, wz * wz, wx * wy, wx * wz, wy * wz
     d00, d11, d22 = 1.0 + b * (xx - th2), 1.0 + b * (yy - th2), 1.0 + b * (zz - th2)
     d01, d10 = b * xy - a * wz, b * xy + a * wz
@@ -99,6 +100,18 @@ def _compose_exp(pose: Pose, d: list[float]) -> Pose:
     px = (1.0 + c * (xx - th2)) * vx + (c * xy - b * wz) * vy + (c * xz + b * wy) * vz
     py = (c * xy + b * wz) * vx + (1.0 + c * (yy - th2)) * vy + (c * yz - b * wx) * vz
     pz = (c * xz - b * wy) * vx + (c * yz + b * wx) * vy + (1.0 + c * (zz - th2)) * vz
+    return d00, d01, d02, d10, d11, d12, d20, d21, d22, px, py, pz
+
+
+def _compose_exp(pose: Pose, d: list[float]) -> Pose:
+    """``pose · exp(d)`` for a twist d = [v, ω] in the platform frame, in scalar arithmetic.
+
+    The same map as :func:`cdpr_twin.se3.se3_exp` (Rodrigues and its left Jacobian).
+    """
+    vx, vy, vz, wx, wy, wz = d
+    th2 = wx * wx + wy * wy + wz * wz
+    terms = exp_terms(vx, vy, vz, wx, wy, wz, th2, *exp_coefficients(th2))
+    d00, d01, d02, d10, d11, d12, d20, d21, d22, px, py, pz = terms
     r00, r01, r02, r10, r11, r12, r20, r21, r22, t0, t1, t2 = pose
     return (
         r00 * d00 + r01 * d10 + r02 * d20, r00 * d01 + r01 * d11 + r02 * d21,
