@@ -127,6 +127,7 @@ def check_camera(s: Scenario, intrinsics) -> None:
         ScenarioError: naming the field.
     """
     from cdpr_twin.sim.camera import check_frame_size
+    from cdpr_twin.sim.imaging import lens_margins
 
     cam = s.realism.camera
     if not s.sensors.camera or intrinsics is None:
@@ -138,7 +139,8 @@ def check_camera(s: Scenario, intrinsics) -> None:
             f"camera's read period ({period:g} s, one frame a control tick); shorten it"
         )
     try:
-        check_frame_size(intrinsics.width, intrinsics.height, cam.supersample)
+        margins = lens_margins(intrinsics.scaled(cam.supersample), cam.distortion)
+        check_frame_size(intrinsics.width, intrinsics.height, cam.supersample, margins)
     except ValueError as exc:
         raise ScenarioError(f"{s.source}: {exc}") from None
 

@@ -75,6 +75,18 @@ class CameraIntrinsics:
             s * (self.cy + 0.5) - 0.5,
         )
 
+    def widened(self, mx: int, my: int) -> CameraIntrinsics:
+        """The same camera with ``mx`` more pixels left and right, ``my`` above and below.
+
+        The focal length and the pixel grid stay; the principal point moves with the origin:
+        the widened image's pixel (u + mx, v + my) is this one's (u, v).
+        """
+        if not (mx or my):
+            return self
+        return CameraIntrinsics(
+            self.width + 2 * mx, self.height + 2 * my, self.fx, self.fy, self.cx + mx, self.cy + my
+        )
+
     @property
     def K(self) -> np.ndarray:
         """(3, 3) camera matrix."""

@@ -26,29 +26,33 @@ BYTES_PER_SAMPLE = 160
 the latency pipeline, the float32 images formed from them), above a 0.5 GB run."""
 
 
-def check_frame_size(width: int, height: int, scale: int = 1) -> None:
+def check_frame_size(
+    width: int, height: int, scale: int = 1, margins: tuple[int, int] = (0, 0)
+) -> None:
     """Refuse a render the offscreen buffer cannot hold, or that would exhaust the memory.
 
     Args:
         width: the camera's resolution across [px].
         height: the camera's resolution down [px].
         scale: samples per pixel side (``realism.camera.supersample``).
+        margins: render pixels beyond the camera's field on each side, (x, y), for a lens
+            (:func:`~cdpr_twin.sim.imaging.lens_margins`).
 
     Raises:
         ValueError: saying which limit and what to lower.
     """
     field = "realism.camera.supersample" if scale > 1 else "the camera's resolution"
-    side = max(width, height) * scale
-    if side > MAX_BUFFER_PX:
+    w, h = width * scale + 2 * margins[0], height * scale + 2 * margins[1]
+    if max(w, h) > MAX_BUFFER_PX:
         raise ValueError(
-            f"the camera renders {width * scale}×{height * scale} px: more than an offscreen "
+            f"the camera renders {w}×{h} px: more than an offscreen "
             f"buffer can hold ({MAX_BUFFER_PX} px a side with Mesa); lower {field}"
         )
-    need = BYTES_PER_SAMPLE * width * height * scale * scale
+    need = BYTES_PER_SAMPLE * w * h
     free = _available_memory()
     if free is not None and need > free:
         raise ValueError(
-            f"the camera renders {width * scale}×{height * scale} px, which takes about "
+            f"the camera renders {w}×{h} px, which takes about "
             f"{need / 1e9:.1f} GB of images ({BYTES_PER_SAMPLE} B a sample), more than the "
             f"{free / 1e9:.1f} GB of memory available; lower {field}"
         )
@@ -106,24 +110,41 @@ class CameraRenderer:
 
     Args:
         model: the compiled model (its ``<visual><global offwidth offheight>`` must be at least
-            the camera resolution; for ``scale`` > 1 it is enlarged here to the supersampled
-            size, which changes nothing but the offscreen buffer).
+            the camera resolution; for ``scale`` > 1 or ``margins`` it is enlarged here to the
+            rendered size, which changes nothing but the offscreen buffer).
         name: camera name.
         scale: render ``scale`` × ``scale`` samples per camera pixel (the same field of view;
             :attr:`render_intrinsics` are the supersampled image's).
+        margins: (mx, my) pixels of the render (supersampled ones) to add beyond the camera's
+            field on each side, left and right, top and bottom: a wider canvas with the same
+            focal length and pixel grid (:attr:`canvas`), for a distorting lens to image
+            (:func:`~cdpr_twin.sim.imaging.lens_margins`).
     """
 
-    def __init__(self, model: mujoco.MjModel, name: str = CAMERA_NAME, scale: int = 1) -> None:
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        name: str = CAMERA_NAME,
+        scale: int = 1,
+        margins: tuple[int, int] = (0, 0),
+    ) -> None:
         self.camera_id = camera_id(model, name)
         self._model = model
         self._scratch: mujoco.MjData | None = None
         self.intrinsics = intrinsics(model, name)
         self.render_intrinsics = self.intrinsics.scaled(scale)
+        self.canvas = self.render_intrinsics.widened(*margins)
         w, h = self.intrinsics.width, self.intrinsics.height
-        check_frame_size(w, h, scale)
-        if scale > 1:
+        check_frame_size(w, h, scale, margins)
+        # the canvas's vertical field of view (MuJoCo's cameras are symmetric frusta: the
+        # same margins on both sides keep the principal point, and the focal length, as is)
+        self._fovy = None
+        if margins[1] or margins[0]:
+            K = self.canvas
+            self._fovy = float(np.rad2deg(2.0 * np.arctan(0.5 * K.height / K.fy)))
+        if scale > 1 or self._fovy is not None:
             g = model.vis.global_
-            w, h = self.render_intrinsics.width, self.render_intrinsics.height
+            w, h = self.canvas.width, self.canvas.height
             g.offwidth, g.offheight = max(g.offwidth, w), max(g.offheight, h)
         if model.vis.global_.offwidth < w or model.vis.global_.offheight < h:
             raise ValueError(
@@ -145,8 +166,16 @@ class CameraRenderer:
         self._option.tendongroup[:] = 1
 
     def render(self, data: mujoco.MjData) -> np.ndarray:
-        """Render the camera's view: (H, W, 3) RGB uint8 at the render size, top row first."""
-        self._renderer.update_scene(data, camera=self.camera_id, scene_option=self._option)
+        """Render the camera's view: (H, W, 3) RGB uint8 of the canvas, top row first."""
+        if self._fovy is None:
+            self._renderer.update_scene(data, camera=self.camera_id, scene_option=self._option)
+            return self._renderer.render()
+        fovy = self._model.cam_fovy[self.camera_id]
+        self._model.cam_fovy[self.camera_id] = self._fovy  # the scene's frustum takes it
+        try:
+            self._renderer.update_scene(data, camera=self.camera_id, scene_option=self._option)
+        finally:
+            self._model.cam_fovy[self.camera_id] = fovy
         return self._renderer.render()
 
     def render_state(

@@ -17,6 +17,7 @@ Pixel coordinates follow OpenCV (the centre of the top-left pixel is (0, 0)).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import cv2
@@ -184,28 +185,95 @@ def undistort_normalized(
     return xy, ok
 
 
+def lens_margins(
+    intrinsics: CameraIntrinsics, coeffs: Sequence[float], limit: float = 0.5
+) -> tuple[int, int]:
+    """How far the ideal render must reach beyond the sensor's field for a distorting lens.
+
+    A barrel lens (k1 < 0) images onto the sensor's edges scene points that an ideal pinhole
+    with the same intrinsics sees *outside* its frame. A real camera shows them; a render of
+    the sensor's own field alone would leave the distorted frame's edges black. This gives the
+    margins, each side, of the ideal render (the *canvas*: the same focal length and pixel
+    grid, the principal point shifted by the margins) that hold the pre-image of every pixel
+    the remap samples, bilinear neighbours included.
+
+    The pre-image of the field is bounded by that of its border (the lens's radial map is
+    monotonic wherever it has an inverse), so the border's pixel centres are undistorted. A
+    lens strong enough to fold its outer field gives some pixels no pre-image: those stay
+    black, as they would through such a lens, and the others of the whole frame are searched.
+
+    Args:
+        intrinsics: the render's pinhole intrinsics (supersampled, if it is).
+        coeffs: the lens's true (k1, k2, p1, p2).
+        limit: the largest margin, as a fraction of the frame's side (a stronger lens keeps a
+            black rim beyond it rather than render a huge canvas).
+
+    Returns:
+        (mx, my): whole pixels of canvas to add left and right, top and bottom (0, 0 for a
+        pinhole or a pincushion lens).
+    """
+    K = intrinsics
+    if not any(coeffs):
+        return 0, 0
+    us, vs = np.arange(K.width, dtype=float), np.arange(K.height, dtype=float)
+    border = np.concatenate(
+        [
+            np.column_stack([us, np.zeros_like(us)]),
+            np.column_stack([us, np.full_like(us, K.height - 1.0)]),
+            np.column_stack([np.zeros_like(vs), vs]),
+            np.column_stack([np.full_like(vs, K.width - 1.0), vs]),
+        ]
+    )
+    x, y, ok = _preimage_pixels(K, coeffs, border[:, 0], border[:, 1])
+    if not ok.all():  # a folding lens: the frame's pre-image is bounded inside, seek it there
+        u, v = np.meshgrid(us, vs)
+        x, y, ok = _preimage_pixels(K, coeffs, u.ravel(), v.ravel())
+    if not ok.any():
+        return 0, 0
+    x, y = x[ok], y[ok]
+    # bilinear sampling at x reads pixels floor(x) and floor(x) + 1; one more for the
+    # fixed-point tables' rounding (1/32 px)
+    need_x = max(0.0, -x.min(), x.max() - (K.width - 1.0)) + 1.0
+    need_y = max(0.0, -y.min(), y.max() - (K.height - 1.0)) + 1.0
+    mx = min(math.ceil(need_x), math.floor(limit * K.width))
+    my = min(math.ceil(need_y), math.floor(limit * K.height))
+    return (mx, my) if need_x > 1.0 or need_y > 1.0 else (0, 0)
+
+
+def _preimage_pixels(
+    K: CameraIntrinsics, coeffs: Sequence[float], u: np.ndarray, v: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Ideal pinhole pixels ``K · undistort(K⁻¹ (u, v))`` of distorted pixels, and which exist."""
+    xy_d = np.stack([(u - K.cx) / K.fx, (v - K.cy) / K.fy], axis=-1)
+    xy, ok = undistort_normalized(xy_d, coeffs)
+    return K.fx * xy[..., 0] + K.cx, K.fy * xy[..., 1] + K.cy, ok
+
+
 def distortion_maps(
-    intrinsics: CameraIntrinsics, coeffs: Sequence[float]
+    intrinsics: CameraIntrinsics, coeffs: Sequence[float], margins: tuple[int, int] = (0, 0)
 ) -> tuple[np.ndarray, np.ndarray]:
     """Remap tables of a lens with Brown–Conrady distortion, for :func:`distort`.
 
     Each pixel (u, v) of the distorted frame sees the scene point whose ideal pinhole pixel is
-    ``K · undistort(K⁻¹ (u, v))``, with the *true* intrinsics K (the render's).
+    ``K · undistort(K⁻¹ (u, v))``, with the *true* intrinsics K (the render's), read from an
+    ideal render that reaches ``margins`` beyond the frame on each side (:func:`lens_margins`).
 
     Args:
-        intrinsics: the render's pinhole intrinsics.
+        intrinsics: the pinhole intrinsics of the frame (and of the render, but its margins).
         coeffs: the lens's true (k1, k2, p1, p2).
+        margins: (mx, my) pixels the render has beyond the frame left and right, top and
+            bottom: its pixel (u + mx, v + my) is the frame's ideal pixel (u, v).
 
     Returns:
-        Two (H, W) fixed-point maps for ``cv2.remap`` (pixels with no pre-image map outside the
-        frame, so they read black).
+        Two (H, W) fixed-point maps for ``cv2.remap`` into the render (pixels with no pre-image
+        map outside it, so they read black).
     """
     K = intrinsics
     u, v = np.meshgrid(np.arange(K.width, dtype=float), np.arange(K.height, dtype=float))
-    xy_d = np.stack([(u - K.cx) / K.fx, (v - K.cy) / K.fy], axis=-1)
-    xy, ok = undistort_normalized(xy_d, coeffs)
-    map_x = np.where(ok, K.fx * xy[..., 0] + K.cx, -10.0).astype(np.float32)
-    map_y = np.where(ok, K.fy * xy[..., 1] + K.cy, -10.0).astype(np.float32)
+    x, y, ok = _preimage_pixels(K, coeffs, u, v)
+    mx, my = margins
+    map_x = np.where(ok, x + mx, -10.0).astype(np.float32)
+    map_y = np.where(ok, y + my, -10.0).astype(np.float32)
     return cv2.convertMaps(map_x, map_y, cv2.CV_16SC2)
 
 

@@ -10,6 +10,9 @@ monochrome camera forms it (:mod:`cdpr_twin.sim.imaging`):
   the robot passes through during the exposure [t − exposure, t]; an :class:`ExposureRecorder`
   hooked into the physics records those states while it steps;
 - lens distortion: the ideal pinhole render is remapped through the true Brown–Conrady lens;
+  the render reaches as far beyond the sensor's field as the lens sees (a barrel lens
+  images the scene beyond the pinhole's frame onto the sensor's edges, which would
+  otherwise read black);
 - pixel area (``supersample`` > 1): the render is made finer and each pixel averages its
   samples, as a sensor pixel integrates the light over its area (a point-sampled render
   aliases edges narrower than a pixel);
@@ -208,8 +211,11 @@ class OnboardCamera:
         # render()'s own noise: a look at the camera must not shift the run's frames
         self._view_rng = np.random.default_rng(run_rng.bit_generator.seed_seq.spawn(1)[0])
         self.calibrated, self.calibrated_distortion = calibrate(intrinsics, r, robot_rng)
+        # a distorting lens images scene points beyond the pinhole's field: render them too
+        fine = cam_mod.intrinsics(physics.model).scaled(r.supersample)
+        self.margins = imaging.lens_margins(fine, r.distortion)
         self._renderer: cam_mod.CameraRenderer | None = cam_mod.CameraRenderer(
-            physics.model, scale=r.supersample
+            physics.model, scale=r.supersample, margins=self.margins
         )
         self.true_intrinsics = self._renderer.intrinsics
         self._maps = None
@@ -222,7 +228,9 @@ class OnboardCamera:
         self.exposure: ExposureRecorder | None = None
         try:
             if any(r.distortion):
-                self._maps = imaging.distortion_maps(self._renderer.render_intrinsics, r.distortion)
+                self._maps = imaging.distortion_maps(
+                    self._renderer.render_intrinsics, r.distortion, self.margins
+                )
             self._detector = TagDetector(
                 self.calibrated,
                 tag_size=tag_size,
