@@ -43,16 +43,19 @@ def check_frame_size(
     """
     field = "realism.camera.supersample" if scale > 1 else "the camera's resolution"
     w, h = width * scale + 2 * margins[0], height * scale + 2 * margins[1]
+    size = f"{w}×{h} px"
+    if margins[0] or margins[1]:
+        size += f" (a {width * scale}×{height * scale} px frame and what the lens sees beyond it)"
     if max(w, h) > MAX_BUFFER_PX:
         raise ValueError(
-            f"the camera renders {w}×{h} px: more than an offscreen "
+            f"the camera renders {size}: more than an offscreen "
             f"buffer can hold ({MAX_BUFFER_PX} px a side with Mesa); lower {field}"
         )
     need = BYTES_PER_SAMPLE * w * h
     free = _available_memory()
     if free is not None and need > free:
         raise ValueError(
-            f"the camera renders {w}×{h} px, which takes about "
+            f"the camera renders {size}, which takes about "
             f"{need / 1e9:.1f} GB of images ({BYTES_PER_SAMPLE} B a sample), more than the "
             f"{free / 1e9:.1f} GB of memory available; lower {field}"
         )
