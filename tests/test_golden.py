@@ -3,18 +3,31 @@
 The fixtures (``tests/fixtures/golden``) were written by the version before the issue-8 redesign
 (commit 7645b83); see their README. What must hold:
 
-- every cell of ``timeseries.csv`` but the quaternions is byte-identical (time, positions,
-  tensions, encoder lengths, rates, status): the physics, sensors, estimators and controllers
+- every cell of ``timeseries.csv`` but the quaternions is the same (time, positions, tensions,
+  encoder lengths, rates, status; byte-identical on the machine that recorded them, to the
+  tolerance below on another): the physics, sensors, estimators and controllers
   compute exactly what they did; the ``event`` column added later (issue 13) is empty, as
   these runs have no event and the fault monitor, checking them, raises nothing;
 - quaternion cells are the same rotations to 2e-16: the one SE(3) implementation for one or a
   stack of rotations (Shepperd's method, w ≥ 0) now writes them, where a second vectorised copy
   without sign convention did; so they differ in the last bit, and the tag's quaternions carry
   w ≥ 0 (q and −q are one rotation);
-- ``summary.json`` is equal key for key; floats within 1e-12 relative (the rotation deviations
-  come from the one pose-distance implementation, last bits: measured ≤ 2e-15°). Only
+- ``summary.json`` is equal key for key; floats within 1e-12 relative on the recording machine
+  (the rotation deviations come from the one pose-distance implementation, last bits: measured
+  ≤ 2e-15°), to the tolerance below on another. Only
   ``source`` (the path the scenario was given by) is ignored, and ``overrides.realism``: the
   paper scenarios now default to the ``acrobot`` profile, so the test asks for ``ideal``.
+
+Those fixtures were recorded on another machine. A run's floating-point results depend, in
+their last bits, on the CPU and the libraries' builds (SIMD kernels of OpenBLAS, NumPy, MuJoCo,
+and Mesa's renderer compiled for the host): on this project's AMD EPYC machine with MuJoCo 4.0,
+NumPy 2.4 and SciPy 1.17 the camera-less cells differ from the fixtures by ≤ 5e-16 m in pose and
+≤ 2.4e-10 N in tension (2.2e-16 m in encoder length), so those cases are compared to 1e-9 of
+each cell's size (at least 1): still far below any change of behaviour. With the camera in the
+PBVS loop a pose differing in its last bit can flip a rendered pixel, which the detection and the
+servo carry on: there the measured differences are 0.24 mN, 13 µm (image estimate), 5.9 µm (tag),
+85 nm (true pose) over the 2 s, and that case is compared to 1e-4 of each cell's size: a change of
+the servo's behaviour moves it by millimetres. Every text cell (status, flags) stays exact.
 
 Est. 7 (``fused``, issue 11) now runs beside the paper's six in the paper scenarios: its columns
 (pose, ``_valid``, covariance) and its entries in ``summary.json`` are new and left out of the
@@ -47,19 +60,32 @@ CASES = {
     ),
     "open_loop_nocam": ("paper_open_loop.toml", {"duration": 11.0, "seed": 5, "camera": False}),
 }
+TOLERANCE = {"open_loop": 1e-9, "open_loop_nocam": 1e-9, "pbvs": 1e-4}
+"""Per case, the largest difference allowed in a number, relative to its size (at least 1): the
+machine's last bits, and in the camera-driven loop what a flipped pixel makes of them."""
+
+
+def _same_cell(got: str, want: str, tol: float) -> bool:
+    if got == want:
+        return True
+    try:
+        a, b = float(got), float(want)
+    except ValueError:
+        return False
+    return abs(a - b) <= tol * max(1.0, abs(b))
 
 
 def _rows(text: str) -> list[list[str]]:
     return list(csv.reader(io.StringIO(text)))
 
 
-def _same_rotation(got: list[str], want: list[str]) -> bool:
+def _same_rotation(got: list[str], want: list[str], tol: float) -> bool:
     if got == want:
         return True
     if "" in got or "" in want:
         return False
     a, b = np.array(got, dtype=float), np.array(want, dtype=float)
-    return min(np.abs(a - b).max(), np.abs(a + b).max()) <= 2e-16
+    return min(np.abs(a - b).max(), np.abs(a + b).max()) <= max(2e-16, tol)
 
 
 def _without_new(value):
@@ -84,18 +110,18 @@ believed, when not the model's; when the last tag detection was read); every key
 fixtures is compared."""
 
 
-def _assert_json_close(got, want, where=""):
+def _assert_json_close(got, want, tol, where=""):
     assert type(got) is type(want) or {type(got), type(want)} <= {int, float}, where
     if isinstance(want, dict):
         assert [k for k in got if k not in ADDED_LATER] == list(want), where
         for k in want:
-            _assert_json_close(got[k], want[k], f"{where}.{k}")
+            _assert_json_close(got[k], want[k], tol, f"{where}.{k}")
     elif isinstance(want, list):
         assert len(got) == len(want), where
         for i, (g, w) in enumerate(zip(got, want, strict=True)):
-            _assert_json_close(g, w, f"{where}[{i}]")
+            _assert_json_close(g, w, tol, f"{where}[{i}]")
     elif isinstance(want, float):
-        assert got == pytest.approx(want, rel=1e-12, abs=1e-15), where
+        assert abs(got - want) <= tol * max(1.0, abs(want)), where
     else:
         assert got == want, where
 
@@ -118,15 +144,17 @@ def test_outputs_equal_those_of_the_version_before_the_redesign(case, tmp_path):
     quats = {h[: -len("_qw")] for h in header if h.endswith("_qw")}
     q_cols = {p: [header.index(f"{p}_q{k}") for k in "wxyz"] for p in quats}
     other = [j for j in range(len(header)) if not any(j in c for c in q_cols.values())]
+    tol = TOLERANCE[case]
     for row_got, row_want in zip(got[1:], want[1:], strict=True):
-        assert [row_got[j] for j in other] == [row_want[j] for j in other]
+        for j in other:
+            assert _same_cell(row_got[j], row_want[j], tol), (row_want[0], header[j])
         for p, cols in q_cols.items():
             g, w = [row_got[j] for j in cols], [row_want[j] for j in cols]
-            assert _same_rotation(g, w), (row_want[0], p, g, w)
+            assert _same_rotation(g, w, tol), (row_want[0], p, g, w)
     summary = json.loads((tmp_path / "summary.json").read_text(encoding="utf-8"))
     expected = json.loads((GOLDEN / case / "summary.json").read_text(encoding="utf-8"))
     summary.pop("source")
     expected.pop("source")
     summary = _without_new(summary)
     assert summary["overrides"].pop("realism") == "ideal"  # asked for here, as the old default
-    _assert_json_close(summary, expected)
+    _assert_json_close(summary, expected, tol)

@@ -12,6 +12,7 @@ import mujoco
 import numpy as np
 
 from cdpr_twin.se3 import matrix_from_quat_wxyz, rot_x, transform
+from cdpr_twin.sim.imaging import lens_margins
 from cdpr_twin.types import CameraIntrinsics
 
 R_MJCAM_CV = rot_x(np.pi)
@@ -118,9 +119,10 @@ class CameraRenderer:
         name: camera name.
         scale: render ``scale`` × ``scale`` samples per camera pixel (the same field of view;
             :attr:`render_intrinsics` are the supersampled image's).
-        margins: (mx, my) pixels of the render (supersampled ones) to add beyond the camera's
-            field on each side, left and right, top and bottom: a wider canvas with the same
-            focal length and pixel grid (:attr:`canvas`), for a distorting lens to image
+        lens: the true lens's (k1, k2, p1, p2), or ``None`` (a pinhole). A barrel lens images
+            scene points beyond the pinhole's field onto the sensor's edges: the render then
+            reaches :attr:`margins` (x, y) pixels (supersampled ones) beyond the camera's field
+            on each side, a wider :attr:`canvas` with the same focal length and pixel grid
             (:func:`~cdpr_twin.sim.imaging.lens_margins`).
     """
 
@@ -129,13 +131,15 @@ class CameraRenderer:
         model: mujoco.MjModel,
         name: str = CAMERA_NAME,
         scale: int = 1,
-        margins: tuple[int, int] = (0, 0),
+        lens: tuple[float, ...] | None = None,
     ) -> None:
         self.camera_id = camera_id(model, name)
         self._model = model
         self._scratch: mujoco.MjData | None = None
         self.intrinsics = intrinsics(model, name)
         self.render_intrinsics = self.intrinsics.scaled(scale)
+        self.margins = lens_margins(self.render_intrinsics, lens) if lens else (0, 0)
+        margins = self.margins
         self.canvas = self.render_intrinsics.widened(*margins)
         w, h = self.intrinsics.width, self.intrinsics.height
         check_frame_size(w, h, scale, margins)

@@ -211,12 +211,10 @@ class OnboardCamera:
         # render()'s own noise: a look at the camera must not shift the run's frames
         self._view_rng = np.random.default_rng(run_rng.bit_generator.seed_seq.spawn(1)[0])
         self.calibrated, self.calibrated_distortion = calibrate(intrinsics, r, robot_rng)
-        # a distorting lens images scene points beyond the pinhole's field: render them too
-        fine = cam_mod.intrinsics(physics.model).scaled(r.supersample)
-        self.margins = imaging.lens_margins(fine, r.distortion)
         self._renderer: cam_mod.CameraRenderer | None = cam_mod.CameraRenderer(
-            physics.model, scale=r.supersample, margins=self.margins
+            physics.model, scale=r.supersample, lens=r.distortion
         )
+        self.margins = self._renderer.margins  # what the lens sees beyond the pinhole's field
         self.true_intrinsics = self._renderer.intrinsics
         self._maps = None
         self._formed = r.noise or r.exposure_s > 0 or any(r.distortion) or r.supersample > 1
