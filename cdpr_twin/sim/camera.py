@@ -139,15 +139,13 @@ class CameraRenderer:
         self.intrinsics = intrinsics(model, name)
         self.render_intrinsics = self.intrinsics.scaled(scale)
         self.margins = lens_margins(self.render_intrinsics, lens) if lens else (0, 0)
-        margins = self.margins
-        self.canvas = self.render_intrinsics.widened(*margins)
+        self.canvas = K = self.render_intrinsics.widened(*self.margins)
         w, h = self.intrinsics.width, self.intrinsics.height
-        check_frame_size(w, h, scale, margins)
+        check_frame_size(w, h, scale, self.margins)
         # the canvas's vertical field of view (MuJoCo's cameras are symmetric frusta: the
         # same margins on both sides keep the principal point, and the focal length, as is)
         self._fovy = None
-        if margins[1] or margins[0]:
-            K = self.canvas
+        if any(self.margins):
             self._fovy = float(np.rad2deg(2.0 * np.arctan(0.5 * K.height / K.fy)))
         if scale > 1 or self._fovy is not None:
             g = model.vis.global_
