@@ -91,3 +91,27 @@ def camera_twin():
 
     with Twin(camera=True, tension_noise_std=0.0) as t:
         yield t
+
+
+def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
+    """``-n auto`` (the suite's default, ``pyproject.toml``): one worker per core this process
+    may use, at most 4 — several tests start process pools and renderer threads of their own, so
+    more workers only crowd the cores. ``-n 0`` runs the suite in one process."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, min(cores or 1, 4))
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Run the modules holding ``slow`` tests first, most ``slow`` tests first.
+
+    With ``--dist loadfile`` each module goes whole to one worker, in this order
+    (``--no-loadscope-reorder``): the long modules start at once instead of one of them being
+    left to run alone at the end while the other workers idle. Within a module the order stays.
+    """
+    slow: dict[str, int] = {}
+    for item in items:
+        slow[item.nodeid.split("::")[0]] = slow.get(item.nodeid.split("::")[0], 0) + (
+            item.get_closest_marker("slow") is not None
+        )
+    first_seen = {module: i for i, module in enumerate(dict.fromkeys(slow))}
+    items.sort(key=lambda it: (-slow[m := it.nodeid.split("::")[0]], first_seen[m]))

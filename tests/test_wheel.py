@@ -76,6 +76,7 @@ def test_the_wheel_carries_every_package_the_robots_and_the_scenarios(installed)
         assert f"cdpr_twin/scenarios/{path.name}" in names
 
 
+@pytest.mark.slow
 def test_the_installed_wheel_runs_a_scenario_by_name_from_an_empty_directory(installed):
     venv, _, env, work = installed
     proc = _call(
