@@ -1,6 +1,7 @@
 """Shared fixtures: the paper's poses and twins of the nominal robot."""
 
 import os
+from collections import Counter
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # before any test module imports mujoco
 
@@ -108,10 +109,9 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     (``--no-loadscope-reorder``): the long modules start at once instead of one of them being
     left to run alone at the end while the other workers idle. Within a module the order stays.
     """
-    slow: dict[str, int] = {}
-    for item in items:
-        slow[item.nodeid.split("::")[0]] = slow.get(item.nodeid.split("::")[0], 0) + (
-            item.get_closest_marker("slow") is not None
-        )
-    first_seen = {module: i for i, module in enumerate(dict.fromkeys(slow))}
-    items.sort(key=lambda it: (-slow[m := it.nodeid.split("::")[0]], first_seen[m]))
+
+    def module(item: pytest.Item) -> str:
+        return item.nodeid.split("::")[0]
+
+    slow = Counter(module(it) for it in items if it.get_closest_marker("slow") is not None)
+    items.sort(key=lambda it: -slow[module(it)])  # a stable sort: the rest keeps its order
