@@ -297,12 +297,24 @@ def test_a_ray_address_nothing_answers_is_a_one_line_error_before_anything_is_wr
     assert not out.exists()
 
 
-@pytest.mark.slow
-def test_sigterm_stops_a_ray_campaign_as_terminated(tmp_path):
-    # before: Ray's own SIGTERM handler made it `error: sys.exit(1) called`, exit 1, status
-    # failed; then Ray's signal check re-raised the Terminated as a plain Ctrl-C (exit 130)
-    pytest.importorskip("ray", reason="Ray has no wheel for this platform")
+def _ray_head_started(pgid: int) -> bool:
+    """Whether the campaign of process group ``pgid`` has Ray's head up: it is in ``ray.init``
+    (Ray's GCS server starts first; the driver connects seconds later), or past it."""
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            comm, fields = stat.read_text().rsplit(")", 1)
+        except OSError:
+            continue
+        if comm.endswith("(gcs_server") and int(fields.split()[2]) == pgid:
+            return True
+    return False
+
+
+def _sigterm_a_ray_campaign(tmp_path: Path, ready) -> tuple[subprocess.Popen, str, Path]:
+    """Start a two-run Ray campaign, wait for ``ready(out, pid)``, SIGTERM it; (process, stderr,
+    out)."""
     src = _campaign(tmp_path, "slow", 30.0, camera=True, seeds=(1, 2))
+    src.write_text(f'artefacts = "csv"\n{src.read_text()}')  # a run's directory marks its start
     out = tmp_path / "ray_out"
     cmd = [sys.executable, "-m", "cdpr_twin", "campaign", str(src), "--out", str(out), "--ray"]
     env = {**os.environ, "MUJOCO_GL": "egl"}
@@ -311,16 +323,42 @@ def test_sigterm_stops_a_ray_campaign_as_terminated(tmp_path):
         start_new_session=True,
     )  # fmt: skip
     try:
-        deadline = time.monotonic() + 120
-        while not (out / "campaign.json").exists() and time.monotonic() < deadline:
-            time.sleep(0.2)  # the campaign claimed its directory
-        time.sleep(15.0)  # the local cluster started, its actors imported the package and run
-        assert proc.poll() is None
+        deadline = time.monotonic() + 240
+        while not ready(out, proc.pid) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert proc.poll() is None and ready(out, proc.pid), "the campaign never got that far"
         proc.send_signal(signal.SIGTERM)
-        _, err = proc.communicate(timeout=90)
+        _, err = proc.communicate(timeout=120)
+        deadline = time.monotonic() + 30
+        while _group_alive(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        left = _group_alive(proc.pid)  # Ray's head and actors are in the campaign's group
     finally:
         if _group_alive(proc.pid):
             os.killpg(proc.pid, signal.SIGKILL)
+    assert not left, "a Ray process outlived the stopped campaign"
+    return proc, err, out
+
+
+@pytest.mark.slow
+def test_sigterm_while_ray_starts_stops_the_campaign_as_terminated(tmp_path):
+    # before: Ray's handler, installed for the length of ray.init (seconds on a loaded machine),
+    # exited `error: sys.exit(15) called`, status failed, and the half-started driver aborted
+    pytest.importorskip("ray", reason="Ray has no wheel for this platform")
+    proc, err, out = _sigterm_a_ray_campaign(tmp_path, lambda out, pid: _ray_head_started(pid))
+    assert proc.returncode == 143, err
+    assert "cdpr-twin: terminated;" in err and "Traceback" not in err
+    assert json.loads((out / "campaign.json").read_text())["status"] == "terminated"
+
+
+@pytest.mark.slow
+def test_sigterm_stops_a_ray_campaign_with_runs_under_way_as_terminated(tmp_path):
+    # before: Ray's own SIGTERM handler made it `error: sys.exit(1) called`, exit 1, status
+    # failed; then Ray's signal check re-raised the Terminated as a plain Ctrl-C (exit 130)
+    pytest.importorskip("ray", reason="Ray has no wheel for this platform")
+    proc, err, out = _sigterm_a_ray_campaign(
+        tmp_path, lambda out, pid: (out / "runs").is_dir() and any((out / "runs").iterdir())
+    )
     assert proc.returncode == 143, err
     assert "cdpr-twin: terminated;" in err and "Traceback" not in err
     assert json.loads((out / "campaign.json").read_text())["status"] == "terminated"

@@ -20,6 +20,8 @@ from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any
 
+from cdpr_twin.outputs import Terminated
+
 
 class ExecutorError(RuntimeError):
     """The executor cannot start (e.g. Ray is not installed)."""
@@ -152,15 +154,26 @@ def run_ray(
     if started:
         if address is not None:
             check_address(address)  # Ray itself retries an unreachable cluster for minutes
-        ours = signal.getsignal(signal.SIGTERM)
+        ours, stopped = signal.getsignal(signal.SIGTERM), False
         try:
             ray.init(address=address, include_dashboard=False, log_to_driver=False)
         except Exception as exc:  # Ray's own connection errors are of many types
+            ray.shutdown()
             where = address or "a local cluster"
             raise ExecutorError(f"cannot start Ray on {where}: {exc}") from None
+        except SystemExit as exc:  # Ray's SIGTERM handler, while Ray was starting
+            ray.shutdown()  # (a half-started driver aborts the interpreter at exit)
+            if exc.code != signal.SIGTERM:
+                raise
+            stopped = True
+            raise Terminated() from None
+        except BaseException:  # the campaign's own stop (SIGTERM, Ctrl-C) before Ray's handler
+            ray.shutdown()
+            raise
         finally:  # Ray's SIGTERM handler exits; the campaign's stops it cleanly (exit 143)
             if threading.current_thread() is threading.main_thread() and callable(ours):
-                signal.signal(signal.SIGTERM, ours)
+                # once stopped, a second SIGTERM is ignored while the outputs are completed
+                signal.signal(signal.SIGTERM, signal.SIG_IGN if stopped else ours)
     try:
         n = workers or max(1, int(ray.available_resources().get("CPU", 1)))
 
