@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_twin.blueprint import default_blueprint
+from cdpr_twin.blueprint import default_blueprint, robot_label, series_colors
 from cdpr_twin.outputs import OutputError, partial_of, writing
 from cdpr_twin.se3 import covariance_ellipsoids, quat_xyzw_from_matrix
 from cdpr_twin.types import CameraIntrinsics, Measurement, PoseEstimate
@@ -65,6 +65,7 @@ class SceneInfo:
         tag_size: tag edge [m].
         frame_min: (3,) frame lower corner [m].
         frame_max: (3,) frame upper corner [m].
+        model_file: the robot's MJCF scene (its name titles the 3D view), if known.
     """
 
     a_base: np.ndarray
@@ -76,6 +77,7 @@ class SceneInfo:
     tag_size: float
     frame_min: np.ndarray
     frame_max: np.ndarray
+    model_file: Path | None = None
 
 
 class RerunRecorder:
@@ -114,7 +116,7 @@ class RerunRecorder:
         self.rec = rr.RecordingStream(
             application_id, recording_id=recording_id, send_properties=False
         )
-        blueprint = default_blueprint()
+        blueprint = default_blueprint(robot_label(scene.model_file))
         self.spawned = False  # streaming live (a spawned viewer or a server at ``connect``)
         if live:
             try:
@@ -177,8 +179,11 @@ class RerunRecorder:
         cables = [f"cable {i + 1}" for i in range(len(s.a_base))]
         rec.log("tension", rr.SeriesLines(names=cables), static=True)
         rec.log("length", rr.SeriesLines(names=cables), static=True)
+        lines = rr.SeriesLines(
+            names=list(self.estimators), colors=series_colors(len(self.estimators))
+        )
         for kind in ("translation_mm", "rotation_deg"):
-            rec.log(f"deviation/{kind}", rr.SeriesLines(names=list(self.estimators)), static=True)
+            rec.log(f"deviation/{kind}", lines, static=True)
 
     def _log_platform(self) -> None:
         """The platform box, and the camera's mounting and pinhole when there is a camera."""

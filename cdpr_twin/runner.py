@@ -238,8 +238,7 @@ def _monitor(s: Scenario, physics):
 
 
 def _scene(setup: RunSetup) -> SceneInfo:
-    p = setup.physics
-    g = p.geometry
+    p, g = setup.physics, setup.physics.geometry
     tag = setup.nominal.T_base_tag is not None and p.has_tag
     return SceneInfo(
         a_base=g.a_base,
@@ -251,6 +250,7 @@ def _scene(setup: RunSetup) -> SceneInfo:
         tag_size=setup.nominal.tag_size if tag else 0.0,
         frame_min=g.frame_min,
         frame_max=g.frame_max,
+        model_file=setup.scenario.model.file,
     )
 
 
