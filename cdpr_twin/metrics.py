@@ -39,6 +39,13 @@ def pose_error(T_a: np.ndarray, T_b: np.ndarray) -> dict:
     return {"translation_m": dt, "rotation_deg": float(np.degrees(dr))}
 
 
+_NO_DEVIATION = dict.fromkeys(
+    ("max_translation_m", "max_translation_time_s", "max_rotation_deg", "max_rotation_time_s",
+     "rms_translation_m", "rms_rotation_deg"),
+    math.nan,
+)  # fmt: skip
+
+
 @dataclass
 class DeviationTrack:
     """Running translational/rotational deviation of one estimator from ground truth."""
@@ -81,8 +88,12 @@ class DeviationTrack:
         self.flags.update(estimate.flags)
 
     def summary(self) -> dict:
-        """JSON-ready summary (metres and degrees)."""
-        return {
+        """JSON-ready summary (metres and degrees).
+
+        Without a single finite estimate the max and RMS deviations are NaN (``null`` in JSON):
+        an estimator that never estimated has no deviation to report, least of all zero.
+        """
+        summary = {
             "max_translation_m": self.max_translation,
             "max_translation_time_s": self.max_translation_time,
             "max_rotation_deg": float(np.degrees(self.max_rotation)),
@@ -96,6 +107,7 @@ class DeviationTrack:
                 np.degrees(np.sqrt(self.sum_sq_rotation / max(self.count, 1)))
             ),
         }
+        return summary if self.count else {**summary, **_NO_DEVIATION}
 
 
 class RunMetrics:

@@ -168,6 +168,48 @@ def test_a_nan_estimate_is_counted_invalid_not_dropped_from_the_deviations():
     assert math.isnan(track.summary()["final_translation_m"])  # the last estimate: none
 
 
+NAN_ESTIMATOR = """
+import numpy as np
+from cdpr_twin import plugins
+from cdpr_twin.estimators.base import NO_INPUTS, Estimator
+from cdpr_twin.types import PoseEstimate
+
+
+@plugins.register
+class Broken(Estimator):
+    name = "broken"
+
+    def update(self, measurement, inputs=NO_INPUTS):
+        self._check_reset()
+        return PoseEstimate(measurement.time, np.full((4, 4), np.nan))
+"""
+
+
+def test_an_estimator_that_never_estimates_has_no_deviation_and_wins_nothing(tmp_path):
+    # before: max and RMS deviations of 0 over no estimate at all, and in a campaign's report
+    # the broken estimator "deviated least" in every run
+    (tmp_path / "broken.py").write_text(NAN_ESTIMATOR)
+    text = (ROOT / "scenarios" / "paper_open_loop.toml").read_text()
+    text = text.replace('name = "paper_open_loop"', 'name = "broken"\nplugins = ["broken.py"]')
+    text = text.replace('passive = ["image", ', 'passive = ["broken", "image", ')
+    (tmp_path / "broken.toml").write_text(text)
+    src = tmp_path / "c.toml"
+    src.write_text(
+        f'name = "c"\nscenario = "{tmp_path / "broken.toml"}"\n\n[overrides]\n'
+        '"sensors.camera" = false\nduration = 0.2\n\n[[axes]]\nkey = "seed"\nvalues = [1, 2]\n'
+    )
+    out = tmp_path / "out"
+    assert main(["campaign", str(src), "--out", str(out)]) == 0
+    rows = load_table(out).to_pylist()
+    for row in rows:
+        broken = json.loads(row["summary"])["estimators"]["broken"]
+        assert broken["invalid_updates"] == 6  # the start and five ticks, none finite
+        assert broken["max_translation_m"] is None and broken["rms_translation_m"] is None
+        assert math.isnan(row["est.broken.rms_t_m"]) and row["est.model_simple.rms_t_m"] > 0
+    report = (out / "report.md").read_text()
+    assert "| model_simple |" in report and "| broken |" not in report
+
+
 def test_a_waypoint_outside_the_frame_through_an_axis_is_refused_before_any_run(tmp_path):
     from cdpr_twin.campaign import CampaignError
 
