@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import sys
 import threading
 from collections.abc import Iterator
 
@@ -65,3 +66,33 @@ def sigterm_raises() -> Iterator[None]:
     finally:
         signal.signal(signal.SIGTERM, previous)
         _SIGTERM.clear()  # a later Ctrl-C, outside this command, is a Ctrl-C
+
+
+@contextlib.contextmanager
+def shielded() -> Iterator[None]:
+    """Within: SIGINT and SIGTERM are held off, so that the outputs being saved are completed.
+
+    A run completes, renames and commits its files in well under a second; a (second) Ctrl-C
+    or SIGTERM during that used to interrupt it, leaving ``*.partial`` files and the lock. A
+    signal that came is delivered afterwards, to the handler it was meant for, unless it is of
+    the kind of a stop already under way (which absorbs it). SIGKILL still stops it. In
+    another thread than the main one (where signals cannot be handled) it does nothing.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[int] = []
+    previous = {}
+    try:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, lambda signum, frame: held.append(signum))
+        yield
+    finally:
+        for sig, handler in previous.items():
+            if handler is not None:  # (None: a handler installed from C, not restorable)
+                signal.signal(sig, handler)
+    stopping = sys.exc_info()[1]  # a stop under way absorbs its own kind of signal only
+    absorbed = signal.SIGTERM if isinstance(stopping, Terminated) else signal.SIGINT
+    for sig in dict.fromkeys(held):  # each kind once, in the order they came
+        if not (isinstance(stopping, KeyboardInterrupt) and sig == absorbed):
+            signal.raise_signal(sig)  # now, to the handler it was meant for (a worker: exit)

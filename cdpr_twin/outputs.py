@@ -31,9 +31,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
-import signal
 import socket
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -270,6 +268,7 @@ class OutputDir:
         self.outputs, self.foreign = outputs, foreign
         self.partials = outputs if partials is None else partials
         self._held = False
+        self._made: list[Path] = []  # the directories the claim created, deepest first
 
     def claim(self) -> None:
         """Create the directory, take its lock and remove an earlier run's outputs.
@@ -297,6 +296,7 @@ class OutputDir:
         if self.path.exists() and not self.path.is_dir():
             raise OutputDirError(f"{where}: exists and is not a directory")
         try:
+            self._made = [p for p in (self.path, *self.path.parents) if not p.exists()]
             self.path.mkdir(parents=True, exist_ok=True)
             with _guard(self.path):
                 self._create_lock()
@@ -336,12 +336,17 @@ class OutputDir:
         """Remove the owner's files begun since the claim, then release: nothing was recorded.
 
         For a command stopped while opening its outputs (a Ctrl-C then leaves no header-only
-        ``*.partial`` behind). Nothing is touched unless this claim holds the directory.
+        ``*.partial`` behind, nor the directories the claim created, when they are empty).
+        Nothing is touched unless this claim holds the directory.
         """
-        if self._held:
+        held = self._held
+        if held:
             with contextlib.suppress(OutputError):
                 self._clear()
         self.release()
+        for made in self._made if held else ():
+            with contextlib.suppress(OSError):
+                made.rmdir()  # (only if empty)
 
     def release(self) -> None:
         """Remove the lock (if this claim still holds it)."""
@@ -366,33 +371,26 @@ def out_path(text: str) -> Path:
     return Path(text)
 
 
-@contextlib.contextmanager
-def shielded() -> Iterator[None]:
-    """Within: SIGINT and SIGTERM are held off, so that the outputs being saved are completed.
+def sweep_abandoned(parent: Path) -> list[Path]:
+    """Tidy the run directories under ``parent`` whose run died (its lock's owner is gone).
 
-    A run completes, renames and commits its files in well under a second; a (second) Ctrl-C
-    or SIGTERM during that used to interrupt it, leaving ``*.partial`` files and the lock. A
-    signal that came is delivered afterwards, to the handler it was meant for, unless it is of
-    the kind of a stop already under way (which absorbs it). SIGKILL still stops it. In
-    another thread than the main one (where signals cannot be handled) it does nothing.
+    A campaign or study stopped ends its workers mid-run (SIGTERM, then SIGKILL): their run
+    directories keep the lock and the ``*.partial`` files the run had begun. Those go, and the
+    directory too when nothing else is left in it; a live run's directory is not touched.
+
+    Returns:
+        The directories tidied.
     """
-    import threading
-
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    held: list[int] = []
-    previous = {}
-    try:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            previous[sig] = signal.signal(sig, lambda signum, frame: held.append(signum))
-        yield
-    finally:
-        for sig, handler in previous.items():
-            if handler is not None:  # (None: a handler installed from C, not restorable)
-                signal.signal(sig, handler)
-    stopping = sys.exc_info()[1]  # a stop under way absorbs its own kind of signal only
-    absorbed = signal.SIGTERM if isinstance(stopping, Terminated) else signal.SIGINT
-    for sig in dict.fromkeys(held):  # each kind once, in the order they came
-        if not (isinstance(stopping, KeyboardInterrupt) and sig == absorbed):
-            signal.raise_signal(sig)  # now, to the handler it was meant for (a worker: exit)
+    tidied = []
+    for lock in sorted(Path(parent).glob(f"*/{LOCK_NAME}")):
+        directory = lock.parent
+        with contextlib.suppress(OSError), _guard(directory):
+            if not _stale(_owner(lock)):
+                continue
+            for name in OUTPUT_NAMES:
+                partial_of(directory / name).unlink(missing_ok=True)
+            lock.unlink()
+            tidied.append(directory)
+        with contextlib.suppress(OSError):
+            directory.rmdir()  # (only if empty)
+    return tidied

@@ -31,15 +31,9 @@ from cdpr_twin import plugins
 from cdpr_twin.controllers.base import Controller
 from cdpr_twin.estimators.base import Estimator, update_order
 from cdpr_twin.events import EventSchedule, TagOcclusion
-from cdpr_twin.interrupts import interruption
+from cdpr_twin.interrupts import interruption, shielded
 from cdpr_twin.metrics import RunMetrics
-from cdpr_twin.outputs import (
-    OutputDir,
-    OutputError,
-    Terminated,
-    others,
-    shielded,
-)
+from cdpr_twin.outputs import OutputDir, OutputError, Terminated, others
 from cdpr_twin.plugins import OptionError
 from cdpr_twin.preflight import check_goal, controller_for
 from cdpr_twin.procedure import homing, teach

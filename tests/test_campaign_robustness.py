@@ -102,6 +102,7 @@ def _group_alive(pgid: int) -> bool:
 def _start_slow_campaign(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
     """Two 30 s camera-on runs on one worker (each many seconds of wall time)."""
     src = _campaign(tmp_path, "slow", 30.0, camera=True, seeds=(1, 2))
+    src.write_text(f'artefacts = "all"\n{src.read_text()}')  # the runs under way write files
     out = tmp_path / "slow_out"
     cmd = [sys.executable, "-m", "cdpr_twin", "campaign", str(src), "--out", str(out),
            "--workers", "1"]  # fmt: skip
@@ -138,6 +139,13 @@ def test_sigterm_ends_the_runs_under_way_and_says_nothing_was_recorded(tmp_path)
     assert not (out / "results.parquet").exists()
     time.sleep(0.5)
     assert not _group_alive(proc.pid), "a worker process outlived the campaign"
+    assert not _leftovers(out)  # before: the run under way kept its .lock and *.partial files
+
+
+def _leftovers(out: Path) -> list[str]:
+    """The locks and ``*.partial`` files under a directory's ``runs/``."""
+    found = (out / "runs").rglob("*")
+    return [str(p.relative_to(out)) for p in found if p.name == ".lock" or p.suffix == ".partial"]
 
 
 @pytest.mark.slow
@@ -404,3 +412,4 @@ def test_sigterm_stops_a_ray_campaign_with_runs_under_way_as_terminated(tmp_path
     assert proc.returncode == 143, err
     assert "cdpr-twin: terminated;" in err and "Traceback" not in err
     assert json.loads((out / "campaign.json").read_text())["status"] == "terminated"
+    assert not _leftovers(out)

@@ -251,8 +251,8 @@ def test_a_sigterm_as_the_run_ends_says_its_outputs_are_complete(tmp_path, monke
 
 
 def test_a_held_signal_of_another_kind_than_the_stop_under_way_is_delivered():
-    from cdpr_twin.interrupts import sigterm_raises
-    from cdpr_twin.outputs import Terminated, shielded
+    from cdpr_twin.interrupts import shielded, sigterm_raises
+    from cdpr_twin.outputs import Terminated
 
     with sigterm_raises(), pytest.raises(Terminated):  # a pool worker told to stop while it
         try:  # saves a run stopped by Ctrl-C: the SIGTERM must still end it

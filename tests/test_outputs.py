@@ -196,6 +196,25 @@ def test_a_stop_while_the_outputs_open_leaves_nothing(tmp_path, monkeypatch, cap
     assert {p.name for p in out.iterdir()} == {"notes.txt"}
 
 
+def test_a_stop_while_the_files_open_leaves_no_directory_the_run_created(
+    tmp_path, monkeypatch, capsys
+):
+    """SIGTERM while the Rerun file opens, in an --out that did not exist: before, the empty
+    directory and its new parents stayed behind."""
+    from cdpr_twin import recorders
+    from cdpr_twin.outputs import Terminated
+
+    def terminated(*args, **kwargs):
+        raise Terminated()
+
+    out = tmp_path / "new" / "deeper" / "out"
+    monkeypatch.setattr(recorders, "RerunRecorder", terminated)
+    code = main(["run", str(OPEN_LOOP), "--out", str(out), "--no-camera", "--duration", "1"])
+    line = _one_error_line(capsys.readouterr().err)
+    assert code == 143 and "terminated before this run saved any output" in line
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize("limit", [100_000, 150_000], ids=["csv_first", "rrd_end"])
 def test_a_file_size_limit_is_a_one_line_error_and_no_final_name(tmp_path, limit):
     """A real failing write (RLIMIT_FSIZE: EFBIG, as a full disk gives ENOSPC), whichever file

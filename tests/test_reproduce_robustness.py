@@ -275,6 +275,9 @@ def test_sigterm_stops_the_workers_and_leaves_no_stale_report(done_study, tmp_pa
     assert not [p for p in children if _alive(p)], "a child process outlived the study"
     left = {p.name for p in out.iterdir()}
     assert left == {"runs"}, left  # no report, runs.json or figure: neither old nor new
+    # before: the run under way kept its lock and *.partial files
+    found = (out / "runs").rglob("*")
+    assert not [p for p in found if p.name == ".lock" or p.suffix == ".partial"]
 
 
 def _failing_scenario(tmp_path: Path) -> Path:

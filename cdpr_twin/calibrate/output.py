@@ -171,8 +171,9 @@ def write(
     Raises:
         cdpr_twin.outputs.OutputError: a file cannot be written (naming it).
     """
+    from cdpr_twin.interrupts import shielded
     from cdpr_twin.json_format import json_text
-    from cdpr_twin.outputs import fsync_dir, partial_of, shielded, write_partial, writing
+    from cdpr_twin.outputs import fsync_dir, partial_of, write_partial, writing
 
     with writing(out):
         out.mkdir(parents=True, exist_ok=True)

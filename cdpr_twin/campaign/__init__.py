@@ -26,6 +26,7 @@ from cdpr_twin.outputs import (
     OutputDirError,
     Terminated,
     others,
+    sweep_abandoned,
     write_json_atomic,
     writing,
 )
@@ -141,6 +142,9 @@ def _execute(campaign, out, table, todo, workers, ray_address, progress) -> dict
         status = "failed"
         raise
     finally:
+        if status != "completed":
+            rows.close()  # the workers end, if a stop came between two results
+            sweep_abandoned(Path(runs_dir))  # the runs under way: their lock and *.partial
         if n or not (Path(out) / RESULTS).exists():
             table.flush()
         summary = {

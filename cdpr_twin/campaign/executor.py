@@ -102,6 +102,7 @@ def stop_workers(
         process.join(timeout=max(0.0, deadline - time.monotonic()))
         if process.is_alive():
             process.kill()
+            process.join(timeout=1.0)  # gone before its run's directory is tidied
 
 
 CONNECT_TIMEOUT_S = 10.0

@@ -199,7 +199,8 @@ def run_study(
     """Run every spec in ``workers`` spawned processes; writes ``runs.json`` (whole).
 
     A stop (Ctrl-C, SIGTERM as :class:`~cdpr_twin.outputs.Terminated`) or any error ends the
-    workers and cancels the queued runs before it propagates; no ``runs.json`` is written.
+    workers and cancels the queued runs before it propagates; no ``runs.json`` is written, and
+    the runs under way leave no lock or ``*.partial`` file.
 
     Returns:
         One record per run, in the order of ``specs``: the spec's fields, ``ok``, ``status``,
@@ -209,18 +210,22 @@ def run_study(
         OutputError: ``runs/`` or ``runs.json`` cannot be written.
     """
     from cdpr_twin.campaign.executor import run_local  # the one engine of parallel runs
-    from cdpr_twin.outputs import write_json_atomic, writing
+    from cdpr_twin.outputs import sweep_abandoned, write_json_atomic, writing
 
     runs_dir = out / "runs"
     with writing(runs_dir):
         runs_dir.mkdir(parents=True, exist_ok=True)
     records = []
     # closed on leaving, however: a stop raised here (in progress) ends the workers too
-    with contextlib.closing(run_local(_run_one, specs, workers, str(runs_dir))) as results:
-        for done, record in enumerate(results, 1):
-            records.append(record)
-            if progress is not None:
-                progress(done, len(specs), record)
+    try:
+        with contextlib.closing(run_local(_run_one, specs, workers, str(runs_dir))) as results:
+            for done, record in enumerate(results, 1):
+                records.append(record)
+                if progress is not None:
+                    progress(done, len(specs), record)
+    except BaseException:
+        sweep_abandoned(runs_dir)  # the runs under way: their lock and *.partial files
+        raise
     order = {s.name: i for i, s in enumerate(specs)}
     records.sort(key=lambda r: order[r["name"]])
     write_json_atomic(out / "runs.json", records)
