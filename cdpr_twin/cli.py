@@ -12,12 +12,13 @@ import numpy as np
 
 from cdpr_twin import model_cli, se3
 from cdpr_twin.cli_campaign import add_campaign_parser
+from cdpr_twin.interrupts import closed_stdout
 from cdpr_twin.outputs import out_path
 
 P0 = (0.112, -0.032, 0.301, -12.0, -10.0, 0.0)
 """The paper's start pose ᵇp_p0 [m, deg]."""
 TRACEBACK_HELP = "on an unexpected error (e.g. a plugin's bug), also print its traceback"
-REPRODUCE_DOC = (
+REPRODUCE_DOC = (  # `reproduce --help`: what the study writes, and what it removes
     "Run the paper's study into --out: runs/<run>/, runs.json, fig*.png, report.json, report.md "
     "(last). The directory is locked as a run's: a second writer is refused (exit 2). Before any "
     "run starts, an earlier study's report.md, report.json, runs.json, figures (and their "
@@ -26,7 +27,6 @@ REPRODUCE_DOC = (
     "keeping the finished runs, without a report. Exit 0 done, 1 a run or a write failed, 2 bad "
     "options or --out in use."
 )
-"""``cdpr-twin reproduce --help``'s description: what the study writes, and what it removes."""
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -294,6 +294,8 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
         return args.func(args)
+    except BrokenPipeError:  # its reader went (`| head`): the rest has nobody to read it
+        return closed_stdout()
     except (SystemExit, KeyboardInterrupt) as exc:  # a plugin's exit; Ctrl-C while starting
         stop = isinstance(exc, KeyboardInterrupt)  # (the commands return their exit codes)
         why = "interrupted" if stop else f"error: sys.exit({exc.code!r}) called"
@@ -321,12 +323,8 @@ def _parser() -> argparse.ArgumentParser:
     runp.add_argument(
         "scenario", help="scenario file, or a shipped one's name (cdpr-twin scenarios list)"
     )
-    runp.add_argument(
-        "--out",
-        type=out_path,
-        default=None,
-        help="output directory (default: runs/<scenario name>)",
-    )
+    out_help = "output directory (default: runs/<scenario name>)"
+    runp.add_argument("--out", type=out_path, default=None, help=out_help)
     runp.add_argument("--seed", type=int, default=None, help="run seed (sensor noise)")
     runp.add_argument("--in-loop", default=None, help="estimator closing the loop")
     runp.add_argument("--duration", type=float, default=None, help="run length [s]")

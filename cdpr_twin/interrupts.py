@@ -96,3 +96,19 @@ def shielded() -> Iterator[None]:
     for sig in dict.fromkeys(held):  # each kind once, in the order they came
         if not (isinstance(stopping, KeyboardInterrupt) and sig == absorbed):
             signal.raise_signal(sig)  # now, to the handler it was meant for (a worker: exit)
+
+
+def closed_stdout() -> int:
+    """After a ``BrokenPipeError``: standard output's reader is gone (``cdpr-twin … | head``).
+
+    The rest of the output is dropped without a word (as ``cat`` does); standard output goes to
+    ``/dev/null`` so that the interpreter's own flush at exit fails no more. Returns 141, the
+    status of a process ended by SIGPIPE (128 + 13). A run's files are complete either way:
+    the summary is printed after they are saved.
+    """
+    import os
+
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
+    return 128 + signal.SIGPIPE

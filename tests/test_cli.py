@@ -168,3 +168,15 @@ def test_run_prints_the_table_and_writes_outputs(tmp_path):
     assert summary["seed"] == 3 and summary["overrides"]["camera"] is False
     assert "image" not in summary["estimators"]
     assert {p.name for p in out.iterdir()} == {"recording.rrd", "timeseries.csv", "summary.json"}
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly_with_sigpipes_status():
+    # before: `cdpr-twin scenarios list | head -1` printed a BrokenPipeError traceback, exit 1
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cdpr_twin", "scenarios", "list"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    proc.stdout.close()  # the reader is gone before the command writes a line
+    err = proc.stderr.read()
+    assert proc.wait(timeout=120) == 141, err
+    assert err == ""
