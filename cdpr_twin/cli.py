@@ -19,13 +19,13 @@ P0 = (0.112, -0.032, 0.301, -12.0, -10.0, 0.0)
 """The paper's start pose ᵇp_p0 [m, deg]."""
 TRACEBACK_HELP = "on an unexpected error (e.g. a plugin's bug), also print its traceback"
 REPRODUCE_DOC = (  # `reproduce --help`: what the study writes, and what it removes
-    "Run the paper's study into --out: runs/<run>/, runs.json, fig*.png, report.json, report.md "
-    "(last). The directory is locked as a run's: a second writer is refused (exit 2). Before any "
-    "run starts, an earlier study's report.md, report.json, runs.json, figures (and their "
-    "*.partial), runs under runs/ are removed (give another --out to keep them). Each file is "
-    "written as <name>.partial, then renamed. Ctrl-C/SIGTERM stops the workers (exit 130/143), "
-    "keeping the finished runs, without a report. Exit 0 done, 1 a run or a write failed, 2 bad "
-    "options or --out in use."
+    "Run the paper's study into --out: study.json (first), runs/<run>/, runs.json, fig*.png, "
+    "report.json, report.md (last). The directory is locked as a run's: a second writer is "
+    "refused (exit 2). Before any run starts, an earlier study's report.md, report.json, "
+    "runs.json, figures (and their *.partial), runs under runs/ are removed (give another --out "
+    "to keep them). Each file is written as <name>.partial, then renamed. Ctrl-C/SIGTERM stops "
+    "the workers (exit 130/143), keeping the finished runs and study.json, without a report. "
+    "Exit 0 done, 1 a run or a write failed, 2 bad options or --out in use."
 )
 
 

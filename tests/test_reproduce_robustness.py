@@ -214,7 +214,7 @@ def test_a_new_study_removes_the_earlier_ones_files_before_any_run(
     assert main(["reproduce", "--out", str(out), *TINY]) == 130
     line = _one_line(capsys.readouterr().err)
     assert "interrupted" in line and "0 of 8 runs" in line and "no report" in line, line
-    assert sorted(p.name for p in out.iterdir()) == ["runs"]
+    assert sorted(p.name for p in out.iterdir()) == ["runs", "study.json"]  # (its marker)
     assert [p.name for p in (out / "runs").iterdir()] == ["notes"]
 
 
@@ -274,7 +274,11 @@ def test_sigterm_stops_the_workers_and_leaves_no_stale_report(done_study, tmp_pa
         time.sleep(0.1)
     assert not [p for p in children if _alive(p)], "a child process outlived the study"
     left = {p.name for p in out.iterdir()}
-    assert left == {"runs"}, left  # no report, runs.json or figure: neither old nor new
+    assert left == {"runs", "study.json"}, left  # no report, runs.json or figure: old or new
+    # the stopped study's directory is still a study's: a run is refused there (before, it
+    # wrote its files beside runs/, and the next reproduce refused its own directory)
+    argv = ["run", "paper_open_loop", "--out", str(out), "--duration", "0.08", "--no-camera"]
+    assert main(argv) == 2
     # before: the run under way kept its lock and *.partial files
     found = (out / "runs").rglob("*")
     assert not [p for p in found if p.name == ".lock" or p.suffix == ".partial"]

@@ -19,9 +19,9 @@ import multiprocessing
 import time
 from pathlib import Path
 
-from cdpr_twin.outputs import OutputDir, others
+from cdpr_twin.outputs import OutputDir, others, write_json_atomic
 from cdpr_twin.study.analysis import accuracy_at_p1, analyse
-from cdpr_twin.study.files import STUDY_FILES, clear_earlier_study
+from cdpr_twin.study.files import STUDY_FILES, STUDY_MARKER, clear_earlier_study
 from cdpr_twin.study.findings import FINDINGS, Finding, evaluate
 from cdpr_twin.study.plan import (
     Progress,
@@ -143,7 +143,8 @@ def reproduce_runs(
     The directory's promises are :mod:`.files`': its lock held throughout (a second writer is
     refused), the earlier study's report, figures, ``runs.json`` and runs removed before any
     run starts, each file written whole, ``report.md`` last. A stop (Ctrl-C, SIGTERM) ends the
-    workers and leaves the runs that finished, without ``runs.json`` or a report.
+    workers and leaves the runs that finished, without ``runs.json`` or a report, but with
+    ``study.json`` (written at the start), which marks the directory as a study's.
 
     Returns:
         The report numbers (as in ``report.json``), plus ``"wall_time_s"``.
@@ -158,6 +159,7 @@ def reproduce_runs(
     owner.claim()  # the lock, then *.partial removed
     try:
         clear_earlier_study(out)
+        write_json_atomic(out / STUDY_MARKER, {"command": "reproduce", "runs": len(specs)})
         start = time.perf_counter()
         records = run_study(specs, out, workers, progress)
         rep = analyse(out, records)

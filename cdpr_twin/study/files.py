@@ -29,6 +29,9 @@ FIGURES = ("fig5a", "fig5b", "fig7a", "fig7b", "fig8")
 """The study's figures (``<name>.png``)."""
 STUDY_FILES = ("report.md", "report.json", "runs.json", *(f"{n}.png" for n in FIGURES))
 """The final names of a study's own files (beside its ``runs/``)."""
+STUDY_MARKER = "study.json"
+"""Written as the study starts (the command, its run count): a stopped study's directory is
+still a study's, refused by the other commands (``runs.json`` only comes at the end)."""
 RUN_NAME = re.compile(r"(open_loop|pbvs_.+)_seed\d+(_without_.+|_goal_.+)?")
 """How the study names its runs (:func:`cdpr_twin.study.plan.plan`, ``extra_runs``)."""
 
