@@ -124,6 +124,8 @@ def read_truth(top: OptionReader, source: Path) -> DeviationSpec:
             ),
             seed=t.integer("seed", 0, minimum=0),
         )
+    except ScenarioError:
+        raise  # (names the file and the field already)
     except ValueError as exc:
         raise ScenarioError(f"{source}: truth: {exc}") from None
     t.done()

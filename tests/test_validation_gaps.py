@@ -37,6 +37,15 @@ def test_scenario_values_that_would_hang_or_do_nothing_are_refused(tmp_path, old
         load_scenario(_file(tmp_path, old, new))
 
 
+def test_a_bad_truth_value_names_the_file_and_the_field_once(tmp_path):
+    # before: "s.toml: truth: s.toml: truth.exit_point_std: must be ≥ 0 m, got -0.012"
+    path = _file(tmp_path, "exit_point_std = 0.012 ", "exit_point_std = -0.012 ")
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    message = str(info.value)
+    assert message == f"{path}: truth.exit_point_std: must be ≥ 0 m, got -0.012"
+
+
 def test_a_run_shorter_than_one_control_period_is_refused_on_the_command_line():
     s = load_scenario(ROOT / "scenarios" / "paper_open_loop.toml")
     with pytest.raises(ScenarioError, match=r"--duration: 0\.001 s must span 1"):
