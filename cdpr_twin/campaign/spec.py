@@ -52,6 +52,16 @@ from cdpr_twin import resources
 
 DRAWS = ("integers", "uniform", "normal", "choice")
 ARTEFACTS = ("none", "csv", "all")
+INT64 = (-(2**63), 2**63 - 1)
+"""The integers an axis may give (its values, its draw's bounds): the results table's int64."""
+MAX_RUNS = 100_000
+"""The most runs a campaign may have (grid points × samples, summed over its blocks).
+
+Refused before any run is expanded: each run's resolved scenario is built, validated and kept
+in memory (about 7 ms and 50 kB a run), so 100 000 runs take some 12 min and 5 GB to load.
+That is seven times the largest study planned (1 000 robots × 7 estimators × 2 controllers:
+14 000 runs); a bigger study is several campaigns.
+"""
 
 
 class CampaignError(ValueError):
@@ -138,12 +148,26 @@ def _fail(source: Path, where: str, problem: str) -> CampaignError:
     return CampaignError(f"{source}: {where}: {problem}")
 
 
+def _big_int(value: Any) -> int | None:
+    """The first integer in ``value`` (lists and tables searched too) outside :data:`INT64`."""
+    if isinstance(value, dict | list):
+        items = value.values() if isinstance(value, dict) else value
+        return next((big for v in items if (big := _big_int(v)) is not None), None)
+    if isinstance(value, int) and not INT64[0] <= value <= INT64[1]:
+        return value
+    return None
+
+
 def _axis(source: Path, where: str, axis: Any) -> dict:
     if not isinstance(axis, dict) or not isinstance(axis.get("key"), str) or not axis["key"]:
         raise _fail(source, where, 'must be a table with a key = "dotted.scenario.key"')
     known = {"key", "values", "draw", "low", "high", "mean", "std"}
     if unknown := sorted(set(axis) - known):
         raise _fail(source, f"{where}.{unknown[0]}", f"unknown field; use {sorted(known)}")
+    for field in ("values", "low", "high", "mean", "std"):
+        if (big := _big_int(axis.get(field))) is not None:
+            use = f"{big} is not a 64-bit integer: use one from {INT64[0]} to {INT64[1]}"
+            raise _fail(source, f"{where}.{field} ({axis['key']})", use)
     if ("values" in axis) == ("draw" in axis) and axis.get("draw") != "choice":
         raise _fail(source, where, "give either values = [...] (a grid) or draw = ... (random)")
     if "draw" in axis and axis["draw"] not in DRAWS:
@@ -168,8 +192,9 @@ def _check_draw(source: Path, where: str, axis: dict) -> dict:
         raise _fail(source, f"{where}.high", "high − low must be a finite number")
     for field in ("low", "high") if draw == "integers" else ():
         v = axis[field]
-        if v != int(v) or not -(2**63) <= v <= 2**63 - 1:
-            raise _fail(source, f"{where}.{field}", f"must be a 64-bit integer, got {v!r}")
+        if v != int(v) or not INT64[0] <= v <= INT64[1]:
+            use = f"must be a 64-bit integer, from {INT64[0]} to {INT64[1]}, got {v!r}"
+            raise _fail(source, f"{where}.{field} ({axis['key']})", use)
     if draw == "normal" and not axis["std"] > 0:
         raise _fail(source, f"{where}.std", f"must be > 0, got {axis['std']!r}")
     return axis
@@ -231,10 +256,9 @@ def _block(source: Path, table: dict, index: int, where: str) -> _Block:
     overrides = table.get("overrides", {})
     if not isinstance(overrides, dict):
         raise _fail(source, f"{where}overrides", 'must be a table of "dotted.key" = value')
-    axes = table.get("axes", [])
-    if not isinstance(axes, list):
-        raise _fail(source, f"{where}axes", "must be an array of tables [[axes]]")
-    axes = [_axis(source, f"{where}axes[{i}]", a) for i, a in enumerate(axes)]
+    if not isinstance(table.get("description", ""), str):
+        raise _fail(source, f"{where}description", 'must be text: description = "..."')
+    axes = _axes(source, table.get("axes", []), where)
     samples, artefacts = table.get("samples", 1), table.get("artefacts", "none")
     if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
         raise _fail(source, f"{where}samples", f"must be an integer ≥ 1, got {samples!r}")
@@ -248,6 +272,33 @@ def _block(source: Path, table: dict, index: int, where: str) -> _Block:
         _read_toml(scenario, "scenario file"), overrides,
         tuple(a for a in axes if "draw" not in a), random, samples, artefacts,
     )  # fmt: skip
+
+
+def _axes(source: Path, axes: Any, where: str) -> list[dict]:
+    """A block's axes, each checked, each varying its own key."""
+    if not isinstance(axes, list):
+        raise _fail(source, f"{where}axes", "must be an array of tables [[axes]]")
+    axes = [_axis(source, f"{where}axes[{i}]", a) for i, a in enumerate(axes)]
+    first: dict[str, int] = {}
+    for i, axis in enumerate(axes):
+        if (j := first.setdefault(axis["key"], i)) != i:
+            use = f"{axis['key']!r} is varied by axes[{j}] too: list all its values on one axis"
+            raise _fail(source, f"{where}axes[{i}].key", use)
+    return axes
+
+
+def _check_blocks(source: Path, blocks: list[_Block]) -> None:
+    """Refuse two blocks of one name, and more than :data:`MAX_RUNS` runs (before expanding)."""
+    names: dict[str, int] = {}
+    for block in blocks:
+        if (i := names.setdefault(block.name, block.index)) != block.index:
+            use = f"{block.name!r} names blocks[{i}] too: give each block its own name"
+            raise _fail(source, f"blocks[{block.index}].name", use)
+    runs = sum(math.prod(len(a["values"]) for a in b.grid) * b.samples for b in blocks)
+    if runs > MAX_RUNS:
+        where = "blocks" if len(blocks) > 1 else "samples" if blocks[0].samples > 1 else "axes"
+        use = f"{runs} runs, more than the {MAX_RUNS} allowed: use fewer samples or values,"
+        raise _fail(source, where, f"{use} or split it into several campaigns")
 
 
 IN_LOOP = "estimators.in_loop"
@@ -322,7 +373,9 @@ def load_campaign(path: str | Path) -> Campaign:
     seed = top.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise _fail(source, "seed", f"must be an integer ≥ 0, got {seed!r}")
-    name = top.get("name", source.stem)
+    name, description = top.get("name", source.stem), top.get("description", "")
+    if not isinstance(description, str):
+        raise _fail(source, "description", 'must be text: description = "..."')
     if not isinstance(name, str) or name in ("", ".", "..") or any(c in name for c in "/\\"):
         raise _fail(source, "name", f"must be a plain name usable as a directory, got {name!r}")
     blocks = top.get("blocks")
@@ -334,6 +387,7 @@ def load_campaign(path: str | Path) -> Campaign:
         raise _fail(source, extra[0], "not allowed beside [[blocks]] (give it in each block)")
     else:
         parsed = [_block(source, b, i, f"blocks[{i}].") for i, b in enumerate(blocks)]
+    _check_blocks(source, parsed)
     tasks = [t for i, b in enumerate(parsed) for t in _tasks(source, b, seed,
              f"blocks[{i}]." if blocks else "")]  # fmt: skip
     seen: dict[str, str] = {}
@@ -342,4 +396,4 @@ def load_campaign(path: str | Path) -> Campaign:
         if key in seen:
             raise _fail(source, "axes", f"runs {seen[key]} and {t.name} are identical")
         seen[key] = t.name
-    return Campaign(name, source, str(top.get("description", "")), tuple(tasks))
+    return Campaign(name, source, description, tuple(tasks))

@@ -1,0 +1,101 @@
+"""A campaign's limits are refused in one line, before anything is written or expanded.
+
+Integers beyond the results table's int64, a key on two axes, two blocks of one name, more
+runs than ``MAX_RUNS`` (refused at once, not after expanding them) and a description that is
+not text.
+"""
+
+import time
+from pathlib import Path
+
+import pytest
+
+from cdpr_twin.campaign.spec import INT64, MAX_RUNS
+from cdpr_twin.cli import main
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENARIO = f'scenario = "{ROOT}/scenarios/paper_open_loop.toml"\n'
+FAST = '[overrides]\n"sensors.camera" = false\nduration = 0.08\n\n'
+BIG = 99999999999999999999  # > 2**63 - 1
+
+
+def _axis(key: str, body: str) -> str:
+    return f'[[axes]]\nkey = "{key}"\n{body}\n\n'
+
+
+def _block(name: str, axes: str, keys: str = "") -> str:
+    fast = FAST.replace("[overrides]", "[blocks.overrides]")
+    axes = axes.replace("[[axes]]", "[[blocks.axes]]")
+    return f'[[blocks]]\nname = "{name}"\n{SCENARIO}{keys}\n{fast}{axes}'
+
+
+def _refused(tmp_path: Path, capsys, text: str, *words: str) -> float:
+    """Run the campaign ``text``: exit 2, one line on stderr naming ``words``, no ``--out``."""
+    src, out = tmp_path / "bad.toml", tmp_path / "out"
+    src.write_text(text)
+    start = time.monotonic()
+    assert main(["campaign", str(src), "--out", str(out)]) == 2
+    elapsed = time.monotonic() - start
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.endswith("\n"), err
+    assert str(src) in err and all(w in err for w in words), err
+    assert not out.exists()
+    return elapsed
+
+
+BEYOND_64_BITS = {  # the axis, and where the error says it is
+    "grid": (_axis("seed", f"values = [1, {BIG}]"), "axes[0].values (seed)"),
+    "grid_negative": (_axis("seed", f"values = [1, -{BIG}]"), "axes[0].values (seed)"),
+    "in_a_table": (_axis("truth", f"values = [{{seed = {BIG}}}]"), "axes[0].values (truth)"),
+    "choice": (_axis("truth.seed", f'draw = "choice"\nvalues = [{BIG}]'), "values (truth.seed)"),
+    "integers_high": (_axis("truth.seed", f'draw = "integers"\nlow = 1\nhigh = {BIG}'), "high"),
+    "integers_float_low": (_axis("truth.seed", 'draw = "integers"\nlow = -1e19\nhigh = 1'), "low"),
+    "normal_std": (_axis("seed", f'draw = "normal"\nmean = 0\nstd = {BIG**20}'), "std (seed)"),
+}
+
+
+@pytest.mark.parametrize(("axis", "where"), BEYOND_64_BITS.values(), ids=BEYOND_64_BITS.keys())
+def test_an_integer_beyond_64_bits_is_refused_naming_the_axis_and_the_range(
+    tmp_path, capsys, axis, where
+):
+    _refused(tmp_path, capsys, SCENARIO + FAST + axis, where, str(INT64[0]), str(INT64[1]))
+
+
+@pytest.mark.parametrize("values", [([1], [2]), ([1, 2], [3, 4])], ids=["one_each", "two_each"])
+def test_a_key_on_two_axes_is_refused_naming_it(tmp_path, capsys, values):
+    axes = "".join(_axis("seed", f"values = {v}") for v in values)
+    _refused(tmp_path, capsys, SCENARIO + FAST + axes, "axes[1].key", "'seed'", "axes[0]")
+
+
+def test_two_blocks_of_one_name_are_refused_naming_it(tmp_path, capsys):
+    blocks = _block("a", _axis("seed", "values = [1]")) + _block("a", _axis("seed", "values = [2]"))
+    _refused(tmp_path, capsys, blocks, "blocks[1].name", "'a'", "blocks[0]")
+
+
+RANDOM = _axis("truth.seed", 'draw = "integers"\nlow = 1\nhigh = 1000')
+HALF = MAX_RUNS // 2 + 1  # two blocks of HALF samples: each under the bound, both over
+GRID = "".join(_axis(k, f"values = {list(range(1, 401))}") for k in ("seed", "truth.seed"))
+MANY_RUNS = {
+    "samples": (SCENARIO + "samples = 100000000000\n" + FAST + RANDOM, 100000000000),
+    "grid": (SCENARIO + FAST + GRID, 400**2),
+    "blocks": ("".join(_block(n, RANDOM, f"samples = {HALF}\n") for n in "ab"), 2 * HALF),
+}
+
+
+@pytest.mark.parametrize(("text", "runs"), MANY_RUNS.values(), ids=MANY_RUNS.keys())
+def test_more_runs_than_the_bound_are_refused_at_once(tmp_path, capsys, text, runs):
+    elapsed = _refused(tmp_path, capsys, text, f"{runs} runs", str(MAX_RUNS))
+    assert elapsed < 5.0
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "description = 3\n" + SCENARIO + FAST + _axis("seed", "values = [1]"),
+        "description = 3\n" + _block("a", _axis("seed", "values = [1]")),
+        _block("a", _axis("seed", "values = [1]"), 'description = ["x"]\n'),
+    ],
+    ids=["top", "top_with_blocks", "block"],
+)
+def test_a_description_that_is_not_text_is_refused(tmp_path, capsys, text):
+    _refused(tmp_path, capsys, text, "description: must be text")
