@@ -293,9 +293,11 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``cdpr-twin`` command."""
     args = _parser().parse_args(argv)
     try:
-        return args.func(args)
-    except BrokenPipeError:  # its reader went (`| head`): the rest has nobody to read it
-        return closed_stdout()
+        code = args.func(args)
+        sys.stdout.flush()  # a reader gone (`| head`) shows here, not at the interpreter's exit
+        return code
+    except BrokenPipeError as exc:
+        return closed_stdout(exc)
     except (SystemExit, KeyboardInterrupt) as exc:  # a plugin's exit; Ctrl-C while starting
         stop = isinstance(exc, KeyboardInterrupt)  # (the commands return their exit codes)
         why = "interrupted" if stop else f"error: sys.exit({exc.code!r}) called"

@@ -98,16 +98,23 @@ def shielded() -> Iterator[None]:
             signal.raise_signal(sig)  # now, to the handler it was meant for (a worker: exit)
 
 
-def closed_stdout() -> int:
-    """After a ``BrokenPipeError``: standard output's reader is gone (``cdpr-twin … | head``).
+def closed_stdout(exc: BrokenPipeError) -> int:
+    """After a ``BrokenPipeError``: if standard output's reader is gone (``cdpr-twin … | head``).
 
     The rest of the output is dropped without a word (as ``cat`` does); standard output goes to
     ``/dev/null`` so that the interpreter's own flush at exit fails no more. Returns 141, the
     status of a process ended by SIGPIPE (128 + 13). A run's files are complete either way:
-    the summary is printed after they are saved.
+    the summary is printed after they are saved. A broken pipe elsewhere (a socket, a plugin's)
+    is not standard output's: ``exc`` is raised again.
     """
     import os
 
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        pass
+    else:
+        raise exc
     devnull = os.open(os.devnull, os.O_WRONLY)
     os.dup2(devnull, sys.stdout.fileno())
     os.close(devnull)

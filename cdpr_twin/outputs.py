@@ -370,28 +370,3 @@ def out_path(text: str) -> Path:
     if not text.strip():
         raise argparse.ArgumentTypeError("is empty: give a directory (e.g. runs/my_run)")
     return Path(text)
-
-
-def sweep_abandoned(parent: Path) -> list[Path]:
-    """Tidy the run directories under ``parent`` whose run died (its lock's owner is gone).
-
-    A campaign or study stopped ends its workers mid-run (SIGTERM, then SIGKILL): their run
-    directories keep the lock and the ``*.partial`` files the run had begun. Those go, and the
-    directory too when nothing else is left in it; a live run's directory is not touched.
-
-    Returns:
-        The directories tidied.
-    """
-    tidied = []
-    for lock in sorted(Path(parent).glob(f"*/{LOCK_NAME}")):
-        directory = lock.parent
-        with contextlib.suppress(OSError), _guard(directory):
-            if not _stale(_owner(lock)):
-                continue
-            for name in OUTPUT_NAMES:
-                partial_of(directory / name).unlink(missing_ok=True)
-            lock.unlink()
-            tidied.append(directory)
-        with contextlib.suppress(OSError):
-            directory.rmdir()  # (only if empty)
-    return tidied

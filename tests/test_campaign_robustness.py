@@ -112,10 +112,10 @@ def _start_slow_campaign(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
         start_new_session=True,
     )  # fmt: skip
     deadline = time.monotonic() + 120
-    while not (out / ".lock").exists() and time.monotonic() < deadline:
-        time.sleep(0.1)
-    time.sleep(6.0)  # the worker spawned, imported the package and started its first run
+    while not any(out.glob("runs/*/.lock")) and time.monotonic() < deadline:
+        time.sleep(0.1)  # the worker spawned, imported the package and started its first run
     assert proc.poll() is None, proc.stderr.read()
+    assert any(out.glob("runs/*/.lock")), "no run started within 120 s"
     return proc, out
 
 
@@ -240,8 +240,14 @@ BASE = f'scenario = "{ROOT}/scenarios/paper_open_loop.toml"\n'
     [  # each was a traceback (KeyError, ValueError, OverflowError) while drawing
         ('[[axes]]\nkey = "seed"\ndraw = "choice"\n', r"axes\[0\]\.values: .*needs values"),
         ('[[axes]]\nkey = "seed"\ndraw = "normal"\nmean = 1\nstd = -1\n', r"std: must be > 0"),
-        ('[[axes]]\nkey = "seed"\ndraw = "integers"\nlow = 1\nhigh = 1e20\n', r"high: .*64-bit"),
-        ('[[axes]]\nkey = "seed"\ndraw = "integers"\nlow = 0.5\nhigh = 9\n', r"low: .*64-bit"),
+        (
+            '[[axes]]\nkey = "seed"\ndraw = "integers"\nlow = 1\nhigh = 1e20\n',
+            r"high \(seed\): .*64-bit",
+        ),
+        (
+            '[[axes]]\nkey = "seed"\ndraw = "integers"\nlow = 0.5\nhigh = 9\n',
+            r"low \(seed\): .*64-bit",
+        ),
         (
             '[[axes]]\nkey = "truth.exit_point_std"\n'
             'draw = "uniform"\nlow = -1e308\nhigh = 1e308\n',

@@ -172,9 +172,10 @@ def test_run_prints_the_table_and_writes_outputs(tmp_path):
 
 def test_a_reader_that_goes_away_ends_the_command_quietly_with_sigpipes_status():
     # before: `cdpr-twin scenarios list | head -1` printed a BrokenPipeError traceback, exit 1
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # as in a shell
     proc = subprocess.Popen(
         [sys.executable, "-m", "cdpr_twin", "scenarios", "list"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
     )  # fmt: skip
     proc.stdout.close()  # the reader is gone before the command writes a line
     err = proc.stderr.read()

@@ -20,16 +20,16 @@ from cdpr_twin.campaign.report import report_files
 from cdpr_twin.campaign.spec import Campaign, CampaignError, Task, load_campaign
 from cdpr_twin.campaign.table import RESULTS, ResultTable, load_table
 from cdpr_twin.campaign.worker import run_task
-from cdpr_twin.interrupts import interruption
+from cdpr_twin.interrupts import interruption, shielded
 from cdpr_twin.outputs import (
     OutputDir,
     OutputDirError,
     Terminated,
     others,
-    sweep_abandoned,
     write_json_atomic,
     writing,
 )
+from cdpr_twin.sweep import sweep_abandoned
 
 CAMPAIGN_FILES = (RESULTS, "report.md", "*.png", "campaign.json")
 """Patterns of a campaign's own files beside its ``parts/`` and ``runs/``."""
@@ -142,22 +142,24 @@ def _execute(campaign, out, table, todo, workers, ray_address, progress) -> dict
         status = "failed"
         raise
     finally:
-        if status != "completed":
-            rows.close()  # the workers end, if a stop came between two results
-            sweep_abandoned(Path(runs_dir))  # the runs under way: their lock and *.partial
-        if n or not (Path(out) / RESULTS).exists():
-            table.flush()
-        summary = {
-            "campaign": campaign.name,
-            "source": str(campaign.source),
-            "status": status,
-            "runs": len(campaign.tasks),
-            "ran_now": n,
-            "skipped_done": len(campaign.tasks) - len(todo),
-            "wall_time_s": time.perf_counter() - start,
-            "executor": "local" if ray_address is False else "ray",
-        }
-        if any(Path(out, "parts").glob("part-*.parquet")):
-            summary["table"] = str(table.gather([t.run_id for t in campaign.tasks]))
-        write_json_atomic(Path(out) / "campaign.json", summary)
+        with shielded():  # a second Ctrl-C waits: the workers end, campaign.json says how
+            if status != "completed":
+                rows.close()  # the workers end, if a stop came between two results
+                wait = 0.0 if ray_address is False else 10.0  # Ray's shutdown does not wait
+                sweep_abandoned(Path(runs_dir), wait)  # the runs under way: lock, *.partial
+            if n or not (Path(out) / RESULTS).exists():
+                table.flush()
+            summary = {
+                "campaign": campaign.name,
+                "source": str(campaign.source),
+                "status": status,
+                "runs": len(campaign.tasks),
+                "ran_now": n,
+                "skipped_done": len(campaign.tasks) - len(todo),
+                "wall_time_s": time.perf_counter() - start,
+                "executor": "local" if ray_address is False else "ray",
+            }
+            if any(Path(out, "parts").glob("part-*.parquet")):
+                summary["table"] = str(table.gather([t.run_id for t in campaign.tasks]))
+            write_json_atomic(Path(out) / "campaign.json", summary)
     return summary

@@ -11,6 +11,7 @@ mode is gone), ``address`` joins an existing one.
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import signal
@@ -159,17 +160,17 @@ def run_ray(
         try:
             ray.init(address=address, include_dashboard=False, log_to_driver=False)
         except Exception as exc:  # Ray's own connection errors are of many types
-            ray.shutdown()
+            _shutdown(ray)
             where = address or "a local cluster"
             raise ExecutorError(f"cannot start Ray on {where}: {exc}") from None
         except SystemExit as exc:  # Ray's SIGTERM handler, while Ray was starting
-            ray.shutdown()  # (a half-started driver aborts the interpreter at exit)
+            _shutdown(ray)  # (a half-started driver aborts the interpreter at exit)
             if exc.code != signal.SIGTERM:
                 raise
             stopped = True
             raise Terminated() from None
         except BaseException:  # the campaign's own stop (SIGTERM, Ctrl-C) before Ray's handler
-            ray.shutdown()
+            _shutdown(ray)
             raise
         finally:  # Ray's SIGTERM handler exits; the campaign's stops it cleanly (exit 143)
             if threading.current_thread() is threading.main_thread() and callable(ours):
@@ -188,3 +189,13 @@ def run_ray(
     finally:
         if started:
             ray.shutdown()
+
+
+def _shutdown(ray) -> None:
+    """Disconnect from Ray after a failed start; an error of its own is not the one to tell.
+
+    Ray's processes started before the driver connected are not reached by it: they end with
+    this process (Ray ties their lives to their parent's).
+    """
+    with contextlib.suppress(Exception):
+        ray.shutdown()

@@ -210,7 +210,8 @@ def run_study(
         OutputError: ``runs/`` or ``runs.json`` cannot be written.
     """
     from cdpr_twin.campaign.executor import run_local  # the one engine of parallel runs
-    from cdpr_twin.outputs import sweep_abandoned, write_json_atomic, writing
+    from cdpr_twin.outputs import write_json_atomic, writing
+    from cdpr_twin.sweep import sweep_abandoned
 
     runs_dir = out / "runs"
     with writing(runs_dir):
