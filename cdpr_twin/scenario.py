@@ -335,7 +335,8 @@ def _model(top: OptionReader, source: Path) -> ModelConfig:
 
 def _read(source: Path) -> OptionReader:
     if not source.is_file():
-        raise ScenarioError(f"{source}: scenario file not found")
+        why = "a directory, not a scenario file" if source.is_dir() else "scenario file not found"
+        raise ScenarioError(f"{source}: {why}")
     try:
         data = tomllib.loads(source.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:

@@ -91,6 +91,8 @@ def test_negative_seed_override(tmp_path):
 def test_missing_and_malformed_scenario_files(tmp_path):
     proc = _cli("run", str(tmp_path / "nope.toml"), cwd=tmp_path)
     assert proc.returncode == 2 and "scenario file not found" in proc.stderr
+    proc = _cli("run", str(tmp_path), cwd=tmp_path)  # before: "scenario file not found"
+    assert proc.returncode == 2 and ": a directory, not a scenario file" in proc.stderr
     bad = tmp_path / "broken.toml"
     bad.write_text("name = [unclosed\n")
     proc = _cli("run", str(bad), cwd=tmp_path)
