@@ -67,6 +67,12 @@ def test_a_key_on_two_axes_is_refused_naming_it(tmp_path, capsys, values):
     _refused(tmp_path, capsys, SCENARIO + FAST + axes, "axes[1].key", "'seed'", "axes[0]")
 
 
+def test_a_key_within_another_axis_key_is_refused_naming_both(tmp_path, capsys):
+    # before: the later axis overwrote the earlier one's `seed` (or the other way round)
+    axes = _axis("truth", "values = [{seed = 1}, {seed = 2}]") + _axis("truth.seed", "values = [3]")
+    _refused(tmp_path, capsys, SCENARIO + FAST + axes, "axes[1].key", "'truth.seed'", "'truth'")
+
+
 def test_two_blocks_of_one_name_are_refused_naming_it(tmp_path, capsys):
     blocks = _block("a", _axis("seed", "values = [1]")) + _block("a", _axis("seed", "values = [2]"))
     _refused(tmp_path, capsys, blocks, "blocks[1].name", "'a'", "blocks[0]")

@@ -275,15 +275,16 @@ def _block(source: Path, table: dict, index: int, where: str) -> _Block:
 
 
 def _axes(source: Path, axes: Any, where: str) -> list[dict]:
-    """A block's axes, each checked, each varying its own key."""
+    """A block's axes, each checked, each varying its own key (not one within another's)."""
     if not isinstance(axes, list):
         raise _fail(source, f"{where}axes", "must be an array of tables [[axes]]")
     axes = [_axis(source, f"{where}axes[{i}]", a) for i, a in enumerate(axes)]
-    first: dict[str, int] = {}
     for i, axis in enumerate(axes):
-        if (j := first.setdefault(axis["key"], i)) != i:
-            use = f"{axis['key']!r} is varied by axes[{j}] too: list all its values on one axis"
-            raise _fail(source, f"{where}axes[{i}].key", use)
+        for j, other in enumerate(axes[:i]):  # `truth` and `truth.seed` would overwrite too
+            a, b = axis["key"], other["key"]
+            if a == b or a.startswith(f"{b}.") or b.startswith(f"{a}."):
+                use = f"{a!r} is varied by axes[{j}] ({b!r}) too: vary each value on one axis"
+                raise _fail(source, f"{where}axes[{i}].key", use)
     return axes
 
 
