@@ -41,9 +41,12 @@ LOCK_NAME = ".lock"
 """The lock file in an output directory while a run writes it."""
 OUTPUT_NAMES = ("timeseries.csv", "recording.rrd", "summary.json")
 """The final names of a run's files (removed with ``*.partial`` when a new run starts)."""
-MARKERS = {"run": OUTPUT_NAMES, "campaign": ("campaign.json", "parts")}
-MARKERS |= {"study": ("runs.json", "study.json")}
-MARKERS["calibration"] = ("calibrated_robot.toml", "calibration.json")
+MARKERS = {
+    "run": OUTPUT_NAMES,
+    "campaign": ("campaign.json", "parts"),
+    "study": ("runs.json", "study.json"),
+    "calibration": ("calibrated_robot.toml", "calibration.json"),
+}
 """What marks each command's output directory (study: ``reproduce``'s); the others refuse it."""
 
 

@@ -6,15 +6,17 @@ import contextlib
 import time
 from pathlib import Path
 
-from cdpr_twin.outputs import LOCK_NAME, OUTPUT_NAMES, _guard, _owner, _stale, partial_of
+from cdpr_twin.outputs import LOCK_NAME, OutputDir, OutputDirError, OutputError
 
 
 def sweep_abandoned(parent: Path, wait: float = 0.0) -> list[Path]:
     """Tidy the run directories under ``parent`` whose run died (its lock's owner is gone).
 
     A campaign or study stopped ends its workers mid-run (SIGTERM, then SIGKILL): their run
-    directories keep the lock and the ``*.partial`` files the run had begun. Those go, and the
-    directory too when nothing else is left in it; a live run's directory is not touched.
+    directories keep the lock and the ``*.partial`` files the run had begun. Each is claimed
+    as the next run there would claim it (:class:`~cdpr_twin.outputs.OutputDir`: the dead
+    run's lock taken over, its files removed), released, and removed when nothing else is
+    left in it; a live run's directory is not touched.
 
     Args:
         parent: the directory of the run directories.
@@ -25,20 +27,26 @@ def sweep_abandoned(parent: Path, wait: float = 0.0) -> list[Path]:
         The directories tidied.
     """
     deadline = time.monotonic() + wait
-    while time.monotonic() < deadline and any(
-        _owner(lock) and not _stale(_owner(lock)) for lock in Path(parent).glob(f"*/{LOCK_NAME}")
-    ):
-        time.sleep(0.1)
     tidied = []
     for lock in sorted(Path(parent).glob(f"*/{LOCK_NAME}")):
-        directory = lock.parent
-        with contextlib.suppress(OSError), _guard(directory):
-            if not _stale(_owner(lock)):
-                continue
-            for name in OUTPUT_NAMES:
-                partial_of(directory / name).unlink(missing_ok=True)
-            lock.unlink()
-            tidied.append(directory)
-        with contextlib.suppress(OSError):
-            directory.rmdir()  # (only if empty)
+        if _take(OutputDir(lock.parent), deadline):
+            tidied.append(lock.parent)
+            with contextlib.suppress(OSError):
+                lock.parent.rmdir()  # (only if empty)
     return tidied
+
+
+def _take(run: OutputDir, deadline: float) -> bool:
+    """Claim and release ``run``'s directory, retrying while its owner lives until ``deadline``."""
+    while True:
+        try:
+            run.claim()
+        except OutputDirError:  # its run is alive (on Ray, maybe still ending)
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.1)
+            continue
+        except OutputError:  # a file that cannot be removed: left as it is
+            return False
+        run.release()
+        return True
