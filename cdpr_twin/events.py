@@ -54,9 +54,10 @@ def fire_due(hooks: list[StepHook], time: float, dt: float, chunk: int) -> int:
         chunk: how many steps the physics means to take next.
     """
     for hook in hooks:
-        if hook.next_time() <= time + 0.5 * dt:
-            hook.fire(time + 0.5 * dt)
         next_time = hook.next_time()
+        if next_time <= time + 0.5 * dt:
+            hook.fire(time + 0.5 * dt)
+            next_time = hook.next_time()
         if math.isfinite(next_time):
             steps = math.ceil((next_time - time) / dt - 0.5)
             if 0 < steps < chunk:

@@ -79,9 +79,13 @@ class ExposureRecorder:
         self._done = -math.inf  # the latest sub-frame time already recorded
         self._states: list[tuple[float, State]] = []
         self.active = True
+        self._dt = physics.timestep
+        # the last answer of next_time and the time it was the next after: it stays the
+        # answer while that time only moves forward short of it (called on every chunk)
+        self._cached = (math.inf, -math.inf)
 
     def _forget_if_reset(self) -> None:
-        if self._done > self.physics.time + self.physics.timestep:  # time went back: a reset
+        if self._done > self.physics.time + self._dt:  # time went back: a reset
             self._done = -math.inf
             self._states.clear()
 
@@ -90,10 +94,15 @@ class ExposureRecorder:
         if not self.active:
             return math.inf
         self._forget_if_reset()
-        after = max(self._done, self.physics.time - 0.5 * self.physics.timestep)
+        after = max(self._done, self.physics.time - 0.5 * self._dt)
+        since, t_next = self._cached
+        if since <= after < t_next:
+            return t_next
         k0 = math.floor(after / self.period)
         times = [k * self.period - o for k in range(k0, k0 + 3) for o in self.offsets]
-        return min(t for t in times if t > after)
+        t_next = min(t for t in times if t > after)
+        self._cached = (after, t_next)
+        return t_next
 
     def fire(self, time: float) -> None:
         """Record the current state for every sub-frame time due at or before ``time`` [s]."""
@@ -103,7 +112,7 @@ class ExposureRecorder:
         d = self.physics.data
         state = (d.qpos.copy(), d.mocap_pos.copy(), d.mocap_quat.copy())
         self._states.append((self.physics.time, state))
-        horizon = self.physics.time - self.period - self.offsets[0] - self.physics.timestep
+        horizon = self.physics.time - self.period - self.offsets[0] - self._dt
         self._states = [(t, s) for t, s in self._states if t >= horizon]
 
     def states(self, now: float) -> list[State]:

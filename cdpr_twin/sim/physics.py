@@ -276,13 +276,14 @@ class Physics:
         Raises:
             SimulationError: when the simulation diverges.
         """
+        dt = self.timestep
         while n > 0:
             chunk = min(n, self.align_every)
             if self._hooks:
-                chunk = fire_due(self._hooks, self.time, self.timestep, chunk)
+                chunk = fire_due(self._hooks, self.data.time, dt, chunk)
             self.refresh()
             if not self._servos.ideal:  # the chunk's exact mean rate: l0 exact at its end
-                rate = self._servos.run(chunk * self.timestep)  # the drum's, in command units
+                rate = self._servos.run(chunk * dt)  # the drum's, in command units
                 self.data.ctrl[self._actuators] = self._stalled(rate * self._drum_ratio)
             mujoco.mj_step(self.model, self.data, nstep=chunk)
             n -= chunk
