@@ -71,3 +71,17 @@ def test_pbvs_without_camera_names_the_option(tmp_path, capsys):
     err = _error(capsys)
     assert "--no-camera" in err and "controller.type: 'pbvs' needs the camera" in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "says"),
+    [
+        ("--seed", "-5", "--seed must be an integer ≥ 0, got -5"),  # was numpy's words only
+        ("--noise", "-1", "--noise must be a tension noise std ≥ 0 N, got -1.0"),
+        ("--noise", "nan", "--noise must be a tension noise std ≥ 0 N, got nan"),
+    ],
+)
+def test_demo_option_out_of_range_names_the_option(option, value, says, capsys):
+    assert main(["demo", option, value]) == 2
+    assert _error(capsys) == f"cdpr-twin demo: error: {says}"
+    assert capsys.readouterr().out == ""
