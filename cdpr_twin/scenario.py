@@ -38,6 +38,7 @@ from cdpr_twin.scenario_tables import (
     read_plugins,
     read_realism,
     read_truth,
+    without_camera,
 )
 
 MAX_TICKS = 10**9
@@ -204,7 +205,7 @@ class Scenario:
             s = replace(s, estimators=replace(s.estimators, in_loop=in_loop, passive=passive))
             done["in_loop"] = in_loop
         if not s.sensors.camera:
-            s = _without_camera(s, done)
+            s = without_camera(s, done)
         return replace(s, overrides=MappingProxyType(done))
 
     def without(self, *sources: str) -> Scenario:
@@ -256,27 +257,6 @@ class Scenario:
             controller=replace(self.controller, options=opts),
             overrides=MappingProxyType(done),
         )
-
-
-def _needs_camera(kind: str, name: str) -> bool:
-    return bool(getattr(plugins.lookup(kind, name), "needs_camera", False))
-
-
-def _without_camera(s: Scenario, done: dict) -> Scenario:
-    """Refuse what needs the camera in the loop; drop passive estimators that need it."""
-    if _needs_camera("estimator", s.estimators.in_loop):
-        raise ScenarioError(
-            f"{s.source}: estimators.in_loop: {s.estimators.in_loop!r} needs the camera; "
-            "choose another in-loop estimator or keep the camera on"
-        )
-    if _needs_camera("controller", s.controller.type):
-        raise ScenarioError(f"{s.source}: controller.type: {s.controller.type!r} needs the camera")
-    dropped = [n for n in s.estimators.passive if _needs_camera("estimator", n)]
-    if dropped:  # nothing to see: drop them, and say so
-        passive = tuple(n for n in s.estimators.passive if n not in dropped)
-        s = replace(s, estimators=replace(s.estimators, passive=passive))
-        done["dropped_estimators"] = dropped
-    return s
 
 
 def _plugin(r: OptionReader, key: str, kind: str, name: str) -> type:

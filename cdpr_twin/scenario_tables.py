@@ -1,7 +1,9 @@
 """Tables of a scenario file that are values of their own: truth, realism, events, plugins.
 
 Read by :func:`cdpr_twin.scenario.load_scenario`; each function takes the top-level reader and
-returns the table's value in SI units, with errors naming the file and field.
+returns the table's value in SI units, with errors naming the file and field. Also the rule of
+a run without the camera (:func:`without_camera`), whose errors name the command-line option
+or the file's field that asked for what conflicts.
 """
 
 from __future__ import annotations
@@ -9,7 +11,7 @@ from __future__ import annotations
 import copyreg
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -171,3 +173,43 @@ def read_payload_com(m: OptionReader) -> tuple[float, ...]:
     ):
         raise m.fail("payload_com_m", f"must be 3 numbers [x, y, z] in metres, got {com!r}")
     return tuple(float(v) for v in com)
+
+
+def _needs_camera(kind: str, name: str) -> bool:
+    return bool(getattr(plugins.lookup(kind, name), "needs_camera", False))
+
+
+def without_camera(s: Any, done: dict) -> Any:
+    """Refuse what needs the camera in the loop; drop passive estimators that need it.
+
+    Args:
+        s: the :class:`cdpr_twin.scenario.Scenario`, its camera off.
+        done: its command-line overrides so far (``in_loop``: ``--in-loop``; ``camera`` false:
+            ``--no-camera``), to name who asked for each side of a conflict; dropped
+            estimators are added.
+
+    Raises:
+        ScenarioError: the in-loop estimator or the controller needs the camera.
+    """
+    off = done.get("camera") is False  # --no-camera (else the file's sensors.camera = false)
+    fix = "drop --no-camera" if off else "set sensors.camera = true"
+    in_loop = s.estimators.in_loop
+    if _needs_camera("estimator", in_loop) and "in_loop" in done:  # --in-loop
+        why = "--no-camera turned it off" if off else f"{s.source} has sensors.camera = false"
+        raise ScenarioError(
+            f"--in-loop {in_loop} needs the camera, but {why}; {fix} or give another --in-loop"
+        )
+    if _needs_camera("estimator", in_loop):
+        field = f"{s.source}: estimators.in_loop: {in_loop!r} needs the camera"
+        if off:
+            raise ScenarioError(f"--no-camera: {field}; {fix} or give another --in-loop")
+        raise ScenarioError(f"{field}; choose another in-loop estimator or keep the camera on")
+    if _needs_camera("controller", s.controller.type):
+        field = f"{s.source}: controller.type: {s.controller.type!r} needs the camera; {fix}"
+        raise ScenarioError(f"--no-camera: {field}" if off else field)
+    dropped = [n for n in s.estimators.passive if _needs_camera("estimator", n)]
+    if dropped:  # nothing to see: drop them, and say so
+        passive = tuple(n for n in s.estimators.passive if n not in dropped)
+        s = replace(s, estimators=replace(s.estimators, passive=passive))
+        done["dropped_estimators"] = dropped
+    return s

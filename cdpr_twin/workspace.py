@@ -14,7 +14,9 @@ figure is written whole or not at all (``<name>.partial``, then renamed).
 
 from __future__ import annotations
 
+import errno
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -213,8 +215,8 @@ def figure_format(path: str | Path) -> str:
     """The format a figure at ``path`` is written in (its extension), checked writable.
 
     Raises:
-        ValueError: naming the path, the problem and the fix: a directory, a missing parent
-            directory, or an extension matplotlib cannot write.
+        ValueError: naming the path, the problem and the fix: a directory, a missing or
+            unwritable parent directory, or an extension matplotlib cannot write.
     """
     import shutil
 
@@ -229,6 +231,10 @@ def figure_format(path: str | Path) -> str:
     if not path.parent.is_dir():
         missing = "is not a directory" if path.parent.exists() else "does not exist"
         raise ValueError(f"{path}: {path.parent} {missing}; give a file in an existing directory")
+    if not os.access(path.parent, os.W_OK | os.X_OK):  # found before the sampling, not after
+        ro = os.statvfs(path.parent).f_flag & os.ST_RDONLY
+        why = os.strerror(errno.EROFS if ro else errno.EACCES)
+        raise ValueError(f"{path}: cannot write in {path.parent} ({why}); give another directory")
     if fmt not in kinds:
         raise ValueError(
             f"{path}: cannot write a figure as {path.suffix or 'a file without an extension'}; "

@@ -61,6 +61,29 @@ def test_an_integer_beyond_64_bits_is_refused_naming_the_axis_and_the_range(
     _refused(tmp_path, capsys, SCENARIO + FAST + axis, where, str(INT64[0]), str(INT64[1]))
 
 
+OVERRIDES_BEYOND_64_BITS = {  # the override, and what the error says
+    "seed": (f"seed = {BIG}", f'overrides."seed": {BIG} is not a 64-bit integer'),
+    "dotted": (f'"truth.seed" = -{BIG}', f'overrides."truth.seed": -{BIG} is not a 64-bit'),
+    "in_a_table": (f"truth = {{seed = {BIG}}}", f'overrides."truth": {BIG} is not a 64-bit'),
+}
+
+
+@pytest.mark.parametrize(
+    ("line", "says"), OVERRIDES_BEYOND_64_BITS.values(), ids=OVERRIDES_BEYOND_64_BITS.keys()
+)
+@pytest.mark.parametrize("in_block", [False, True], ids=["top", "block"])
+def test_an_override_beyond_64_bits_is_refused_naming_its_key(
+    tmp_path, capsys, line, says, in_block
+):
+    # before: not checked; the runs started (and an overridden seed then failed the results
+    # table with a traceback), as an axis's values are not
+    axis = _axis("seed", "values = [1]")
+    text = _block("a", axis) if in_block else SCENARIO + FAST + axis
+    text = text.replace("duration = 0.08\n", f"duration = 0.08\n{line}\n")
+    says = f"blocks[0].{says}" if in_block else f"bad.toml: {says}"
+    _refused(tmp_path, capsys, text, says, str(INT64[0]), str(INT64[1]))
+
+
 @pytest.mark.parametrize("values", [([1], [2]), ([1, 2], [3, 4])], ids=["one_each", "two_each"])
 def test_a_key_on_two_axes_is_refused_naming_it(tmp_path, capsys, values):
     axes = "".join(_axis("seed", f"values = {v}") for v in values)

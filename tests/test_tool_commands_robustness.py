@@ -194,6 +194,30 @@ def test_workspace_bad_out_is_refused_before_sampling(out, words, tmp_path, no_s
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
 
 
+@pytest.mark.parametrize(
+    ("flag", "why"), [(0, "Permission denied"), (os.ST_RDONLY, "Read-only file system")]
+)
+def test_workspace_out_in_an_unwritable_directory_is_refused_before_sampling(
+    flag, why, tmp_path, monkeypatch, no_sampling, capsys
+):
+    """Before, the sampling ran (~40 s at the default spacing), then the figure's write failed
+    (exit 1, "free some space"). As root chmod forbids nothing: the OS's answer is patched."""
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    real_access, real_statvfs = os.access, os.statvfs
+    monkeypatch.setattr(os, "access", lambda p, mode: Path(p) != ro and real_access(p, mode))
+    stat = real_statvfs(tmp_path)
+    fake = os.statvfs_result((*stat[:8], stat.f_flag | flag, stat.f_namemax))
+    monkeypatch.setattr(os, "statvfs", lambda p: fake if Path(p) == ro else real_statvfs(p))
+    code = cli.main(["model", "workspace", str(ACROBOT), "--out", str(ro / "ws.png")])
+    assert code == 2
+    assert _error(capsys) == (
+        f"cdpr-twin: error: --out {ro / 'ws.png'}: cannot write in {ro} ({why}); "
+        "give another directory"
+    )
+    assert list(ro.iterdir()) == []
+
+
 def test_workspace_figure_on_a_full_disk_keeps_the_earlier_one(tmp_path, monkeypatch, capsys):
     out = tmp_path / "ws.png"
     out.write_bytes(b"earlier figure")

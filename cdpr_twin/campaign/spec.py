@@ -53,7 +53,8 @@ from cdpr_twin import resources
 DRAWS = ("integers", "uniform", "normal", "choice")
 ARTEFACTS = ("none", "csv", "all")
 INT64 = (-(2**63), 2**63 - 1)
-"""The integers an axis may give (its values, its draw's bounds): the results table's int64."""
+"""The integers an axis (its values, its draw's bounds) or an override may give: the results
+table's int64."""
 MAX_RUNS = 100_000
 """The most runs a campaign may have (grid points × samples, summed over its blocks).
 
@@ -148,14 +149,14 @@ def _fail(source: Path, where: str, problem: str) -> CampaignError:
     return CampaignError(f"{source}: {where}: {problem}")
 
 
-def _big_int(value: Any) -> int | None:
-    """The first integer in ``value`` (lists and tables searched too) outside :data:`INT64`."""
+def _beyond_int64(value: Any) -> str:
+    """Why an integer in ``value`` (lists and tables searched too) is refused, else ``""``."""
     if isinstance(value, dict | list):
         items = value.values() if isinstance(value, dict) else value
-        return next((big for v in items if (big := _big_int(v)) is not None), None)
+        return next((why for v in items if (why := _beyond_int64(v))), "")
     if isinstance(value, int) and not INT64[0] <= value <= INT64[1]:
-        return value
-    return None
+        return f"{value} is not a 64-bit integer: use one from {INT64[0]} to {INT64[1]}"
+    return ""
 
 
 def _axis(source: Path, where: str, axis: Any) -> dict:
@@ -165,9 +166,8 @@ def _axis(source: Path, where: str, axis: Any) -> dict:
     if unknown := sorted(set(axis) - known):
         raise _fail(source, f"{where}.{unknown[0]}", f"unknown field; use {sorted(known)}")
     for field in ("values", "low", "high", "mean", "std"):
-        if (big := _big_int(axis.get(field))) is not None:
-            use = f"{big} is not a 64-bit integer: use one from {INT64[0]} to {INT64[1]}"
-            raise _fail(source, f"{where}.{field} ({axis['key']})", use)
+        if why := _beyond_int64(axis.get(field)):
+            raise _fail(source, f"{where}.{field} ({axis['key']})", why)
     if ("values" in axis) == ("draw" in axis) and axis.get("draw") != "choice":
         raise _fail(source, where, "give either values = [...] (a grid) or draw = ... (random)")
     if "draw" in axis and axis["draw"] not in DRAWS:
@@ -256,6 +256,9 @@ def _block(source: Path, table: dict, index: int, where: str) -> _Block:
     overrides = table.get("overrides", {})
     if not isinstance(overrides, dict):
         raise _fail(source, f"{where}overrides", 'must be a table of "dotted.key" = value')
+    for key, value in overrides.items():  # as an axis's values (the results table's int64)
+        if why := _beyond_int64(value):
+            raise _fail(source, f'{where}overrides."{key}"', why)
     if not isinstance(table.get("description", ""), str):
         raise _fail(source, f"{where}description", 'must be text: description = "..."')
     axes = _axes(source, table.get("axes", []), where)
@@ -349,17 +352,10 @@ def _tasks(source: Path, block: _Block, seed: int, where: str) -> list[Task]:
             if block.samples > 1:
                 params["sample"] = sample
             label = "_".join(f"{k.rsplit('.', 1)[-1]}{_label(v)}" for k, v in params.items())
-            out.append(
-                Task(
-                    run_id(data),
-                    block.name,
-                    f"{block.name}_{label}".rstrip("_"),
-                    str(block.scenario),
-                    data,
-                    params,
-                    block.artefacts,
-                )
-            )
+            out.append(Task(
+                run_id(data), block.name, f"{block.name}_{label}".rstrip("_"),
+                str(block.scenario), data, params, block.artefacts,
+            ))  # fmt: skip
     return out
 
 
