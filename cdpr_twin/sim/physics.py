@@ -279,8 +279,7 @@ class Physics:
         dt = self.timestep
         while n > 0:
             chunk = min(n, self.align_every)
-            if self._hooks:
-                chunk = fire_due(self._hooks, self.data.time, dt, chunk)
+            chunk = fire_due(self._hooks, self.data.time, dt, chunk) if self._hooks else chunk
             self.refresh()
             if not self._servos.ideal:  # the chunk's exact mean rate: l0 exact at its end
                 rate = self._servos.run(chunk * dt)  # the drum's, in command units
