@@ -29,7 +29,6 @@ Rerun entity paths (they follow the frame tree, DESIGN §9):
 
 from __future__ import annotations
 
-import contextlib
 import inspect
 import os
 import warnings
@@ -38,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cdpr_twin import watchdog
 from cdpr_twin.blueprint import default_blueprint, robot_label, series_colors
 from cdpr_twin.outputs import OutputError, partial_of, writing
 from cdpr_twin.se3 import covariance_ellipsoids, quat_xyzw_from_matrix
@@ -154,11 +154,8 @@ class RerunRecorder:
             rr.LineStrips3D([corners[list(e)] for e in edges], colors=[150, 150, 160]),
             static=True,
         )
-        rec.log(
-            "world/exit_points",
-            rr.Points3D(s.a_base, radii=0.008, colors=[230, 140, 30]),
-            static=True,
-        )
+        exits = rr.Points3D(s.a_base, radii=0.008, colors=[230, 140, 30])
+        rec.log("world/exit_points", exits, static=True)
         if s.T_base_tag is not None:
             rec.log(
                 "world/tag",
@@ -337,9 +334,8 @@ class RerunRecorder:
         # B_i in F_b for every buffered tick, (n, m, 3)
         anchors = np.einsum("nij,kj->nki", platform[:, :3, :3], self.scene.b_platform)
         anchors += platform[:, None, :3, 3]
-        strips = np.stack([np.broadcast_to(self.scene.a_base, (n, m, 3)), anchors], axis=2).reshape(
-            n * m, 2, 3
-        )
+        exits = np.broadcast_to(self.scene.a_base, (n, m, 3))
+        strips = np.stack([exits, anchors], axis=2).reshape(n * m, 2, 3)
         taut = (tau > SLACK_TENSION).ravel()
         level = np.clip(tau.ravel() / 30.0, 0.0, 1.0)
         colors = np.where(
@@ -364,20 +360,21 @@ class RerunRecorder:
         """
         self._flush()
         try:  # a live viewer that does not take the data must not hold the run forever
-            self.rec.flush(timeout_sec=LIVE_FLUSH_TIMEOUT_S if self.spawned else 1e38)
+            if self.spawned:
+                self.rec.flush(timeout_sec=LIVE_FLUSH_TIMEOUT_S)
+            else:  # nor a file writer that died mid-flush (Rerun's flush would wait forever)
+                watchdog.flush_while_writing(lambda t: self.rec.flush(timeout_sec=t), self._partial)
         except Exception as exc:
             if not self.spawned:
-                self.abort()
+                self.abort(stalled=isinstance(exc, watchdog.WriterStalledError))
                 raise OutputError(self._partial, f"Rerun could not write it: {exc}") from None
-            why = (
-                f"the live viewer did not take all of the recording (≤ {LIVE_FLUSH_TIMEOUT_S:g} s)"
-            )
-            warnings.warn(f"{why} ({exc}); the file is whole", RuntimeWarning, stacklevel=2)
-        self.rec.disconnect()  # writes the footer (Rerun ≥ 0.23), failing only in its log
+            why = f"the live viewer did not take all of the recording (≤ {LIVE_FLUSH_TIMEOUT_S:g}"
+            warnings.warn(f"{why} s: {exc}); the file is whole", RuntimeWarning, stacklevel=2)
+        ended = self._disconnect(watchdog.ABANDON_S)  # writes the footer (Rerun ≥ 0.23)
         with writing(self._partial), self._partial.open("rb") as f:
             os.fsync(f.fileno())
             f.seek(max(0, os.fstat(f.fileno()).st_size - 16))
-            whole = b"FOOT" in f.read() or not self._footer
+            whole = ended and (b"FOOT" in f.read() or not self._footer)
         if not whole:
             raise OutputError(self._partial, "incomplete: Rerun could not write its end")
 
@@ -386,10 +383,16 @@ class RerunRecorder:
         with writing(self.path):
             os.replace(self._partial, self.path)
 
-    def abort(self) -> None:
-        """Stop recording: what was written stays ``<path>.partial``."""
-        with contextlib.suppress(Exception):
-            self.rec.disconnect()
+    def abort(self, stalled: bool = False) -> None:
+        """Stop recording: what was written stays ``<path>.partial`` (``stalled``: writer dead)."""
+        self._disconnect(0.0 if stalled else watchdog.ABANDON_S)
+
+    def _disconnect(self, wait: float) -> bool:
+        """Rerun's disconnect, once, waited for ≤ ``wait`` [s] (a dead writer blocks it forever)."""
+        if getattr(self, "_ended", None) is None:
+            rr, disconnect = self.rr, self.rec.disconnect
+            self._ended = watchdog.call_with_deadline(disconnect, wait, rr.unregister_shutdown)
+        return self._ended
 
     def close(self) -> None:
         """Finish and give the file its final name."""

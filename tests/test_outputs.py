@@ -237,6 +237,27 @@ def test_a_file_size_limit_is_a_one_line_error_and_no_final_name(tmp_path, limit
     assert left == {"timeseries.csv.partial", "recording.rrd.partial"}, left
 
 
+def test_a_recording_whose_writer_dies_mid_flush_ends_with_a_one_line_error(tmp_path):
+    """With 65 kB the CSV of 1 s (58 kB) is whole and Rerun's file writer dies at the end: its
+    flush then waited forever (3 runs in 5 hung, deaf to SIGTERM). The writer's own error or,
+    where it never comes, the file standing still for ``watchdog.STALL_S`` ends the run."""
+
+    def limited() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (65_000, 65_000))
+
+    out = tmp_path / "out"
+    proc = subprocess.run(
+        [sys.executable, "-m", "cdpr_twin", "run", str(OPEN_LOOP), "--out", str(out),
+         "--no-camera", "--duration", "1"],
+        capture_output=True, text=True, cwd=tmp_path, timeout=240, preexec_fn=limited,
+        env={**os.environ, "MUJOCO_GL": "egl"},
+    )  # fmt: skip
+    assert proc.returncode == 1, proc.stderr
+    assert "recording.rrd.partial" in _one_error_line(proc.stderr)
+    assert {p.name for p in out.iterdir()} == {"timeseries.csv.partial", "recording.rrd.partial"}
+
+
 def test_huge_duration_is_a_one_line_error(tmp_path):
     out = tmp_path / "out"
     args = ("--out", str(out), "--no-camera", "--duration", "1e308")
