@@ -193,13 +193,19 @@ def test_blur_needs_the_read_period(twin):
         _camera(twin, period=0.04, exposure_s=0.05)
 
 
-def test_blur_subframes_are_the_states_during_the_exposure(twin):
-    """The recorder keeps the true states at t − exposure · (1 − (i + ½)/N), rounded to steps."""
+@pytest.mark.parametrize("after_reset", [False, True], ids=["first_run", "after_a_reset"])
+def test_blur_subframes_are_the_states_during_the_exposure(twin, after_reset):
+    """The recorder keeps the true states at t − exposure · (1 − (i + ½)/N), rounded to steps;
+    after a reset (time back to 0) those of the new run, not the times it had found before (it
+    keeps its next time while time only moves forward)."""
     twin.reset(paper_pose("p2"))
     cam = _camera(twin, period=0.04, exposure_s=0.008, blur_subframes=4)
     try:
         rates = np.full(twin.physics.n_cables, 0.01)
         seen, dt = {}, twin.physics.timestep
+        if after_reset:
+            twin.advance(0.12, -rates)  # the recorder's next time is now past 0.12 s
+            twin.reset(paper_pose("p2"))
 
         class Spy:  # records the state at every physics step (until the test ends)
             t = 0.0
@@ -223,39 +229,6 @@ def test_blur_subframes_are_the_states_during_the_exposure(twin):
     for t, state in zip(expected, states, strict=True):
         np.testing.assert_array_equal(state[0], seen[t])
     assert not np.array_equal(states[0][0], states[-1][0])  # the robot moved meanwhile
-
-
-def test_blur_subframes_follow_a_reset(twin):
-    """After a reset (time back to 0) the recorder takes the new run's sub-frame times, not the
-    ones it had found before (it keeps its next time while time only moves forward)."""
-    twin.reset(paper_pose("p2"))
-    cam = _camera(twin, period=0.04, exposure_s=0.008, blur_subframes=2)
-    try:
-        rates = np.full(twin.physics.n_cables, 0.01)
-        dt, seen = twin.physics.timestep, {}
-
-        class Spy:  # the state at every physics step
-            t = 0.0
-
-            def next_time(self):
-                return self.t if cam.exposure.active else math.inf
-
-            def fire(self, time):
-                seen[round(twin.physics.time, 6)] = twin.physics.data.qpos.copy()
-                self.t = twin.physics.time + dt
-
-        twin.advance(0.12, rates)  # the recorder's next time is now past 0.12 s
-        twin.reset(paper_pose("p2"))
-        spy = Spy()
-        twin.physics.add_hook(spy)
-        twin.advance(0.04, -rates)
-        states = cam.exposure.states(twin.physics.time)
-    finally:
-        cam.close()
-    expected = [round(round((0.04 - 0.008 * (1 - (i + 0.5) / 2)) / dt) * dt, 6) for i in range(2)]
-    for t, state in zip(expected, states, strict=True):
-        np.testing.assert_array_equal(state[0], seen[t])
-    assert not np.array_equal(states[0][0], states[1][0])
 
 
 # ---------------------------------------------------------------------------- distortion
