@@ -103,7 +103,7 @@ class RerunRecorder:
     ) -> None:
         import rerun as rr
 
-        self.covariance = tuple(covariance)
+        self.covariance, self._ended = tuple(covariance), None  # _ended: disconnect returned
         self.rr = rr
         self.path = path
         self._partial = partial_of(path)
@@ -149,11 +149,8 @@ class RerunRecorder:
         )
         edges = [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5),
                  (2, 6), (3, 7)]  # fmt: skip
-        rec.log(
-            "world/frame",
-            rr.LineStrips3D([corners[list(e)] for e in edges], colors=[150, 150, 160]),
-            static=True,
-        )
+        frame = rr.LineStrips3D([corners[list(e)] for e in edges], colors=[150, 150, 160])
+        rec.log("world/frame", frame, static=True)
         exits = rr.Points3D(s.a_base, radii=0.008, colors=[230, 140, 30])
         rec.log("world/exit_points", exits, static=True)
         if s.T_base_tag is not None:
@@ -374,9 +371,10 @@ class RerunRecorder:
         with writing(self._partial), self._partial.open("rb") as f:
             os.fsync(f.fileno())
             f.seek(max(0, os.fstat(f.fileno()).st_size - 16))
-            whole = ended and (b"FOOT" in f.read() or not self._footer)
+            whole = b"FOOT" in f.read() or (ended and not self._footer)
         if not whole:
-            raise OutputError(self._partial, "incomplete: Rerun could not write its end")
+            late = "" if ended else f" (its disconnect not done in {watchdog.ABANDON_S:g} s)"
+            raise OutputError(self._partial, f"incomplete: Rerun could not write its end{late}")
 
     def commit(self) -> None:
         """Give the finished file its final name."""
@@ -389,9 +387,9 @@ class RerunRecorder:
 
     def _disconnect(self, wait: float) -> bool:
         """Rerun's disconnect, once, waited for ≤ ``wait`` [s] (a dead writer blocks it forever)."""
-        if getattr(self, "_ended", None) is None:
-            rr, disconnect = self.rr, self.rec.disconnect
-            self._ended = watchdog.call_with_deadline(disconnect, wait, rr.unregister_shutdown)
+        if self._ended is None:
+            late = self.rr.unregister_shutdown
+            self._ended = watchdog.call_with_deadline(self.rec.disconnect, wait, late)
         return self._ended
 
     def close(self) -> None:

@@ -69,14 +69,16 @@ def call_with_deadline(
             waiting for it in turn).
 
     Returns:
-        Whether it returned within ``timeout_s`` (if not, it is left running in its thread).
+        Whether it returned within ``timeout_s`` (if not, it is left running in its thread; for
+        Rerun, ``if_late`` unregisters its at-exit shutdown, for the whole process).
     """
 
     def call() -> None:
         with contextlib.suppress(Exception):
             fn()
 
-    thread = threading.Thread(target=call, name=f"deadline-{fn.__name__}", daemon=True)
+    name = f"deadline-{getattr(fn, '__name__', 'call')}"
+    thread = threading.Thread(target=call, name=name, daemon=True)
     thread.start()
     thread.join(timeout_s)
     if (late := thread.is_alive()) and if_late is not None:

@@ -14,7 +14,7 @@ from cdpr_twin.gym import CdprEnv
 from cdpr_twin.gym.env import FAILURE_REWARD
 from cdpr_twin.gym.tasks import ReachPose, ServoToTag
 from cdpr_twin.kinematics import cable_lengths
-from cdpr_twin.scenario import load_scenario
+from cdpr_twin.scenario import ScenarioError, load_scenario
 from cdpr_twin.scenario_tables import MonitorConfig
 from cdpr_twin.se3 import so3_exp, transform
 
@@ -266,3 +266,11 @@ def test_random_full_scale_twists_slacken_cables_and_on_fault_decides_what_that_
     assert not terminated and steps == 20 and "fewer than six taut cables" in faults[0]
     with pytest.raises(ValueError, match="on_fault must be 'stop', 'continue' or None"):
         CdprEnv(on_fault="ignore")
+
+
+def test_an_image_estimator_without_the_camera_names_the_envs_arguments():
+    """The refusal speaks of the env's arguments, not of the command line's options."""
+    with pytest.raises(ScenarioError) as err:
+        CdprEnv(estimator="image", camera=False)
+    words = str(err.value)
+    assert "estimator=image" in words and "camera=False" in words and "--" not in words
