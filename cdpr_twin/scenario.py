@@ -173,8 +173,13 @@ class Scenario:
         in_loop: str | None = None,
         duration: float | None = None,
         camera: bool | None = None,
+        names: tuple[str, str] = ("--in-loop ", "--no-camera"),
     ) -> Scenario:
-        """A copy with command-line overrides applied (and validated)."""
+        """A copy with command-line overrides applied (and validated).
+
+        ``names``: how the caller's errors name ``in_loop`` (a prefix to the estimator's name)
+        and ``camera=False`` (the CLI's options; the gym env gives its own arguments).
+        """
         s, done = self, dict(self.overrides)
         if seed is not None and (isinstance(seed, bool) or int(seed) != seed or seed < 0):
             raise ScenarioError(f"--seed must be an integer ≥ 0, got {seed}")
@@ -205,7 +210,7 @@ class Scenario:
             s = replace(s, estimators=replace(s.estimators, in_loop=in_loop, passive=passive))
             done["in_loop"] = in_loop
         if not s.sensors.camera:
-            s = without_camera(s, done)
+            s = without_camera(s, done, names)
         return replace(s, overrides=MappingProxyType(done))
 
     def without(self, *sources: str) -> Scenario:

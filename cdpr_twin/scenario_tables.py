@@ -179,34 +179,37 @@ def _needs_camera(kind: str, name: str) -> bool:
     return bool(getattr(plugins.lookup(kind, name), "needs_camera", False))
 
 
-def without_camera(s: Any, done: dict) -> Any:
+def without_camera(
+    s: Any, done: dict, names: tuple[str, str] = ("--in-loop ", "--no-camera")
+) -> Any:
     """Refuse what needs the camera in the loop; drop passive estimators that need it.
 
     Args:
         s: the :class:`cdpr_twin.scenario.Scenario`, its camera off.
-        done: its command-line overrides so far (``in_loop``: ``--in-loop``; ``camera`` false:
-            ``--no-camera``), to name who asked for each side of a conflict; dropped
-            estimators are added.
+        done: its overrides so far (``in_loop``; ``camera`` false), to name who asked for each
+            side of a conflict; dropped estimators are added.
+        names: how the caller names those overrides: a prefix to the in-loop estimator's
+            name, and the camera turned off (the CLI's ``--in-loop``, ``--no-camera``).
 
     Raises:
         ScenarioError: the in-loop estimator or the controller needs the camera.
     """
-    off = done.get("camera") is False  # --no-camera (else the file's sensors.camera = false)
-    fix = "drop --no-camera" if off else "set sensors.camera = true"
+    (pick, no_cam), off = names, done.get("camera") is False  # else the file's camera = false
+    fix, other = f"drop {no_cam}" if off else "set sensors.camera = true", pick.strip(" =")
     in_loop = s.estimators.in_loop
-    if _needs_camera("estimator", in_loop) and "in_loop" in done:  # --in-loop
-        why = "--no-camera turned it off" if off else f"{s.source} has sensors.camera = false"
+    if _needs_camera("estimator", in_loop) and "in_loop" in done:  # the caller's in_loop
+        why = f"{no_cam} turned it off" if off else f"{s.source} has sensors.camera = false"
         raise ScenarioError(
-            f"--in-loop {in_loop} needs the camera, but {why}; {fix} or give another --in-loop"
+            f"{pick}{in_loop} needs the camera, but {why}; {fix} or give another {other}"
         )
     if _needs_camera("estimator", in_loop):
         field = f"{s.source}: estimators.in_loop: {in_loop!r} needs the camera"
         if off:
-            raise ScenarioError(f"--no-camera: {field}; {fix} or give another --in-loop")
+            raise ScenarioError(f"{no_cam}: {field}; {fix} or give another {other}")
         raise ScenarioError(f"{field}; choose another in-loop estimator or keep the camera on")
     if _needs_camera("controller", s.controller.type):
         field = f"{s.source}: controller.type: {s.controller.type!r} needs the camera; {fix}"
-        raise ScenarioError(f"--no-camera: {field}" if off else field)
+        raise ScenarioError(f"{no_cam}: {field}" if off else field)
     dropped = [n for n in s.estimators.passive if _needs_camera("estimator", n)]
     if dropped:  # nothing to see: drop them, and say so
         passive = tuple(n for n in s.estimators.passive if n not in dropped)

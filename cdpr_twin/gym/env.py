@@ -42,7 +42,7 @@ from gymnasium import spaces
 from cdpr_twin.gym.tasks import Score, Truth, make_task
 from cdpr_twin.kinematics import jacobian
 from cdpr_twin.runner import RunSetup, prepare, start
-from cdpr_twin.scenario import EstimatorConfig, Scenario, ScenarioError, load_scenario
+from cdpr_twin.scenario import EstimatorConfig, Scenario, load_scenario
 from cdpr_twin.se3 import so3_log
 from cdpr_twin.sim import SimulationError, WinchLimitError
 from cdpr_twin.types import Command, Measurement, PoseEstimate
@@ -73,11 +73,7 @@ def _configure(
     stds = {f.name: getattr(s.truth, f.name) * scale for f in dataclasses.fields(s.truth)}
     del stds["seed"]
     s = dataclasses.replace(s, truth=dataclasses.replace(s.truth, **stds))
-    try:
-        return s.with_overrides(in_loop=estimator, camera=camera)
-    except ScenarioError as exc:  # its words name the CLI's options: name the env's arguments
-        words = str(exc).replace("--in-loop ", "estimator=").replace("--in-loop", "estimator")
-        raise ScenarioError(words.replace("--no-camera", "camera=False")) from None
+    return s.with_overrides(in_loop=estimator, camera=camera, names=("estimator=", "camera=False"))
 
 
 def _check(on_fault: str | None, **scales: float) -> None:
