@@ -138,7 +138,8 @@ def check_camera(s: Scenario, intrinsics) -> None:
             f"{s.source}: realism.camera.exposure_s: {cam.exposure_s:g} s is longer than the "
             f"camera's read period ({period:g} s, one frame a control tick); shorten it"
         )
-    try:
+    try:  # the frame alone first: the lens's margins cost memory in proportion to it
+        check_frame_size(intrinsics.width, intrinsics.height, cam.supersample)
         margins = lens_margins(intrinsics.scaled(cam.supersample), cam.distortion)
         check_frame_size(intrinsics.width, intrinsics.height, cam.supersample, margins)
     except ValueError as exc:

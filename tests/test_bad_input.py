@@ -118,21 +118,34 @@ def test_huge_finite_tensions_are_rejected_updates_not_a_crash(selection):
         tw.close()
 
 
-def test_a_supersampled_buffer_too_large_for_the_gl_names_supersample(tmp_path, capsys):
-    """64× was blamed on a missing EGL: the buffer (40960 px) exceeds what Mesa can hold."""
+@pytest.mark.parametrize(("scale", "size"), [(64, "40960×30720"), (100_000, "64000000×48000000")])
+def test_a_supersampled_buffer_too_large_for_the_gl_names_supersample(
+    tmp_path, capsys, monkeypatch, scale, size
+):
+    """64× was blamed on a missing EGL: the buffer (40960 px) exceeds what Mesa can hold. At
+    100 000× the lens's margins, sought along the supersampled frame's border before the size
+    was checked, took every byte of memory (the kernel killed the run): the frame alone is
+    refused first, the margins never sought."""
     from pathlib import Path
 
     from cdpr_twin.cli import main
+    from cdpr_twin.sim import imaging
+
+    margins = imaging.lens_margins
+    monkeypatch.setattr(
+        imaging, "lens_margins", lambda K, *a: margins(K, *a) if K.width < 16384 else 1 / 0
+    )
 
     root = Path(__file__).resolve().parent.parent
     text = (root / "scenarios" / "paper_open_loop.toml").read_text()
     path = tmp_path / "s.toml"
     path.write_text(
-        text.replace('"../models/', f'"{root}/models/') + "\n[realism.camera]\nsupersample = 64\n"
+        text.replace('"../models/', f'"{root}/models/')
+        + f"\n[realism.camera]\nsupersample = {scale}\n"
     )
     assert main(["run", str(path), "--duration", "0.2", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
-    assert "40960×30720 px" in err and "lower realism.camera.supersample" in err
+    assert f"{size} px" in err and "lower realism.camera.supersample" in err
     assert "EGL" not in err
 
 

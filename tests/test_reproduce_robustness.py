@@ -307,3 +307,24 @@ def test_a_plugin_raising_mid_run_is_one_line(traceback, tmp_path, capsys):
         err = err.split("RuntimeError: failing_midway: boom\n", 1)[1]  # the trace's last line
     line = _one_line(err)
     assert "RuntimeError: failing_midway: boom" in line and str(out) in line, line
+
+
+def test_a_directory_that_is_no_studys_keeps_its_own_report(tmp_path, capsys):
+    """Before: ``reproduce --out`` on a directory holding someone's ``report.md`` removed it
+    within seconds (only an earlier study's files are promised to go)."""
+    from cdpr_twin.study.files import clear_earlier_study
+
+    out = tmp_path / "mydocs"
+    (out / "runs" / "open_loop_seed1").mkdir(parents=True)
+    own = {"report.md": "my own report", "fig5a.png": "not a figure", "notes.txt": "mine"}
+    for name, text in own.items():
+        (out / name).write_text(text)
+    assert main(["reproduce", "--out", str(out), *TINY]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert "report.md, fig5a.png, runs/open_loop_seed1" in line and "another --out" in line
+    assert {p.name: p.read_text() for p in out.iterdir() if p.is_file()} == own
+    # a study's report.json (docs/ keeps no runs.json) makes it a study's: cleared
+    (out / "report.json").write_text(json.dumps({"runs": [], "findings": []}))
+    clear_earlier_study(out)
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "runs"]
+    assert not list((out / "runs").iterdir())

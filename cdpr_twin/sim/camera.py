@@ -138,6 +138,7 @@ class CameraRenderer:
         self._scratch: mujoco.MjData | None = None
         self.intrinsics = intrinsics(model, name)
         self.render_intrinsics = self.intrinsics.scaled(scale)
+        check_frame_size(self.intrinsics.width, self.intrinsics.height, scale)  # before margins
         self.margins = lens_margins(self.render_intrinsics, lens) if lens else (0, 0)
         self.canvas = K = self.render_intrinsics.widened(*self.margins)
         w, h = self.intrinsics.width, self.intrinsics.height

@@ -9,7 +9,9 @@ The study directory keeps the promises of a run's directory (:mod:`cdpr_twin.out
    ``*.partial`` and its run directories under ``runs/`` (the ones named as the study names
    its runs; another directory there is left alone). Nothing of an earlier study is left to
    look like the new one's, even when the new one is stopped or fails; keep an earlier study
-   by giving the new one another ``--out``.
+   by giving the new one another ``--out``. A directory that holds files of those names but
+   is no study's (no ``study.json``, ``runs.json`` or study ``report.json``: someone's own
+   ``report.md``) is refused, nothing removed.
 3. **Whole files only.** Each file is written as ``<name>.partial``, flushed and ``fsync``'ed,
    then renamed to its final name (the directory ``fsync``'ed); ``report.md`` is written last.
    An ``OSError`` (a full disk) is an :class:`~cdpr_twin.outputs.OutputError` naming the file;
@@ -20,10 +22,11 @@ The study directory keeps the promises of a run's directory (:mod:`cdpr_twin.out
 from __future__ import annotations
 
 import contextlib
+import json
 import re
 from pathlib import Path
 
-from cdpr_twin.outputs import OutputDir, partial_of, writing
+from cdpr_twin.outputs import OutputDir, OutputDirError, partial_of, writing
 
 FIGURES = ("fig5a", "fig5b", "fig7a", "fig7b", "fig8")
 """The study's figures (``<name>.png``)."""
@@ -43,13 +46,23 @@ def clear_earlier_study(out: Path) -> None:
     files removed, refused while a live run holds it), then removed if nothing else is in it.
 
     Raises:
-        OutputDirError: a run directory under ``runs/`` is in use by a live run.
+        OutputDirError: a run directory under ``runs/`` is in use by a live run, or ``out``
+            holds files of a study's names but is no study's (nothing is removed then).
         OutputError: a file cannot be removed.
     """
+    runs = out / "runs"
+    found = [n for n in STUDY_FILES if (out / n).exists()]
+    if runs.is_dir():
+        found += [f"runs/{d.name}" for d in sorted(runs.iterdir()) if RUN_NAME.fullmatch(d.name)]
+    if found and not _is_study(out):
+        raise OutputDirError(
+            f"{out}: holds {', '.join(found[:4])}{', …' if len(found) > 4 else ''} but is not a "
+            f"study's directory (no {STUDY_MARKER}, runs.json or study report.json): reproduce "
+            "would remove them; give it another --out, or move them away"
+        )
     for path in [out / n for n in STUDY_FILES] + [partial_of(out / n) for n in STUDY_FILES]:
         with writing(path):
             path.unlink(missing_ok=True)
-    runs = out / "runs"
     if not runs.is_dir():
         return
     for run_dir in sorted(runs.iterdir()):
@@ -59,3 +72,14 @@ def clear_earlier_study(out: Path) -> None:
             owner.release()
             with contextlib.suppress(OSError):  # something else is in it: not the study's
                 run_dir.rmdir()
+
+
+def _is_study(out: Path) -> bool:
+    """Whether ``out`` holds a study: its marker, its ``runs.json``, or a study's report.json."""
+    if (out / STUDY_MARKER).is_file() or (out / "runs.json").is_file():
+        return True
+    try:
+        report = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(report, dict) and {"runs", "findings"} <= report.keys()
