@@ -21,7 +21,8 @@ REPRODUCE_DOC = (  # `reproduce --help`: what the study writes, and what it remo
     "report.json, report.md (last). The directory is locked as a run's: a second writer is "
     "refused (exit 2). Before any run starts, an earlier study's report.md, report.json, "
     "runs.json, figures (and their *.partial), runs under runs/ are removed (give another --out "
-    "to keep them). Each file is written as <name>.partial, then renamed. Ctrl-C/SIGTERM stops "
+    "to keep them); such files where no study was are refused (exit 2). Each file is written "
+    "as <name>.partial, then renamed. Ctrl-C/SIGTERM stops "
     "the workers (exit 130/143), keeping the finished runs and study.json, without a report. "
     "Exit 0 done, 1 a run or a write failed, 2 bad options or --out in use."
 )
