@@ -254,6 +254,9 @@ def _study_failure(exc: BaseException, args: argparse.Namespace, finished: tuple
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``cdpr-twin`` command."""
+    for stream in (sys.stdout, sys.stderr):  # an ASCII terminal gets ° and × escaped, not a crash
+        if hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="backslashreplace")
     args = _parser().parse_args(argv)
     try:
         code = args.func(args)

@@ -288,6 +288,18 @@ def _tag(t: _Table) -> Tag:
     )
 
 
+def _check_texture(path: Path, tag: Tag) -> None:
+    """``[tag] texture``: a readable PNG file, relative to the description file ``path``."""
+    file = path.parent / tag.texture
+    try:
+        with file.open("rb") as f:
+            png = f.read(8) == b"\x89PNG\r\n\x1a\n"
+    except OSError as exc:
+        raise RobotError(f"{path}: tag.texture: {file}: cannot be read ({exc.strerror})") from None
+    if not png:
+        raise RobotError(f"{path}: tag.texture: {file}: not a PNG image (make_tag_texture.py)")
+
+
 def _scene(scene: _Table, outer_min: np.ndarray, outer_max: np.ndarray) -> dict:
     """``[scene]`` (optional): the viewer's centre, extent and floor, from the frame by default."""
     size = outer_max - outer_min
@@ -305,6 +317,8 @@ def _read(path: Path) -> dict:
         return tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise RobotError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise RobotError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except OSError as exc:
         raise RobotError(f"{path}: cannot read the robot description: {exc.strerror}") from None
 
@@ -337,6 +351,8 @@ def load_robot(path: str | Path) -> Robot:
     name = top.string("name")  # it names the MJCF files `model build` writes: a plain name
     if name.startswith(".") or not all(c.isalnum() or c in "_-." for c in name):
         raise top.fail("name", f"must be a plain file name (letters, digits, _ - .), got {name!r}")
+    if name == "scene":  # `model build` writes <name>.xml beside scene.xml
+        raise top.fail("name", "'scene' names the scene file model build writes; choose another")
     top.string("description", "-")
     sim = table("simulation")
     fields: dict[str, Any] = {"name": name, "source": path}
@@ -364,4 +380,6 @@ def load_robot(path: str | Path) -> Robot:
     fields.update(_scene(scene, fields["frame_outer_min"], fields["frame_outer_max"]))
     for t in [*tables, mon, scene, top]:
         t.done()
+    if fields["tag"] is not None:  # once every field is known good
+        _check_texture(path, fields["tag"])
     return Robot(**fields)

@@ -15,8 +15,8 @@ ROOT = Path(__file__).resolve().parent.parent
 OPEN_LOOP = (ROOT / "scenarios" / "paper_open_loop.toml").read_text()
 
 
-def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    env = {**os.environ, "MUJOCO_GL": "egl"}
+def _cli(*args: str, cwd: Path, encoding: str = "utf-8") -> subprocess.CompletedProcess:
+    env = {**os.environ, "MUJOCO_GL": "egl", "PYTHONIOENCODING": encoding}
     return subprocess.run(
         [sys.executable, "-m", "cdpr_twin", *args],
         capture_output=True,
@@ -150,7 +150,10 @@ def test_ctrl_c_leaves_valid_flushed_partial_outputs(tmp_path):
     assert check.returncode == 0, check.stderr
 
 
-def test_run_prints_the_table_and_writes_outputs(tmp_path):
+@pytest.mark.parametrize("encoding", ["utf-8", "ascii"])
+def test_run_prints_the_table_and_writes_outputs(tmp_path, encoding):
+    """On an ASCII terminal Δ and ° come out escaped (before: a traceback and exit 1 after
+    the run's files were written)."""
     out = tmp_path / "out"
     proc = _cli(
         "run",
@@ -163,9 +166,11 @@ def test_run_prints_the_table_and_writes_outputs(tmp_path):
         "--seed",
         "3",
         cwd=tmp_path,
+        encoding=encoding,
     )
     assert proc.returncode == 0, proc.stderr
-    assert "model_elastic_pulley" in proc.stdout and "max Δt [mm]" in proc.stdout
+    delta = "Δ" if encoding == "utf-8" else "\\u0394"
+    assert "model_elastic_pulley" in proc.stdout and f"max {delta}t [mm]" in proc.stdout
     summary = json.loads((out / "summary.json").read_text())
     assert summary["seed"] == 3 and summary["overrides"]["camera"] is False
     assert "image" not in summary["estimators"]

@@ -160,6 +160,9 @@ def _edited(tmp_path: Path, old: str, new: str) -> Path:
         ("accuracy_n = 0.24\n", "", "tension_sensors.accuracy_n"),  # missing
         ("range_n = [-25.0, 75.0]", "range_n = [75.0, -25.0]", "tension_sensors.range_n"),
         ("max_mass_kg = 0.0", "max_mass_kg = -1.0", "payload.max_mass_kg"),
+        # before: MuJoCo's "Error opening file" with a path relative to --out, at build time
+        ('texture = "assets/tag36h11_00000.png"', 'texture = "nope.png"', "tag.texture"),
+        ('texture = "assets/tag36h11_00000.png"', 'texture = "robot.toml"', "tag.texture"),
     ],
 )
 def test_a_bad_description_is_a_one_line_error_naming_file_and_field(
@@ -225,13 +228,16 @@ def test_cogiro_files_are_generated_and_carry_casprs_platform():
     np.testing.assert_allclose(r.es, 68.5e9 * np.pi * 0.002**2, rtol=1e-8)
 
 
-@pytest.mark.parametrize("name", ["../../evil", "sub/x", "..", ".hidden", "a b", "c:\\\\x"])
+@pytest.mark.parametrize(
+    "name", ["../../evil", "sub/x", "..", ".hidden", "a b", "c:\\\\x", "scene"]
+)
 def test_a_robot_name_that_is_not_a_plain_file_name_is_refused(tmp_path, name):
-    # the name makes `<name>.xml`: "../../evil" wrote outside --out before
+    # the name makes `<name>.xml`: "../../evil" wrote outside --out before; "scene" made both
+    # files scene.xml, and the robot's was silently not written
     path = tmp_path / "d" / "robot.toml"
     path.parent.mkdir()
     path.write_text(ACROBOT.read_text().replace('name = "acrobot"', f'name = "{name}"', 1))
-    with pytest.raises(RobotError, match=r"name: must be a plain file name"):
+    with pytest.raises(RobotError, match=r"name: (must be a plain file name|'scene' names)"):
         build_files(path, tmp_path / "d" / "out")
     assert sorted(p.name for p in tmp_path.rglob("*")) == ["d", "robot.toml"]
 
@@ -245,4 +251,11 @@ def test_a_tag_the_camera_would_never_detect_is_refused(tmp_path, old, new, key)
     path = tmp_path / "robot.toml"
     path.write_text(ACROBOT.read_text().replace(old, new, 1))
     with pytest.raises(RobotError, match=rf"tag\.{key}: the twin detects tag36h11 id 0 only"):
+        load_robot(path)
+
+
+def test_a_description_that_is_not_utf8_names_its_file(tmp_path):
+    path = tmp_path / "robot.toml"
+    path.write_bytes(ACROBOT.read_bytes().replace(b"# ", b"# \x81", 1))
+    with pytest.raises(RobotError, match=rf"^{re.escape(str(path))}: not UTF-8 text"):
         load_robot(path)
