@@ -490,3 +490,30 @@ def test_no_measurement_sees_the_base_turning_about_the_vertical_through_the_hom
                                np.linalg.norm(wrench, axis=2), rtol=1e-7)  # fmt: skip
     # and the exit points moved: 0.4° is ≈ 5 mm at ACROBOT's corners, unseen
     assert np.median(np.linalg.norm(turned.a_base - mod.a_base, axis=1)) > 3e-3
+
+
+@pytest.mark.parametrize(
+    ("extra", "field"),
+    [
+        ('\n[[events]]\nkind = "cable_break"\nat = 1.0\ncable = 2\n', "[[events]]"),
+        ("payload_kg = 0.5\n", "model.payload_kg"),
+    ],
+)
+def test_what_a_calibration_cannot_use_is_refused_not_ignored(tmp_path, capsys, extra, field):
+    """Before: the events were silently left out of the tour, and the payload out of the
+    simulated robot (while the scenario's runs carry it)."""
+    from pathlib import Path
+
+    from cdpr_twin.cli import main
+
+    root = Path(__file__).resolve().parent.parent
+    text = (root / "scenarios" / "paper_open_loop.toml").read_text()
+    text = text.replace('"../models/', f'"{root}/models/')
+    text = text.replace("[model]\n", f"[model]\n{extra}") if "payload" in extra else text + extra
+    path = tmp_path / "s.toml"
+    path.write_text(text)
+    out = tmp_path / "out"
+    assert main(["calibrate", str(path), "--out", str(out), "--poses", "12"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"s.toml: {field}: a calibration" in err
+    assert not out.exists()

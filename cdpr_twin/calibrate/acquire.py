@@ -211,8 +211,7 @@ def record(s: Scenario, poses: list[np.ndarray], frames: int = 4, workers: int =
     """
     if frames < 1:
         raise ValueError(f"frames must be ≥ 1 (readings averaged per pose), got {frames}")
-    if not s.sensors.camera:
-        raise ScenarioError(f"{s.source}: sensors.camera: calibration needs the camera; set true")
+    _refuse_what_it_cannot_use(s)
     started = time.perf_counter()
     n = min(SEGMENTS, len(poses))
     bounds = np.linspace(0, len(poses), n + 1).round().astype(int)
@@ -297,16 +296,26 @@ def _reset_at_start(s: Scenario, physics, settle_time: float) -> None:
 def check(s: Scenario) -> None:
     """What would stop the recording, checked in this process before any worker starts.
 
-    The camera is on, the robot builds and has a camera and a tag, and its true start pose
-    (the homing offset applied) is inside the frame and held by a tension distribution.
+    The camera is on, no events or payload, the robot builds with a camera and a tag, and its
+    true start pose (the homing offset applied) is inside the frame and held by a tension
+    distribution.
 
     Raises:
         ScenarioError: naming the file and the field at fault, as ``cdpr-twin run`` does.
     """
-    if not s.sensors.camera:
-        raise ScenarioError(f"{s.source}: sensors.camera: calibration needs the camera; set true")
+    _refuse_what_it_cannot_use(s)
     physics, _ = _build(s)
     _reset_at_start(s, physics, settle_time=0.0)
+
+
+def _refuse_what_it_cannot_use(s: Scenario) -> None:
+    """The camera off, events (its own tour has none), a payload (its balance weighs none)."""
+    if not s.sensors.camera:
+        raise ScenarioError(f"{s.source}: sensors.camera: calibration needs the camera; set true")
+    for field, used in (("[[events]]", s.events), ("model.payload_kg", s.model.payload)):
+        if used:
+            why = "drives its own tour" if field == "[[events]]" else "weighs the platform alone"
+            raise ScenarioError(f"{s.source}: {field}: a calibration {why}; remove it from a copy")
 
 
 def _ignore_sigint() -> None:
