@@ -266,7 +266,7 @@ def _camera(t: _Table) -> Camera:
     if fovy >= 180:
         raise t.fail("fovy_deg", f"must be < 180, got {fovy}")
     return Camera(
-        t.array("position_m", (3,)), t.array("quat_wxyz", (4,)), (int(res[0]), int(res[1])), fovy
+        t.array("position_m", (3,)), t.quaternion("quat_wxyz"), (int(res[0]), int(res[1])), fovy
     )
 
 
@@ -283,7 +283,7 @@ def _tag(t: _Table) -> Tag:
         plate_half_size=t.number("plate_half_size_m", positive=True),
         plate_thickness=t.number("plate_thickness_m", positive=True),
         position=t.array("position_m", (3,)),
-        quat_wxyz=t.array("quat_wxyz", (4,)),
+        quat_wxyz=t.quaternion("quat_wxyz"),
         texture=t.string("texture"),
     )
 

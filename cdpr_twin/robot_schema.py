@@ -70,6 +70,13 @@ class _Table:
             raise self.fail(key, "must hold finite numbers only")
         return _frozen(a)
 
+    def quaternion(self, key: str) -> np.ndarray:
+        """A (4,) wxyz orientation: any non-zero length (it is normalised where it is used)."""
+        q = self.array(key, (4,))
+        if not np.linalg.norm(q) > 1e-9:
+            raise self.fail(key, f"must be a non-zero quaternion [w, x, y, z], got {q.tolist()}")
+        return q
+
     def per_cable(self, key: str, m: int, default: Any = ...) -> np.ndarray:
         """One number for all cables, or a list of m numbers."""
         v = self.get(key, default)

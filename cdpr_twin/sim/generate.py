@@ -290,13 +290,12 @@ def add_home_key(spec: mujoco.MjSpec, r: Robot, key_name: str) -> None:
     rounded to 10 significant digits, so the files do not depend on the last bits of a solver.
     """
     from cdpr_twin.sim.physics import Physics  # (physics imports this package's model module)
-    from cdpr_twin.statics import InfeasibleTensionError
 
     physics = Physics(spec.compile())
-    try:
-        physics.reset(pose_from_vector(r.home_pose), settle_time=0.5)  # tensions within range
-    except InfeasibleTensionError as exc:
-        raise ValueError(f"{r.source}: home_pose: {exc}") from None
+    try:  # inside the frame, with tensions within range
+        physics.reset(pose_from_vector(r.home_pose), settle_time=0.5)
+    except ValueError as exc:
+        raise ValueError(f"{r.source}: platform.home_pose: {exc}") from None
     m, d = physics.model, physics.data
 
     def rounded(a: np.ndarray) -> list[float]:
