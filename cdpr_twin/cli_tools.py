@@ -138,7 +138,7 @@ def _scenarios(args: argparse.Namespace) -> int:
     except OutputError as exc:
         print(
             f"cdpr-twin scenarios copy: error: cannot write {exc.path}: {exc.cause}; nothing "
-            "was copied (free some space, or copy into another directory)",
+            f"was copied ({exc.fix('copy into another directory')})",
             file=sys.stderr,
         )
         return 1

@@ -14,7 +14,6 @@ exit 1, that leaves the earlier files as they were.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
@@ -37,11 +36,13 @@ def _out_dir(description: Path, out: Path | None) -> Path:
     Raises:
         ValueError: it is not a directory, or cannot be written (the fix in the message).
     """
+    from cdpr_twin.outputs import unwritable
+
     out = Path(description).parent if out is None else Path(out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out}: exists and is not a directory; give a directory")
-    if out.is_dir() and not os.access(out, os.W_OK | os.X_OK):
-        raise ValueError(f"--out {out}: cannot write there (permission denied); give another")
+    if out.is_dir() and (why := unwritable(out)):
+        raise ValueError(f"--out {out}: cannot write there ({why}); give another")
     return out
 
 
@@ -64,7 +65,7 @@ def _build(args: argparse.Namespace) -> int:
     except OutputError as exc:
         print(
             f"cdpr-twin: error: cannot write {exc.path}: {exc.cause}; no half-written file is "
-            "left (free some space, or give another --out)",
+            f"left ({exc.fix('give another --out')})",
             file=sys.stderr,
         )
         return 1
@@ -103,7 +104,7 @@ def _workspace(args: argparse.Namespace) -> int:
     except OutputError as exc:
         print(
             f"cdpr-twin: error: cannot write {exc.path}: {exc.cause}; an earlier figure is kept "
-            "(free some space, or give another --out)",
+            f"({exc.fix('give another --out')})",
             file=sys.stderr,
         )
         return 1

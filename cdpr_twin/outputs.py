@@ -29,6 +29,7 @@ handles it as Ctrl-C.
 from __future__ import annotations
 
 import contextlib
+import errno as _errno
 import fcntl
 import os
 import socket
@@ -68,11 +69,20 @@ class OutputError(Exception):
     Attributes:
         path: the file being written.
         cause: what went wrong (the OS's words).
+        errno: the OS's error number, if it was an ``OSError``.
     """
 
-    def __init__(self, path: Path, cause: str) -> None:
-        self.path, self.cause = Path(path), cause
+    def __init__(self, path: Path, cause: str, errno: int | None = None) -> None:
+        self.path, self.cause, self.errno = Path(path), cause, errno
         super().__init__(f"{path}: {cause}")
+
+    def fix(self, otherwise: str) -> str:
+        """What to do: "free some space" only when the disk is full, else ``otherwise``."""
+        if self.errno in (_errno.ENOSPC, _errno.EDQUOT, _errno.EFBIG):
+            return f"free some space, or {otherwise}"
+        if self.errno in (_errno.EACCES, _errno.EPERM):
+            return f"make it writable, or {otherwise}"
+        return otherwise
 
 
 class Terminated(KeyboardInterrupt):
@@ -85,7 +95,7 @@ def writing(path: Path) -> Iterator[None]:
     try:
         yield
     except OSError as exc:
-        raise OutputError(path, exc.strerror or str(exc)) from None
+        raise OutputError(path, exc.strerror or str(exc), exc.errno) from None
 
 
 def fsync_dir(path: Path) -> None:
@@ -96,6 +106,14 @@ def fsync_dir(path: Path) -> None:
             os.fsync(fd)
         finally:
             os.close(fd)
+
+
+def unwritable(directory: Path) -> str | None:
+    """Why files cannot be made in an existing ``directory`` (the OS's words), or ``None``."""
+    if os.access(directory, os.W_OK | os.X_OK):
+        return None
+    read_only = os.statvfs(directory).f_flag & os.ST_RDONLY  # or its permissions
+    return os.strerror(_errno.EROFS if read_only else _errno.EACCES)
 
 
 def partial_of(path: Path) -> Path:

@@ -287,6 +287,27 @@ def test_out_not_writable_is_a_one_line_error(tmp_path, monkeypatch, capsys, cau
     assert list(out.iterdir()) == []
 
 
+@pytest.mark.parametrize(
+    ("cause", "fix"),
+    [(errno.ENOSPC, "(free some space, or copy into"), (errno.EROFS, "(copy into another dir")],
+)
+def test_a_failed_write_advises_what_its_cause_needs(tmp_path, monkeypatch, capsys, cause, fix):
+    """Before: "free some space" whatever the cause (a read-only file system too)."""
+    real_open = Path.open
+
+    def refusing_open(self, *args, **kwargs):
+        if self.name.endswith(".partial"):
+            raise OSError(cause, os.strerror(cause), str(self))
+        return real_open(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "open", refusing_open)
+    assert main(["scenarios", "copy", "paper_pbvs", str(tmp_path)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("cdpr-twin scenarios copy: error: cannot")
+    assert os.strerror(cause) in err and fix in err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_unreadable_scenario_is_a_one_line_error(tmp_path, monkeypatch, capsys):
     scenario = tmp_path / "secret.toml"
     scenario.write_text(OPEN_LOOP.read_text())
