@@ -84,10 +84,13 @@ def viewer_command(run_dir: Path) -> list[str]:
         run_dir: a run's output directory, or a ``.rrd`` file.
 
     Raises:
-        FileNotFoundError: when there is no recording there (one line saying what to give).
+        FileNotFoundError: when there is no recording there, or the path cannot be looked at
+            (a name too long): one line saying what to give.
     """
+    from cdpr_twin.outputs import path_kind
+
     rrd = run_dir if run_dir.suffix == ".rrd" else run_dir / "recording.rrd"
-    if not rrd.is_file():
+    if path_kind(rrd, FileNotFoundError) != "file":
         raise FileNotFoundError(
             f"{rrd}: no recording; give a run directory written by cdpr-twin run (or a .rrd)"
         )

@@ -29,10 +29,12 @@ handles it as Ctrl-C.
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import os
 import socket
-from collections.abc import Iterator
+import stat
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from cdpr_twin.json_format import json_text
@@ -86,6 +88,25 @@ def writing(path: Path) -> Iterator[None]:
         yield
     except OSError as exc:
         raise OutputError(path, exc.strerror or str(exc)) from None
+
+
+def path_kind(path: Path, error: Callable[[str], Exception] = OutputDirError) -> str | None:
+    """What is at ``path`` (links followed): ``"dir"``, ``"file"`` (regular), ``"other"``, ``None``.
+
+    ``None`` when nothing is there. Another ``OSError`` (a name too long, permission denied),
+    which ``Path.exists()`` raises on Python 3.11 and takes for "missing" on 3.12, is refused.
+
+    Raises:
+        Exception: ``error``, given one line naming the path, the OS's reason and the fix.
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+    except OSError as exc:
+        fix = {errno.ENAMETOOLONG: "give shorter names", errno.EACCES: "check its permissions"}
+        raise error(f"{path}: {exc.strerror}; {fix.get(exc.errno, 'give another path')}") from None
+    return "dir" if stat.S_ISDIR(mode) else "file" if stat.S_ISREG(mode) else "other"
 
 
 def fsync_dir(path: Path) -> None:
@@ -283,7 +304,9 @@ class OutputDir:
         """
         if self.path is None:
             return
-        if held := [n for n in self.foreign if (self.path / n).exists()]:
+        if path_kind(self.path) not in (None, "dir"):
+            raise OutputDirError(f"output directory {self.path}: exists and is not a directory")
+        if held := [n for n in self.foreign if path_kind(self.path / n)]:
             raise OutputDirError(
                 f"output directory {self.path} holds another command's outputs "
                 f"({', '.join(held)}); choose another directory"
@@ -296,16 +319,15 @@ class OutputDir:
             raise
 
     def _acquire(self) -> None:
-        where = f"output directory {self.path}"
-        if self.path.exists() and not self.path.is_dir():
-            raise OutputDirError(f"{where}: exists and is not a directory")
+        self._made = [p for p in (self.path, *self.path.parents) if path_kind(p) is None]
         try:
-            self._made = [p for p in (self.path, *self.path.parents) if not p.exists()]
             self.path.mkdir(parents=True, exist_ok=True)
             with _guard(self.path):
                 self._create_lock()
         except OSError as exc:
-            raise OutputDirError(f"{where}: cannot write there: {exc.strerror or exc}") from None
+            self._remove_made()  # (e.g. a name too long for the last one: not its parents)
+            where, why = f"output directory {self.path}", exc.strerror or exc
+            raise OutputDirError(f"{where}: cannot write there: {why}") from None
         self._held = True
 
     def _create_lock(self) -> None:
@@ -343,12 +365,15 @@ class OutputDir:
         ``*.partial`` behind, nor the directories the claim created, when they are empty).
         Nothing is touched unless this claim holds the directory.
         """
-        held = self._held
-        if held:
+        if self._held:
             with contextlib.suppress(OutputError):
                 self._clear()
-        self.release()
-        for made in self._made if held else ():
+            self.release()
+            self._remove_made()
+
+    def _remove_made(self) -> None:
+        """Remove the directories the claim created, deepest first, those that are empty."""
+        for made in self._made:
             with contextlib.suppress(OSError):
                 made.rmdir()  # (only if empty)
 

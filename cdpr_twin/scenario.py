@@ -28,6 +28,7 @@ from cdpr_twin.options import (
     ScenarioError,
     parse_options,
 )
+from cdpr_twin.outputs import path_kind
 from cdpr_twin.realism import Realism, profile, without_source
 from cdpr_twin.scenario_tables import (
     MonitorConfig,
@@ -319,8 +320,8 @@ def _model(top: OptionReader, source: Path) -> ModelConfig:
 
 
 def _read(source: Path) -> OptionReader:
-    if not source.is_file():
-        why = "a directory, not a scenario file" if source.is_dir() else "scenario file not found"
+    if (kind := path_kind(source, ScenarioError)) != "file":
+        why = "a directory, not a scenario file" if kind == "dir" else "scenario file not found"
         raise ScenarioError(f"{source}: {why}")
     try:
         data = tomllib.loads(source.read_text(encoding="utf-8"))
