@@ -15,6 +15,7 @@ import subprocess
 import sys
 import tomllib
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from cdpr_twin import resources
 
@@ -26,14 +27,15 @@ def live_url(address: str) -> str:
     """A Rerun gRPC server's URL from what ``run --connect`` was given.
 
     A port (``9876``) or ``host:port`` expands to ``rerun+http://<host>:<port>/proxy``, as the
-    ``rerun --connect`` option does; a URL is kept.
+    ``rerun --connect`` option does; a URL is kept when it names a host, a port and ``/proxy``
+    (what the Rerun SDK connects to; it drops another URL's recording without a word).
 
     Raises:
         ValueError: for anything else, saying what to give.
     """
     if address.isdigit():
         return f"rerun+http://127.0.0.1:{_port(address)}/proxy"
-    if address.startswith(LIVE_SCHEMES):
+    if address.startswith(LIVE_SCHEMES) and _proxy_url(address):
         return address
     host, _, port = address.rpartition(":")
     if "://" not in address and host and port.isdigit():
@@ -41,6 +43,19 @@ def live_url(address: str) -> str:
     raise ValueError(
         f"--connect {address!r}: give a port, host:port or a URL rerun+http://host:port/proxy"
     )
+
+
+def _proxy_url(address: str) -> bool:
+    """Whether a URL names a host, a port and the path ``/proxy``, and nothing else.
+
+    Raises:
+        ValueError: its port is not in 1…65535.
+    """
+    url = urlsplit(address)
+    port = url.netloc.rpartition(":")[2]
+    if any(c.isspace() for c in address) or not (url.hostname and port.isdigit()):
+        return False
+    return url.path == "/proxy" and not (url.query or url.fragment) and bool(_port(port))
 
 
 def run_notes(scenario, spawn: bool) -> list[str]:

@@ -124,20 +124,34 @@ def test_view_opens_the_run_recording_in_the_rerun_viewer(tmp_path, monkeypatch,
         ("9876", "rerun+http://127.0.0.1:9876/proxy"),
         ("robot-pc:9000", "rerun+http://robot-pc:9000/proxy"),
         ("rerun+http://10.0.0.2:9876/proxy", "rerun+http://10.0.0.2:9876/proxy"),
+        ("rerun+https://[::1]:443/proxy", "rerun+https://[::1]:443/proxy"),
     ],
 )
 def test_connect_addresses(given, url):
     assert cli_tools.live_url(given) == url
 
 
-def test_a_bad_connect_address_is_a_one_line_error(tmp_path):
-    proc = _cli("run", "paper_open_loop", "--connect", "http://x/y", cwd=tmp_path)
-    assert proc.returncode == 2
-    assert proc.stderr.strip() == (
-        "cdpr-twin: error: --connect 'http://x/y': give a port, host:port or a URL "
+@pytest.mark.parametrize(
+    "address",
+    [
+        "http://x/y",
+        "rerun+http://",  # before: the URLs were kept as given, the run streamed nowhere, exit 0
+        "rerun+http://garbage with spaces",
+        "rerun+http://garbage with spaces:9876/proxy",
+        "rerun+http://robot-pc/proxy",  # no port
+        "rerun+http://:9876/proxy",  # no host
+        "rerun+http://robot-pc:9876",  # no /proxy: the SDK refuses it, the run said nothing
+        "rerun+http://robot-pc:9876/proxy?x=1",
+    ],
+)
+def test_a_bad_connect_address_is_a_one_line_error(address, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["run", "paper_open_loop", "--connect", address]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"cdpr-twin: error: --connect {address!r}: give a port, host:port or a URL "
         "rerun+http://host:port/proxy"
     )
-    assert not (tmp_path / "runs").exists()
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_spawn_and_connect_together_is_a_one_line_error(tmp_path):
