@@ -18,6 +18,7 @@ from pathlib import Path
 from urllib.parse import urlsplit
 
 from cdpr_twin import resources
+from cdpr_twin.outputs import out_path
 
 LIVE_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
 """URL schemes of a Rerun gRPC server (``run --connect``)."""
@@ -171,7 +172,7 @@ def add_parsers(sub) -> None:
     actions.add_parser("list", help="the shipped scenarios and what each reproduces")
     copy = actions.add_parser("copy", help="copy a shipped scenario into a directory")
     copy.add_argument("name", help="a shipped scenario (see: cdpr-twin scenarios list)")
-    copy.add_argument("dir", type=Path, help="directory to copy it into (created if needed)")
+    copy.add_argument("dir", type=out_path, help="directory to copy it into (created if needed)")
     sc.set_defaults(func=_scenarios)
     view = sub.add_parser("view", help="open a run's recording in the Rerun viewer")
     view.add_argument("run_dir", type=Path, help="a run's output directory (or a .rrd file)")
