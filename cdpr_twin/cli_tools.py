@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import subprocess
 import sys
 import tomllib
@@ -120,7 +121,7 @@ def _view(args: argparse.Namespace) -> int:
         print(f"cdpr-twin view: error: {exc}", file=sys.stderr)
         return 2
     if args.print_command:
-        print(" ".join(command))
+        print(shlex.join(command))  # pasted into a shell: a path with spaces stays one word
         return 0
     try:
         viewer = subprocess.Popen(command)
@@ -161,7 +162,7 @@ def _scenarios(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 1
-    print(f"{target} (run it: cdpr-twin run {target})")
+    print(f"{target} (run it: cdpr-twin run {shlex.quote(str(target))})")
     return 0
 
 
