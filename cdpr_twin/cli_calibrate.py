@@ -40,9 +40,16 @@ def _check_options(args: argparse.Namespace) -> None:
 
 
 def _missing(out: Path) -> list[Path]:
-    """``out`` and its ancestors that do not exist yet (what claiming it creates), deepest first."""
+    """``out`` and its ancestors that do not exist yet (what claiming it creates), deepest first.
+
+    Raises:
+        cdpr_twin.outputs.OutputDirError: ``out`` cannot be looked at (e.g. a name too long).
+    """
+    from cdpr_twin.outputs import OutputDirError
+    from cdpr_twin.paths import path_kind
+
     made = []
-    while not out.exists() and out != out.parent:
+    while path_kind(out, OutputDirError) is None and out != out.parent:
         made.append(out)
         out = out.parent
     return made
@@ -61,6 +68,7 @@ def _calibrate(args: argparse.Namespace) -> int:
     from cdpr_twin.calibrate.acquire import check
     from cdpr_twin.calibrate.output import NAMES
     from cdpr_twin.outputs import OutputDir, OutputDirError, OutputError, others
+    from cdpr_twin.paths import path_kind
     from cdpr_twin.scenario import ScenarioError, load_scenario
 
     started, made = time.perf_counter(), []
@@ -68,7 +76,7 @@ def _calibrate(args: argparse.Namespace) -> int:
         _check_options(args)
         s = load_scenario(args.scenario).with_overrides(seed=args.seed)
         source = s.model.nominal or s.model.file.parent / "robot.toml"
-        if not source.is_file():
+        if path_kind(source, ScenarioError) != "file":
             raise ScenarioError(
                 f"{s.source}: model: no robot description {source} beside the model file; "
                 'give one with [model] nominal = "robot.toml"'

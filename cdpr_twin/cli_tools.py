@@ -11,12 +11,15 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import subprocess
 import sys
 import tomllib
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from cdpr_twin import resources
+from cdpr_twin.outputs import out_path
 
 LIVE_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
 """URL schemes of a Rerun gRPC server (``run --connect``)."""
@@ -26,14 +29,15 @@ def live_url(address: str) -> str:
     """A Rerun gRPC server's URL from what ``run --connect`` was given.
 
     A port (``9876``) or ``host:port`` expands to ``rerun+http://<host>:<port>/proxy``, as the
-    ``rerun --connect`` option does; a URL is kept.
+    ``rerun --connect`` option does; a URL is kept when it names a host, a port and ``/proxy``
+    (what the Rerun SDK connects to; it drops another URL's recording without a word).
 
     Raises:
         ValueError: for anything else, saying what to give.
     """
     if address.isdigit():
         return f"rerun+http://127.0.0.1:{_port(address)}/proxy"
-    if address.startswith(LIVE_SCHEMES):
+    if address.startswith(LIVE_SCHEMES) and _proxy_url(address):
         return address
     host, _, port = address.rpartition(":")
     if "://" not in address and host and port.isdigit():
@@ -41,6 +45,19 @@ def live_url(address: str) -> str:
     raise ValueError(
         f"--connect {address!r}: give a port, host:port or a URL rerun+http://host:port/proxy"
     )
+
+
+def _proxy_url(address: str) -> bool:
+    """Whether a URL names a host, a port and the path ``/proxy``, and nothing else.
+
+    Raises:
+        ValueError: its port is not in 1…65535.
+    """
+    url = urlsplit(address)
+    port = url.netloc.rpartition(":")[2]
+    if any(c.isspace() for c in address) or not (url.hostname and port.isdigit()):
+        return False
+    return url.path == "/proxy" and not (url.query or url.fragment) and bool(_port(port))
 
 
 def run_notes(scenario, spawn: bool) -> list[str]:
@@ -84,10 +101,13 @@ def viewer_command(run_dir: Path) -> list[str]:
         run_dir: a run's output directory, or a ``.rrd`` file.
 
     Raises:
-        FileNotFoundError: when there is no recording there (one line saying what to give).
+        FileNotFoundError: when there is no recording there, or the path cannot be looked at
+            (a name too long): one line saying what to give.
     """
+    from cdpr_twin.paths import path_kind
+
     rrd = run_dir if run_dir.suffix == ".rrd" else run_dir / "recording.rrd"
-    if not rrd.is_file():
+    if path_kind(rrd, FileNotFoundError) != "file":
         raise FileNotFoundError(
             f"{rrd}: no recording; give a run directory written by cdpr-twin run (or a .rrd)"
         )
@@ -101,7 +121,7 @@ def _view(args: argparse.Namespace) -> int:
         print(f"cdpr-twin view: error: {exc}", file=sys.stderr)
         return 2
     if args.print_command:
-        print(" ".join(command))
+        print(shlex.join(command))  # pasted into a shell: a path with spaces stays one word
         return 0
     try:
         viewer = subprocess.Popen(command)
@@ -142,7 +162,7 @@ def _scenarios(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 1
-    print(f"{target} (run it: cdpr-twin run {target})")
+    print(f"{target} (run it: cdpr-twin run {shlex.quote(str(target))})")
     return 0
 
 
@@ -153,7 +173,7 @@ def add_parsers(sub) -> None:
     actions.add_parser("list", help="the shipped scenarios and what each reproduces")
     copy = actions.add_parser("copy", help="copy a shipped scenario into a directory")
     copy.add_argument("name", help="a shipped scenario (see: cdpr-twin scenarios list)")
-    copy.add_argument("dir", type=Path, help="directory to copy it into (created if needed)")
+    copy.add_argument("dir", type=out_path, help="directory to copy it into (created if needed)")
     sc.set_defaults(func=_scenarios)
     view = sub.add_parser("view", help="open a run's recording in the Rerun viewer")
     view.add_argument("run_dir", type=Path, help="a run's output directory (or a .rrd file)")

@@ -36,7 +36,7 @@ def _out_dir(description: Path, out: Path | None) -> Path:
     Raises:
         ValueError: it is not a directory, or cannot be written (the fix in the message).
     """
-    from cdpr_twin.outputs import unwritable
+    from cdpr_twin.paths import unwritable
 
     out = Path(description).parent if out is None else Path(out)
     if out.exists() and not out.is_dir():

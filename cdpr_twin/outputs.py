@@ -29,7 +29,7 @@ handles it as Ctrl-C.
 from __future__ import annotations
 
 import contextlib
-import errno as _errno
+import errno
 import fcntl
 import os
 import socket
@@ -37,6 +37,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from cdpr_twin.json_format import json_text
+from cdpr_twin.paths import path_kind
 
 LOCK_NAME = ".lock"
 """The lock file in an output directory while a run writes it."""
@@ -78,9 +79,9 @@ class OutputError(Exception):
 
     def fix(self, otherwise: str) -> str:
         """What to do: "free some space" only when the disk is full, else ``otherwise``."""
-        if self.errno in (_errno.ENOSPC, _errno.EDQUOT, _errno.EFBIG):
+        if self.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
             return f"free some space, or {otherwise}"
-        if self.errno in (_errno.EACCES, _errno.EPERM):
+        if self.errno in (errno.EACCES, errno.EPERM):
             return f"make it writable, or {otherwise}"
         return otherwise
 
@@ -106,14 +107,6 @@ def fsync_dir(path: Path) -> None:
             os.fsync(fd)
         finally:
             os.close(fd)
-
-
-def unwritable(directory: Path) -> str | None:
-    """Why files cannot be made in an existing ``directory`` (the OS's words), or ``None``."""
-    if os.access(directory, os.W_OK | os.X_OK):
-        return None
-    read_only = os.statvfs(directory).f_flag & os.ST_RDONLY  # or its permissions
-    return os.strerror(_errno.EROFS if read_only else _errno.EACCES)
 
 
 def partial_of(path: Path) -> Path:
@@ -301,7 +294,9 @@ class OutputDir:
         """
         if self.path is None:
             return
-        if held := [n for n in self.foreign if (self.path / n).exists()]:
+        if path_kind(self.path, OutputDirError) not in (None, "dir"):
+            raise OutputDirError(f"output directory {self.path}: exists and is not a directory")
+        if held := [n for n in self.foreign if path_kind(self.path / n, OutputDirError)]:
             raise OutputDirError(
                 f"output directory {self.path} holds another command's outputs "
                 f"({', '.join(held)}); choose another directory"
@@ -314,16 +309,17 @@ class OutputDir:
             raise
 
     def _acquire(self) -> None:
-        where = f"output directory {self.path}"
-        if self.path.exists() and not self.path.is_dir():
-            raise OutputDirError(f"{where}: exists and is not a directory")
+        self._made = [
+            p for p in (self.path, *self.path.parents) if path_kind(p, OutputDirError) is None
+        ]
         try:
-            self._made = [p for p in (self.path, *self.path.parents) if not p.exists()]
             self.path.mkdir(parents=True, exist_ok=True)
             with _guard(self.path):
                 self._create_lock()
         except OSError as exc:
-            raise OutputDirError(f"{where}: cannot write there: {exc.strerror or exc}") from None
+            self._remove_made()  # (e.g. a name too long for the last one: not its parents)
+            where, why = f"output directory {self.path}", exc.strerror or exc
+            raise OutputDirError(f"{where}: cannot write there: {why}") from None
         self._held = True
 
     def _create_lock(self) -> None:
@@ -361,12 +357,15 @@ class OutputDir:
         ``*.partial`` behind, nor the directories the claim created, when they are empty).
         Nothing is touched unless this claim holds the directory.
         """
-        held = self._held
-        if held:
+        if self._held:
             with contextlib.suppress(OutputError):
                 self._clear()
-        self.release()
-        for made in self._made if held else ():
+            self.release()
+            self._remove_made()
+
+    def _remove_made(self) -> None:
+        """Remove the directories the claim created, deepest first, those that are empty."""
+        for made in self._made:
             with contextlib.suppress(OSError):
                 made.rmdir()  # (only if empty)
 

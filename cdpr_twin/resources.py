@@ -63,7 +63,7 @@ def robot_scene(name: str) -> Path:
         ResourceError: for a name that is not shipped, listing those that are.
     """
     path = models_dir() / name / SCENE_FILE
-    if "/" in name or "\\" in name or not path.is_file():
+    if "/" in name or "\\" in name or name not in robots():  # (a name too long is not one)
         raise ResourceError(
             f"no robot named {name!r}; choose one of {', '.join(robots())} or give a model file"
         )
@@ -81,7 +81,9 @@ def robot_model(ref: str | Path | None = None) -> Path:
     """
     if ref is None:
         return robot_scene("acrobot")
-    if is_name(ref) and not Path(ref).is_file():
+    from cdpr_twin.paths import path_kind
+
+    if is_name(ref) and path_kind(Path(ref), ResourceError) != "file":
         return robot_scene(str(ref))
     return Path(ref)
 
@@ -101,8 +103,10 @@ def scenario_file(ref: str | Path) -> Path:
     Raises:
         ResourceError: for a bare name that is neither a file nor a shipped scenario.
     """
+    from cdpr_twin.paths import path_kind
+
     path = Path(ref)
-    if not is_name(ref) or path.is_file():
+    if not is_name(ref) or path_kind(path, ResourceError) == "file":
         return path
     try:
         return _shipped_scenario(str(ref))
@@ -112,7 +116,7 @@ def scenario_file(ref: str | Path) -> Path:
 
 def _shipped_scenario(name: str) -> Path:
     shipped = scenarios_dir() / f"{name}.toml"
-    if not is_name(name) or not shipped.is_file():
+    if not is_name(name) or name not in scenarios():  # (a name too long is not one)
         raise ResourceError(f"no scenario named {name!r}; choose one of {', '.join(scenarios())}")
     return shipped
 
@@ -128,12 +132,13 @@ def copy_scenario(name: str, dest: str | Path) -> Path:
         cdpr_twin.outputs.OutputError: the copy cannot be written (disk full); nothing is left.
     """
     from cdpr_twin.outputs import write_whole
+    from cdpr_twin.paths import path_kind
 
     source = _shipped_scenario(name)
     target = Path(dest) / source.name
-    if target.parent.exists() and not target.parent.is_dir():
+    if path_kind(target.parent, ResourceError) not in (None, "dir"):
         raise ResourceError(f"{target.parent} is not a directory; give a directory")
-    if target.exists():
+    if path_kind(target, ResourceError):
         raise ResourceError(f"{target} exists; remove it or copy into another directory")
     data = source.read_bytes()  # a shipped file: unreadable only in a broken installation
     try:

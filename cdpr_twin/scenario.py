@@ -28,6 +28,7 @@ from cdpr_twin.options import (
     ScenarioError,
     parse_options,
 )
+from cdpr_twin.paths import path_kind
 from cdpr_twin.realism import Realism, profile, without_source
 from cdpr_twin.scenario_tables import (
     MonitorConfig,
@@ -319,8 +320,8 @@ def _model(top: OptionReader, source: Path) -> ModelConfig:
 
 
 def _read(source: Path) -> OptionReader:
-    if not source.is_file():
-        why = "a directory, not a scenario file" if source.is_dir() else "scenario file not found"
+    if (kind := path_kind(source, ScenarioError)) != "file":
+        why = "a directory, not a scenario file" if kind == "dir" else "scenario file not found"
         raise ScenarioError(f"{source}: {why}")
     try:
         data = tomllib.loads(source.read_text(encoding="utf-8"))
@@ -358,8 +359,13 @@ def scenario_from_data(data: Mapping[str, Any], source: str | Path) -> Scenario:
 def _scenario(top: OptionReader, source: Path) -> Scenario:
     loaded = read_plugins(top)  # first: the file may name what they register
     name = top.string("name", source.stem)
-    if not name or any(c in name for c in "/\\") or name in (".", ".."):
-        raise top.fail("name", f"must be a plain name usable as a directory, got {name!r}")
+    control = any(ord(c) < 0x20 or c == "\x7f" for c in name)  # NUL, newline, tab, DEL
+    if not name or any(c in name for c in "/\\") or name in (".", "..") or control:
+        raise top.fail(
+            "name",
+            f"must be a plain name usable as a directory (no /, \\ or control characters), "
+            f"got {name!r}",
+        )
     description = top.string("description", "")
     duration = top.number("duration", minimum=0, exclusive=True, unit="s")
     seed = top.integer("seed", 0, minimum=0)

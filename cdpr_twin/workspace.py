@@ -14,9 +14,7 @@ figure is written whole or not at all (``<name>.partial``, then renamed).
 
 from __future__ import annotations
 
-import errno
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -216,24 +214,25 @@ def figure_format(path: str | Path) -> str:
 
     Raises:
         ValueError: naming the path, the problem and the fix: a directory, a missing or
-            unwritable parent directory, or an extension matplotlib cannot write.
+            unwritable parent directory, a path the OS refuses to look at (a name too long),
+            or an extension matplotlib cannot write.
     """
     import shutil
 
     import matplotlib
     from matplotlib.backend_bases import FigureCanvasBase
 
+    from cdpr_twin.paths import path_kind, unwritable
+
     path = Path(path)
     kinds = FigureCanvasBase.get_supported_filetypes()
     fmt = path.suffix[1:].lower()
-    if path.is_dir():
+    if path_kind(path, ValueError) == "dir":
         raise ValueError(f"{path} is a directory; give a file name, e.g. {path / 'workspace.png'}")
-    if not path.parent.is_dir():
-        missing = "is not a directory" if path.parent.exists() else "does not exist"
+    if (parent := path_kind(path.parent, ValueError)) != "dir":
+        missing = "is not a directory" if parent else "does not exist"
         raise ValueError(f"{path}: {path.parent} {missing}; give a file in an existing directory")
-    if not os.access(path.parent, os.W_OK | os.X_OK):  # found before the sampling, not after
-        ro = os.statvfs(path.parent).f_flag & os.ST_RDONLY
-        why = os.strerror(errno.EROFS if ro else errno.EACCES)
+    if why := unwritable(path.parent):  # found before the sampling, not after
         raise ValueError(f"{path}: cannot write in {path.parent} ({why}); give another directory")
     if fmt not in kinds:
         raise ValueError(

@@ -71,7 +71,9 @@ def test_an_event_the_run_does_not_reach_is_listed_in_the_summary():
     assert (pending["kind"], pending["due_s"], pending["cable"]) == ("cable_break", 26.0, 2)
 
 
-@pytest.mark.parametrize("address", ["0", "99999", "host:70000"])
+@pytest.mark.parametrize(
+    "address", ["0", "99999", "host:70000", "rerun+http://host:0/proxy", "rerun://host:70000/proxy"]
+)
 def test_a_port_out_of_range_is_refused(address):
     with pytest.raises(ValueError, match="not a TCP port"):
         live_url(address)

@@ -363,3 +363,66 @@ def test_a_claim_removes_its_owners_partial_files_not_the_users(tmp_path, partia
     owner.claim()
     owner.release()
     assert sorted(p.name for p in out.iterdir()) == ["notes.partial", "thesis.tex.partial"]
+
+
+LONG = "y" * 300  # a path component over NAME_MAX (255 bytes): the OS says ENAMETOOLONG
+ACROBOT = ROOT / "models" / "acrobot" / "robot.toml"
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["run", str(OPEN_LOOP), "--out", "LONG", "--no-camera", "--duration", "0.2"],
+        ["run", "LONG.toml"],
+        ["run", LONG],  # a bare name: neither a file here nor a shipped scenario
+        ["reproduce", "--out", "LONG", "--duration", "0.2", "--runs-scale", "0.01"],
+        ["calibrate", str(OPEN_LOOP), "--poses", "12", "--out", "LONG"],
+        ["calibrate", str(OPEN_LOOP), "--poses", "12", "--out", "made/LONG"],
+        ["calibrate", "LONG.toml"],
+        ["model", "workspace", str(ACROBOT), "--out", "LONG/ws.png"],
+        ["scenarios", "copy", "paper_pbvs", "LONG"],
+        ["view", "LONG"],
+    ],
+    ids=[
+        "run --out",
+        "run FILE",
+        "run NAME",
+        "reproduce --out",
+        "calibrate --out",
+        "calibrate --out (parent made)",
+        "calibrate FILE",
+        "model workspace --out",
+        "scenarios copy",
+        "view",
+    ],
+)
+def test_a_path_the_os_refuses_is_one_line_naming_it_and_nothing_is_left(
+    argv, tmp_path, monkeypatch, capsys
+):
+    """Python 3.11's ``Path.exists()`` raised it: a traceback (or "the run failed", exit 1)."""
+    monkeypatch.chdir(tmp_path)
+    code = main([a.replace("LONG", LONG) for a in argv])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert LONG in err and "File name too long" in err
+    assert list(tmp_path.iterdir()) == []  # not even the parent directory made for it
+
+
+def test_a_scenario_name_too_long_for_its_directory_leaves_nothing_then_again(
+    tmp_path, monkeypatch, capsys
+):
+    """``runs/<name>`` cannot be made: the first run left ``runs/``, the second failed (exit 1)."""
+    text = _scenario(tmp_path, (10.0, 5.0, 10.0)).read_text()
+    scenario = tmp_path / "long.toml"
+    scenario.write_text(text.replace('name = "paper_open_loop"', f'name = "{LONG}"', 1))
+    monkeypatch.chdir(tmp_path)
+    for kept in ([], ["runs"]):  # no runs/ (the claim makes it, then removes it); the user's
+        for name in kept:
+            (tmp_path / name).mkdir()
+        assert main(["run", str(scenario), "--no-camera", "--duration", "0.2"]) == 2
+        line = _one_error_line(capsys.readouterr().err)
+        assert f"runs/{LONG}" in line and "File name too long" in line
+        left = sorted(p.name for p in tmp_path.iterdir())
+        assert left == sorted(["long.toml", "slow_25.toml", *kept])
+    assert list((tmp_path / "runs").iterdir()) == []

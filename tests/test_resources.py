@@ -1,6 +1,7 @@
 """Robots and scenarios by name, `cdpr-twin scenarios list|copy`, and `cdpr-twin view`."""
 
 import os
+import shlex
 import subprocess
 import sys
 import tomllib
@@ -75,20 +76,23 @@ def test_scenarios_list_and_copy_start_ones_own(tmp_path):
     assert set(rows) == set(SHIPPED)
     shipped = tomllib.loads((ROOT / "scenarios" / "paper_pbvs.toml").read_text())
     assert shipped["description"] in rows["paper_pbvs"]
-    copied = _cli("scenarios", "copy", "paper_open_loop", "mine", cwd=tmp_path)
+    copied = _cli("scenarios", "copy", "paper_open_loop", "my own", cwd=tmp_path)
     assert copied.returncode == 0, copied.stderr
-    target = tmp_path / "mine" / "paper_open_loop.toml"
+    hint = "(run it: cdpr-twin run 'my own/paper_open_loop.toml')"  # quoted for a shell
+    assert copied.stdout.strip() == f"my own/paper_open_loop.toml {hint}"
+    target = tmp_path / "my own" / "paper_open_loop.toml"
     assert target.read_bytes() == (ROOT / "scenarios" / "paper_open_loop.toml").read_bytes()
     assert load_scenario(target).model.file.samefile(resources.robot_scene("acrobot"))
-    again = _cli("scenarios", "copy", "paper_open_loop", "mine", cwd=tmp_path)
+    again = _cli("scenarios", "copy", "paper_open_loop", "my own", cwd=tmp_path)
     assert again.returncode == 2 and "exists; remove it" in again.stderr
     unknown = _cli("scenarios", "copy", "paper", "mine", cwd=tmp_path)
     assert unknown.returncode == 2 and len(unknown.stderr.strip().splitlines()) == 1
     assert "choose one of " + ", ".join(SHIPPED) in unknown.stderr
 
 
-def test_view_opens_the_run_recording_in_the_rerun_viewer(tmp_path, monkeypatch, capsys):
-    run_dir = tmp_path / "run"
+@pytest.mark.parametrize("name", ["run", "my run's 'copy'"])  # printed quoted for a shell
+def test_view_opens_the_run_recording_in_the_rerun_viewer(name, tmp_path, monkeypatch, capsys):
+    run_dir = tmp_path / name
     run_dir.mkdir()
     assert cli.main(["view", str(run_dir)]) == 2
     assert "no recording; give a run directory" in capsys.readouterr().err
@@ -106,7 +110,7 @@ def test_view_opens_the_run_recording_in_the_rerun_viewer(tmp_path, monkeypatch,
     assert cli.main(["view", str(run_dir)]) == 0
     assert started == [[sys.executable, "-m", "rerun", str(run_dir / "recording.rrd")]]
     assert cli.main(["view", str(run_dir), "--print-command"]) == 0
-    assert capsys.readouterr().out.split() == started[0]
+    assert shlex.split(capsys.readouterr().out) == started[0]
     assert len(started) == 1
     monkeypatch.undo()
     # the printed command is the viewer of this environment's rerun-sdk
@@ -124,20 +128,34 @@ def test_view_opens_the_run_recording_in_the_rerun_viewer(tmp_path, monkeypatch,
         ("9876", "rerun+http://127.0.0.1:9876/proxy"),
         ("robot-pc:9000", "rerun+http://robot-pc:9000/proxy"),
         ("rerun+http://10.0.0.2:9876/proxy", "rerun+http://10.0.0.2:9876/proxy"),
+        ("rerun+https://[::1]:443/proxy", "rerun+https://[::1]:443/proxy"),
     ],
 )
 def test_connect_addresses(given, url):
     assert cli_tools.live_url(given) == url
 
 
-def test_a_bad_connect_address_is_a_one_line_error(tmp_path):
-    proc = _cli("run", "paper_open_loop", "--connect", "http://x/y", cwd=tmp_path)
-    assert proc.returncode == 2
-    assert proc.stderr.strip() == (
-        "cdpr-twin: error: --connect 'http://x/y': give a port, host:port or a URL "
+@pytest.mark.parametrize(
+    "address",
+    [
+        "http://x/y",
+        "rerun+http://",  # before: the URLs were kept as given, the run streamed nowhere, exit 0
+        "rerun+http://garbage with spaces",
+        "rerun+http://garbage with spaces:9876/proxy",
+        "rerun+http://robot-pc/proxy",  # no port
+        "rerun+http://:9876/proxy",  # no host
+        "rerun+http://robot-pc:9876",  # no /proxy: the SDK refuses it, the run said nothing
+        "rerun+http://robot-pc:9876/proxy?x=1",
+    ],
+)
+def test_a_bad_connect_address_is_a_one_line_error(address, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["run", "paper_open_loop", "--connect", address]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"cdpr-twin: error: --connect {address!r}: give a port, host:port or a URL "
         "rerun+http://host:port/proxy"
     )
-    assert not (tmp_path / "runs").exists()
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_spawn_and_connect_together_is_a_one_line_error(tmp_path):

@@ -140,6 +140,18 @@ def test_scenarios_copy_into_a_file_is_a_one_line_error(tmp_path, capsys):
     assert "not a directory" in _error(capsys)
 
 
+def test_scenarios_copy_into_an_empty_path_is_refused_not_taken_for_here(
+    tmp_path, monkeypatch, capsys
+):
+    """An unset shell variable (``"$DIR"``): before, the scenario was copied into the cwd."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exit_:
+        cli.main(["scenarios", "copy", "paper_pbvs", ""])
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and "argument dir: is empty: give a directory" in err
+    assert list(tmp_path.iterdir()) == []
+
+
 # --- model workspace ------------------------------------------------------------------------
 
 

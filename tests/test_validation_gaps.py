@@ -46,6 +46,26 @@ def test_a_bad_truth_value_names_the_file_and_the_field_once(tmp_path):
     assert message == f"{path}: truth.exit_point_std: must be ≥ 0 m, got -0.012"
 
 
+@pytest.mark.parametrize("command", ["run", "calibrate"])
+@pytest.mark.parametrize(
+    "escaped", [r"a\u0000b", r"a\nb", r"a\tb", r"a\u007fb"], ids=["NUL", "newline", "tab", "DEL"]
+)
+def test_a_scenario_name_with_a_control_character_is_refused_naming_the_field(
+    escaped, command, tmp_path, monkeypatch, capsys
+):
+    """Before: NUL was "the run failed: ValueError" (exit 1, a traceback from calibrate), a
+    newline made the directory ``runs/a⏎b``."""
+    from cdpr_twin.cli import main
+
+    path = _file(tmp_path, 'name = "paper_open_loop"', f'name = "{escaped}"')
+    monkeypatch.chdir(tmp_path)  # the default output directory: runs/<name>
+    assert main([command, str(path), "--no-camera" if command == "run" else "--poses=12"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert f"{path}: name: must be a plain name" in err and "control characters" in err
+    assert [p.name for p in tmp_path.iterdir()] == ["s.toml"]
+
+
 def test_a_run_shorter_than_one_control_period_is_refused_on_the_command_line():
     s = load_scenario(ROOT / "scenarios" / "paper_open_loop.toml")
     with pytest.raises(ScenarioError, match=r"--duration: 0\.001 s must span 1"):
