@@ -123,6 +123,15 @@ def _view(args: argparse.Namespace) -> int:
     if args.print_command:
         print(shlex.join(command))  # pasted into a shell: a path with spaces stays one word
         return 0
+    if sys.platform.startswith("linux") and not (
+        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+    ):  # the viewer would fail with its own multi-line error
+        print(
+            "cdpr-twin view: error: no display here (DISPLAY and WAYLAND_DISPLAY unset); copy "
+            "the recording to a machine with one, or print the command with --print-command",
+            file=sys.stderr,
+        )
+        return 2
     try:
         viewer = subprocess.Popen(command)
     except OSError as exc:

@@ -107,6 +107,14 @@ def test_view_opens_the_run_recording_in_the_rerun_viewer(name, tmp_path, monkey
             return 0
 
     monkeypatch.setattr(cli_tools.subprocess, "Popen", FakeViewer)
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    if sys.platform.startswith("linux"):  # before: Rerun's own multi-line error, exit 1
+        assert cli.main(["view", str(run_dir)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "no display here" in err and "--print-command" in err
+        assert started == []
+    monkeypatch.setenv("DISPLAY", ":0")
     assert cli.main(["view", str(run_dir)]) == 0
     assert started == [[sys.executable, "-m", "rerun", str(run_dir / "recording.rrd")]]
     assert cli.main(["view", str(run_dir), "--print-command"]) == 0
