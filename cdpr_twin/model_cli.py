@@ -36,12 +36,13 @@ def _out_dir(description: Path, out: Path | None) -> Path:
     Raises:
         ValueError: it is not a directory, or cannot be written (the fix in the message).
     """
-    from cdpr_twin.paths import unwritable
+    from cdpr_twin.paths import path_kind, unwritable
 
     out = Path(description).parent if out is None else Path(out)
-    if out.exists() and not out.is_dir():
+    kind = path_kind(out, ValueError)
+    if kind not in (None, "dir"):
         raise ValueError(f"--out {out}: exists and is not a directory; give a directory")
-    if out.is_dir() and (why := unwritable(out)):
+    if kind == "dir" and (why := unwritable(out)):
         raise ValueError(f"--out {out}: cannot write there ({why}); give another")
     return out
 

@@ -297,8 +297,7 @@ def check(s: Scenario) -> None:
     """What would stop the recording, checked in this process before any worker starts.
 
     The camera is on, no events or payload, the robot builds with a camera and a tag, and its
-    true start pose (the homing offset applied) is inside the frame and held by a tension
-    distribution.
+    true start pose (homing offset applied) is inside the frame and held by some tensions.
 
     Raises:
         ScenarioError: naming the file and the field at fault, as ``cdpr-twin run`` does.
@@ -312,9 +311,10 @@ def _refuse_what_it_cannot_use(s: Scenario) -> None:
     """The camera off, events (its own tour has none), a payload (its balance weighs none)."""
     if not s.sensors.camera:
         raise ScenarioError(f"{s.source}: sensors.camera: calibration needs the camera; set true")
-    for field, used in (("[[events]]", s.events), ("model.payload_kg", s.model.payload)):
+    unused = [("[[events]]", s.events, "drives its own tour"),
+              ("model.payload_kg", s.model.payload, "weighs the platform alone")]  # fmt: skip
+    for field, used, why in unused:
         if used:
-            why = "drives its own tour" if field == "[[events]]" else "weighs the platform alone"
             raise ScenarioError(f"{s.source}: {field}: a calibration {why}; remove it from a copy")
 
 
