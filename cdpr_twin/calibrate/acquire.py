@@ -31,27 +31,16 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from cdpr_twin.calibrate import drive
 from cdpr_twin.calibrate.excitation import tag_in_view
 from cdpr_twin.calibrate.problem import Detector, Observations
 from cdpr_twin.campaign.executor import stop_workers
-from cdpr_twin.controllers.open_loop import Segment
-from cdpr_twin.kinematics import cable_lengths
 from cdpr_twin.procedure import homing
 from cdpr_twin.scenario import Scenario, ScenarioError
 from cdpr_twin.se3 import so3_exp, so3_log, transform
 
-SPEED = 0.08
-"""Cruise speed of the moves between poses [m/s] (0.2 m/rad for rotations)."""
-
-SETTLE = 0.6
+SETTLE = 0.3
 """Rest before reading at each pose [s] (the platform's swing decays in ≈ 0.3 s)."""
-
-
-TIGHTEN_TARGET = 3.0
-"""Every cable is tightened to at least this tension before the readings [N]."""
-
-TIGHTEN_SPEED = 0.002
-"""Speed at which a slack cable is reeled in [m/s]."""
 
 SEGMENTS = 4
 """The tour is recorded in this many segments (fewer when there are fewer poses)."""
@@ -117,42 +106,6 @@ class Recording:
         return replace(self, obs=self.obs.subset(keep), truth=truth)
 
 
-def _move(physics, sensors, geom, T_from: np.ndarray, T_to: np.ndarray, period: float) -> None:
-    """Drive open loop along a quintic line, rates from the nominal lengths' changes.
-
-    The lengths end at the nominal model's at ``T_to``: what tightening reeled in at the last
-    pose is paid back out along the way.
-    """
-    dist = np.linalg.norm(T_to[:3, 3] - T_from[:3, 3])
-    ang = np.linalg.norm(so3_log(T_from[:3, :3].T @ T_to[:3, :3]))
-    n = max(int(np.ceil((dist + 0.2 * ang) / SPEED / period * 1.875)), 10)  # peak ṡ = 1.875
-    seg = Segment(T_from, T_to, n * period)
-    lengths = sensors.read(None, render=False).cable_lengths
-    gap = cable_lengths(geom, T_from, "pulley") - lengths
-    for k in range(1, n + 1):
-        nxt = cable_lengths(geom, seg.pose(k * period), "pulley") - gap * (1.0 - k / n)
-        physics.advance(period, (nxt - lengths) / period)
-        lengths = nxt
-
-
-def _tighten(physics, sensors, period: float, target: float, timeout: float = 4.0) -> None:
-    """Reel in every cable that reads below ``target`` [N] until all read above it.
-
-    The true robot differs from the model, so after an open-loop move some cables hang slack
-    (the platform rests on six, which carry no information on the geometry). Like a real
-    CDPR's tensioning step this uses the tension readings only: a slack cable is reeled in at
-    2 mm/s, a taut one below the target in proportion to the missing tension.
-    """
-    for _ in range(round(timeout / period)):
-        tau = sensors.read(None, render=False).tensions
-        low = tau < target
-        if not low.any():
-            return
-        k = physics.geometry.es / physics.rest_lengths  # the order of magnitude suffices
-        rate = np.where(tau < 0.5, -TIGHTEN_SPEED, -(target + 1.0 - tau) / (k * 0.05))
-        physics.advance(period, np.where(low, np.maximum(rate, -TIGHTEN_SPEED), 0.0))
-
-
 def _read(
     physics, sensors, period: float, frames: int, wait: int, look: bool, tighten: bool = True
 ) -> tuple:
@@ -163,8 +116,12 @@ def _read(
     rest = np.zeros(physics.n_cables)
     if tighten:
         physics.advance(round(SETTLE / period) * period, rest)
-        _tighten(physics, sensors, period, TIGHTEN_TARGET)
-    physics.advance(round(SETTLE / period) * period, rest)
+        drive.tighten(physics, sensors)
+    settle = round(SETTLE / period) * period
+    physics.advance(settle - period * look, rest)
+    if look:  # the camera records the states of its exposures from the tick before its reads
+        _exposures(sensors, True)
+        physics.advance(period, rest)
     for _ in range(wait if look else 0):
         sensors.read(None)
         physics.advance(period, rest)
@@ -179,7 +136,19 @@ def _read(
         if m.tag is not None:
             tags.append(m.tag.T_cam_tag)
         physics.advance(period, rest)
+    _exposures(sensors, False)
     return np.mean(enc, axis=0), np.mean(ten, axis=0), ok, _mean_pose(tags)
+
+
+def _exposures(sensors, on: bool) -> None:
+    """Record the robot's states for the camera's motion blur (``on``) or not.
+
+    Off while the robot moves and tightens, where the camera is not read: a hook less to stop
+    the physics at every sub-frame time.
+    """
+    recorder = sensors.camera.exposure if sensors.camera is not None else None
+    if recorder is not None:
+        recorder.active = on
 
 
 def _mean_pose(poses: list[np.ndarray]) -> np.ndarray | None:
@@ -347,12 +316,13 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
     try:
         _reset_at_start(s, physics, settle_time=0.3)
         sensors.home(s.start_pose)
+        _exposures(sensors, False)
         rows, truth, here = [], [], s.start_pose
         # the first segment first reads where the encoders were homed, as the robot stands
         stops = [(here, False)] * (index == 0) + [(T, True) for T in poses]
         for T, moved in stops:
             if moved:
-                _move(physics, sensors, g, here, T, period)
+                drive.move(physics, sensors, g, here, T, period)
             look = tag_in_view(g, nominal.T_base_tag, nominal.intrinsics, nominal.tag_size, T,
                                VIEW_MARGIN)  # fmt: skip
             wait = s.realism.camera.latency_ticks

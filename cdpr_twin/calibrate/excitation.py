@@ -111,14 +111,15 @@ def excitation_poses(
 
 def tour(poses: list[np.ndarray], start: np.ndarray) -> list[np.ndarray]:
     """The poses ordered greedily, each next one the nearest (position + 0.2 m/rad)."""
-
-    def dist(a: np.ndarray, b: np.ndarray) -> float:
-        c = np.clip(0.5 * (np.trace(a[:3, :3].T @ b[:3, :3]) - 1.0), -1.0, 1.0)
-        return float(np.linalg.norm(a[:3, 3] - b[:3, 3]) + 0.2 * math.acos(c))
-
-    left, out, here = list(poses), [], start
-    while left:
-        j = min(range(len(left)), key=lambda i: dist(here, left[i]))
-        here = left.pop(j)
-        out.append(here)
+    if not poses:
+        return []
+    T = np.asarray(poses, dtype=float)
+    left, out, here = np.ones(len(T), dtype=bool), [], np.asarray(start, dtype=float)
+    for _ in range(len(T)):
+        # the angle between here and each pose: tr(Rᵀ R_i) = Σ R ⊙ R_i
+        c = np.clip(0.5 * (np.einsum("ij,kij->k", here[:3, :3], T[:, :3, :3]) - 1.0), -1.0, 1.0)
+        d = np.linalg.norm(T[:, :3, 3] - here[:3, 3], axis=1) + 0.2 * np.arccos(c)
+        j = int(np.argmin(np.where(left, d, np.inf)))
+        left[j], here = False, T[j]
+        out.append(poses[j])
     return out

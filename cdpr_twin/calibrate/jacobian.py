@@ -58,6 +58,17 @@ def _differentiate(fun, x, cols, h, pattern, data, row0) -> None:
         data[at][inside] = d[rows[inside] - row0]
 
 
+def _where(pattern: csc_matrix, cols: list[int], rows: slice) -> tuple[np.ndarray, np.ndarray]:
+    """Where columns ``cols`` have entries in ``rows``: positions in ``pattern.data``, rows.
+
+    The rows are counted from ``rows.start``.
+    """
+    at = np.concatenate([np.arange(pattern.indptr[c], pattern.indptr[c + 1]) for c in cols])
+    r = pattern.indices[at]
+    inside = (r >= rows.start) & (r < rows.stop)
+    return at[inside], r[inside] - rows.start
+
+
 def _colour(block: csc_matrix) -> list[list[int]]:
     """Greedy grouping of ``block``'s nonzero columns into sets with disjoint rows."""
     occupied: list[np.ndarray] = []
@@ -97,6 +108,12 @@ class PartJacobian:
     ) -> None:
         self.parts, self.pattern, self.h = parts, csc_matrix(pattern), h
         self.groups = groups or [_colour(self.pattern[rows]) for rows, _ in parts]
+        # per part and group: where its derivatives go in the pattern's data, and which of
+        # the part's rows they are
+        self._scatter = [
+            [_where(self.pattern, cols, rows) for cols in part_groups]
+            for (rows, _), part_groups in zip(parts, self.groups, strict=True)
+        ]
 
     @property
     def evaluations(self) -> int:
@@ -107,8 +124,11 @@ class PartJacobian:
         """The (n_rows, n) Jacobian at ``x`` (CSC, on the pattern), and the evaluations."""
         p = self.pattern
         data = np.zeros(p.nnz)
-        for (rows, fun), groups in zip(self.parts, self.groups, strict=True):
-            for cols in groups:
-                _differentiate(fun, x, cols, self.h, p, data, rows.start)
+        h = self.h
+        for (_, fun), groups, scatter in zip(self.parts, self.groups, self._scatter, strict=True):
+            for cols, (at, rows) in zip(groups, scatter, strict=True):
+                dx = np.zeros(len(x))
+                dx[cols] = h
+                data[at] = ((fun(x + dx) - fun(x - dx)) / (2.0 * h))[rows]
         J = csc_matrix((data, p.indices, p.indptr), shape=p.shape)
         return J, self.evaluations

@@ -52,6 +52,8 @@ def levenberg_marquardt(
     max_iterations: int = 100,
     ftol: float = 1e-10,
     xtol: float = 1e-10,
+    lam0: float = 1e-3,
+    shrink: float = 1.0 / 3.0,
 ) -> Solution:
     """Minimise ½‖fun(x)‖² from ``x0``.
 
@@ -62,6 +64,10 @@ def levenberg_marquardt(
         max_iterations: most steps (accepted or not).
         ftol: stop when a step lowers the cost by less than ``ftol`` × cost.
         xtol: stop when ‖δ‖ < ``xtol`` · (‖x‖ + xtol), norms in Marquardt's scaling.
+        lam0: the damping λ to start from (dimensionless, Marquardt's scaling): small when
+            ``x0`` is already near the minimum (a re-solve with other weights), so that the
+            first steps are Gauss–Newton's.
+        shrink: the most λ shrinks by after a step (Nielsen's rule).
 
     Returns:
         The solution (``converged`` False at the iteration limit).
@@ -72,7 +78,7 @@ def levenberg_marquardt(
     J, n = jac(x)
     nfev += n
     N, g = _normal(J, r)
-    lam, nu = 1e-3, 2.0  # with Marquardt's scaling λ is dimensionless
+    lam, nu = lam0, 2.0  # with Marquardt's scaling λ is dimensionless
     for it in range(1, max_iterations + 1):
         d = np.maximum(np.diag(N), 1e-300)
         step = _damped_step(N, g, lam * d)
@@ -97,7 +103,7 @@ def levenberg_marquardt(
         J, n = jac(x)
         nfev += n
         N, g = _normal(J, r)
-        lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+        lam *= max(shrink, 1.0 - (2.0 * rho - 1.0) ** 3)
         nu = 2.0
     return Solution(x, r, J, cost, nfev, max_iterations, False, "the iteration limit was hit")
 

@@ -40,6 +40,15 @@ MIN_VARIANCE_RATIO = 1e-4
 """A group's σ is not lowered below 1 % of the one it was told (noise-free readings, as in the
 ``ideal`` profile, would otherwise weigh it without bound)."""
 
+DAMPING = (1e-6, 1e-8)
+"""Levenberg–Marquardt's starting damping (Marquardt's scaling) from the nominal model, and
+from the previous solve when only the weights changed. The residuals are nearly linear in
+the unknowns within the builder's tolerances, so Gauss–Newton's steps are the right ones; a
+textbook start (λ = 1e-3, shrinking at most 3× per step) damps the directions that only the
+priors hold (the frame's gauge) for many steps (robot 1, 240 poses, three solves: 45 steps
+in 25 s against 13 in 9 s; the exit points agree within 0.01 µm). Steps that do not lower the cost
+are still rejected and λ raised, and λ shrinks up to 10× per accepted step."""
+
 POSE_SCALE = 0.01
 """The scale of a pose correction in the rank analysis: 1 cm, 0.01 rad."""
 
@@ -206,6 +215,8 @@ def _minimise(problem: Problem, max_iterations: int, x0: np.ndarray | None):
             problem.jacobian(),
             np.zeros(L.n) if x0 is None else np.asarray(x0, dtype=float),
             max_iterations=max_iterations,
+            lam0=DAMPING[x0 is not None],
+            shrink=0.1,
         )
     if not res.converged or not np.all(np.isfinite(res.x)):
         raise CalibrationError(

@@ -109,6 +109,26 @@ def T_world_cam(data: mujoco.MjData, cid: int) -> np.ndarray:
     return transform(data.cam_xmat[cid].reshape(3, 3) @ R_MJCAM_CV, data.cam_xpos[cid])
 
 
+def scene_key(scene: mujoco.MjvScene) -> bytes:
+    """What the renderer draws of ``scene``, as bytes: equal keys draw the same image.
+
+    Every geom's kind, object, material, size, colour and pose, every light's, and the
+    camera's pose and frustum, in the single precision ``mjvScene`` holds them in (the
+    flags, options and textures are the renderer's own, fixed).
+    """
+    parts = []
+    for g in scene.geoms[: scene.ngeom]:
+        ids = (g.type, g.dataid, g.objtype, g.objid, g.matid, g.texcoord, g.segid)
+        parts += [np.array(ids, np.float32), g.size, g.pos, g.mat, g.rgba]
+    for light in scene.lights[: scene.nlight]:
+        parts += [light.pos, light.dir, light.diffuse, light.ambient, light.specular]
+    for cam in scene.camera:
+        frustum = (cam.frustum_center, cam.frustum_width, cam.frustum_bottom)
+        frustum += (cam.frustum_top, cam.frustum_near, cam.frustum_far, cam.orthographic)
+        parts += [cam.pos, cam.forward, cam.up, np.array(frustum, np.float32)]
+    return b"".join(np.asarray(p, np.float32).tobytes() for p in parts)
+
+
 class CameraRenderer:
     """Offscreen RGB rendering of one camera, at its native resolution or supersampled.
 
@@ -136,6 +156,7 @@ class CameraRenderer:
         self.camera_id = camera_id(model, name)
         self._model = model
         self._scratch: mujoco.MjData | None = None
+        self._last: tuple[bytes, np.ndarray | None] = (b"", None)  # the last scene drawn
         self.intrinsics = intrinsics(model, name)
         self.render_intrinsics = self.intrinsics.scaled(scale)
         check_frame_size(self.intrinsics.width, self.intrinsics.height, scale)  # before margins
@@ -172,17 +193,25 @@ class CameraRenderer:
         self._option.tendongroup[:] = 1
 
     def render(self, data: mujoco.MjData) -> np.ndarray:
-        """Render the camera's view: (H, W, 3) RGB uint8 of the canvas, top row first."""
+        """Render the camera's view: (H, W, 3) RGB uint8 of the canvas, top row first.
+
+        A scene that draws exactly as the last one (every geom, light and the camera equal in
+        the single precision the renderer draws with: a robot at rest between the sub-frames
+        of an exposure) gives a copy of the last image instead of drawing it again.
+        """
         if self._fovy is None:
             self._renderer.update_scene(data, camera=self.camera_id, scene_option=self._option)
-            return self._renderer.render()
-        fovy = self._model.cam_fovy[self.camera_id]
-        self._model.cam_fovy[self.camera_id] = self._fovy  # the scene's frustum takes it
-        try:
-            self._renderer.update_scene(data, camera=self.camera_id, scene_option=self._option)
-        finally:
-            self._model.cam_fovy[self.camera_id] = fovy
-        return self._renderer.render()
+        else:
+            fovy = self._model.cam_fovy[self.camera_id]
+            self._model.cam_fovy[self.camera_id] = self._fovy  # the scene's frustum takes it
+            try:
+                self._renderer.update_scene(data, camera=self.camera_id, scene_option=self._option)
+            finally:
+                self._model.cam_fovy[self.camera_id] = fovy
+        key = scene_key(self._renderer.scene)
+        if key != self._last[0]:
+            self._last = (key, self._renderer.render())
+        return self._last[1].copy()
 
     def render_state(
         self, qpos: np.ndarray, mocap_pos: np.ndarray, mocap_quat: np.ndarray
