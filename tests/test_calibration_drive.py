@@ -1,0 +1,153 @@
+"""How a calibration drives and reads the robot, and the solver's damping, against truth.
+
+- tightening: the simulated robot's own cable tensions (physics, not the sensors) after it;
+- the tour: a greedy nearest-neighbour order written out here, pose by pose;
+- the damping: Rosenbrock's valley, whose minimum is known, from a start where Gauss–Newton's
+  first step overshoots;
+- the camera: a frame drawn once and reused equals a fresh renderer's draw of the same state.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from cdpr_twin.calibrate import drive
+from cdpr_twin.calibrate.excitation import excitation_poses, tour
+from cdpr_twin.calibrate.normal_equations import levenberg_marquardt
+from cdpr_twin.scenario import load_scenario
+
+
+def _robot(s):
+    from cdpr_twin.sim import Sensors, build_robot
+
+    physics, nominal, _ = build_robot(
+        s.model.file, s.truth, s.model.timestep, s.model.align_every, s.realism.winch
+    )
+    sensors = Sensors(
+        physics, nominal, s.sensors.tension_noise_std, s.seed, camera=False,
+        realism=s.realism, robot_seed=s.truth.seed, period=s.model.control_period,
+    )  # fmt: skip
+    physics.reset(s.start_pose, settle_time=0.3)
+    sensors.home(s.start_pose)
+    return physics, nominal, sensors
+
+
+def test_tightening_leaves_every_true_cable_taut_after_an_open_loop_move():
+    s = load_scenario("paper_open_loop")  # robot 19: exit points 12 mm off the nominal ones
+    physics, nominal, sensors = _robot(s)
+    g, period = nominal.geometry, s.model.control_period
+    poses = excitation_poses(g, nominal.T_base_tag, nominal.intrinsics, nominal.tag_size, 6,
+                             s.start_pose)  # fmt: skip
+    rest, slack_before = np.zeros(physics.n_cables), 0
+    here = s.start_pose
+    for T in poses:
+        drive.move(physics, sensors, g, here, T, period)
+        physics.advance(0.4, rest)
+        slack_before += int(np.sum(physics.tensions < 0.5))
+        ticks = drive.tighten(physics, sensors)
+        physics.advance(0.4, rest)
+        assert ticks > 0  # it had to reel in
+        # the sensors' offset (σ 0.24 N, drawn per robot) may make a reading 2.5 N of less
+        assert np.all(physics.tensions > drive.TIGHTEN_ACCEPT - 1.0), physics.tensions
+        here = T
+    assert slack_before >= len(poses)  # the nominal model's lengths left cables slack
+
+
+def test_tightening_gives_up_at_its_timeout_and_says_so():
+    s = load_scenario("paper_open_loop")
+    physics, _, sensors = _robot(s)
+    physics.disable_cable(0)  # a broken cable: no reeling makes it read
+    assert drive.tighten(physics, sensors, timeout=0.5) == -1
+    assert physics.time == pytest.approx(0.5, abs=0.03)  # (time restarts at a reset)
+
+
+def _greedy(poses, start):
+    """Each next pose the nearest to the last: position + 0.2 m per radian of rotation."""
+    left, out, here = list(range(len(poses))), [], start
+    while left:
+        costs = []
+        for i in left:
+            R = here[:3, :3].T @ poses[i][:3, :3]
+            angle = math.acos(max(-1.0, min(1.0, 0.5 * (np.trace(R) - 1.0))))
+            costs.append(np.linalg.norm(poses[i][:3, 3] - here[:3, 3]) + 0.2 * angle)
+        j = left.pop(int(np.argmin(costs)))
+        out.append(j)
+        here = poses[j]
+    return out
+
+
+def test_the_tour_visits_the_nearest_pose_next():
+    from cdpr_twin.se3 import pose_from_vector
+
+    rng = np.random.default_rng(7)
+    poses = [
+        pose_from_vector([*rng.uniform(-0.3, 0.3, 3), *rng.uniform(-12, 12, 3)]) for _ in range(60)
+    ]
+    start = pose_from_vector([0.0, 0.0, 0.3, 0, 0, 0])
+    got = tour(poses, start)
+    assert [next(i for i, p in enumerate(poses) if p is q) for q in got] == _greedy(poses, start)
+    assert tour([], start) == []
+
+
+@pytest.mark.parametrize("lam0", [1e-8, 1e-3, 1.0])
+def test_levenberg_marquardt_finds_rosenbrocks_minimum_from_any_starting_damping(lam0):
+    # r = (10 (y − x²), 1 − x): minimum 0 at (1, 1); from (−1.2, 1) the undamped step overshoots
+    from scipy.sparse import csc_matrix
+
+    def fun(x):
+        return np.array([10.0 * (x[1] - x[0] ** 2), 1.0 - x[0]])
+
+    def jac(x):
+        return csc_matrix(np.array([[-20.0 * x[0], 10.0], [-1.0, 0.0]])), 0
+
+    res = levenberg_marquardt(fun, jac, np.array([-1.2, 1.0]), lam0=lam0, shrink=0.1)
+    assert res.converged, res.message
+    np.testing.assert_allclose(res.x, [1.0, 1.0], atol=1e-8)
+
+
+def test_a_frame_drawn_again_is_a_fresh_draw_of_the_same_state():
+    from cdpr_twin.sim import build_robot
+    from cdpr_twin.sim.camera import CameraRenderer
+
+    s = load_scenario("paper_open_loop")
+    physics, _, _ = build_robot(s.model.file)
+    physics.reset(s.start_pose, settle_time=0.3)
+    d = physics.data
+    state = (d.qpos.copy(), d.mocap_pos.copy(), d.mocap_quat.copy())
+    moved = (state[0] + np.r_[1e-4, np.zeros(len(state[0]) - 1)], *state[1:])
+    reused, fresh = CameraRenderer(physics.model), CameraRenderer(physics.model)
+    try:
+        first = reused.render_state(*state)
+        again = reused.render_state(*state)  # the same scene: not drawn again
+        np.testing.assert_array_equal(again, fresh.render_state(*state))
+        assert again is not first  # a copy: the caller may write into it
+        after = reused.render_state(*moved)  # 0.1 mm along x: drawn anew
+        fresh2 = CameraRenderer(physics.model)
+        try:
+            np.testing.assert_array_equal(after, fresh2.render_state(*moved))
+        finally:
+            fresh2.close()
+        assert np.any(after != first)
+    finally:
+        reused.close()
+        fresh.close()
+
+
+def test_a_rest_shorter_than_the_swing_would_read_a_moving_platform():
+    # truth: the platform's own speed (physics) where the calibration starts reading
+    from cdpr_twin.calibrate.acquire import SETTLE
+
+    s = load_scenario("paper_open_loop")
+    physics, nominal, sensors = _robot(s)
+    g, period = nominal.geometry, s.model.control_period
+    T = excitation_poses(g, nominal.T_base_tag, nominal.intrinsics, nominal.tag_size, 1,
+                         s.start_pose)[0]  # fmt: skip
+    drive.move(physics, sensors, g, s.start_pose, T, period)
+    rest = np.zeros(physics.n_cables)
+    speeds = []
+    for _ in range(round(SETTLE / period)):
+        physics.advance(period, rest)
+        speeds.append(np.abs(physics.data.qvel[:3]).max())
+    assert speeds[0] > 100 * speeds[-1]  # the move's swing, decayed
+    assert speeds[-1] < 1e-5  # [m/s]: under 0.4 µm over the four frames read (0.16 s)
