@@ -39,7 +39,7 @@ from cdpr_twin.procedure import homing
 from cdpr_twin.scenario import Scenario, ScenarioError
 from cdpr_twin.se3 import so3_exp, so3_log, transform
 
-SETTLE = 0.3
+SETTLE = 0.6
 """Rest before reading at each pose [s] (the platform's swing decays in ≈ 0.3 s)."""
 
 SEGMENTS = 4

@@ -109,13 +109,16 @@ def T_world_cam(data: mujoco.MjData, cid: int) -> np.ndarray:
     return transform(data.cam_xmat[cid].reshape(3, 3) @ R_MJCAM_CV, data.cam_xpos[cid])
 
 
-def scene_key(scene: mujoco.MjvScene) -> bytes:
+def scene_key(scene: mujoco.MjvScene) -> bytes | None:
     """What the renderer draws of ``scene``, as bytes: equal keys draw the same image.
 
     Every geom's kind, object, material, size, colour and pose, every light's, and the
     camera's pose and frustum, in the single precision ``mjvScene`` holds them in (the
-    flags, options and textures are the renderer's own, fixed).
+    flags, options and textures are the renderer's own, fixed). ``None`` for a scene with
+    flexes or skins, whose vertices the key leaves out.
     """
+    if scene.nflex or scene.nskin:
+        return None
     parts = []
     for g in scene.geoms[: scene.ngeom]:
         ids = (g.type, g.dataid, g.objtype, g.objid, g.matid, g.texcoord, g.segid)
@@ -156,7 +159,7 @@ class CameraRenderer:
         self.camera_id = camera_id(model, name)
         self._model = model
         self._scratch: mujoco.MjData | None = None
-        self._last: tuple[bytes, np.ndarray | None] = (b"", None)  # the last scene drawn
+        self._last: tuple[bytes | None, np.ndarray | None] = (None, None)  # the last drawn
         self.intrinsics = intrinsics(model, name)
         self.render_intrinsics = self.intrinsics.scaled(scale)
         check_frame_size(self.intrinsics.width, self.intrinsics.height, scale)  # before margins
@@ -209,7 +212,7 @@ class CameraRenderer:
             finally:
                 self._model.cam_fovy[self.camera_id] = fovy
         key = scene_key(self._renderer.scene)
-        if key != self._last[0]:
+        if key is None or key != self._last[0]:
             self._last = (key, self._renderer.render())
         return self._last[1].copy()
 
