@@ -18,10 +18,11 @@ leaves decays within the rest that follows (``acquire.SETTLE``)."""
 
 TIGHTEN_TARGET = 3.0
 """Tightening ends once every cable reads at least this [N]. (Ending at 2.5 N instead, with
-a rest of 0.3 s instead of ``acquire.SETTLE``'s 0.6 s, was 10 % faster, but left some cables
-below 1 N by the readings — 1–2 % of robot 8's poses, against none — and its calibrated exit
-points' shape 0.46 and 0.38 mm off, against 0.32, 0.27 and 0.34 mm: two and three sessions of
-robot 8 with different noise.)"""
+rests of 0.3 s instead of ``acquire.SETTLE``'s 0.6 s, was 4 % faster over robots 1–20, 64.1 s
+against 66.8 s median, but left 1–2 % of robot 8's poses with a cable under 1 N by the
+readings, against none, and its calibrated exit points' shape 0.60, 0.46 and 0.38 mm off
+against 0.32, 0.27 and 0.34 mm in sessions with other noise; over the 20 robots paired with
+the run before, no trend either way. Kept: the cautious settings.)"""
 
 TIGHTEN_SPEED = 0.002
 """Speed at which a slack cable is reeled in [m/s]."""

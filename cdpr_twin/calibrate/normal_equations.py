@@ -64,9 +64,8 @@ def levenberg_marquardt(
         max_iterations: most steps (accepted or not).
         ftol: stop when a step lowers the cost by less than ``ftol`` × cost.
         xtol: stop when ‖δ‖ < ``xtol`` · (‖x‖ + xtol), norms in Marquardt's scaling.
-        lam0: the damping λ to start from (dimensionless, Marquardt's scaling): small when
-            ``x0`` is already near the minimum (a re-solve with other weights), so that the
-            first steps are Gauss–Newton's.
+        lam0: the damping λ to start from (Marquardt's scaling): small where the first
+            steps should be Gauss–Newton's (``x0`` near the minimum, nearly linear residuals).
         shrink: the most λ shrinks by after a step (Nielsen's rule).
 
     Returns:
