@@ -16,7 +16,7 @@ import numpy as np
 from scipy.stats import qmc
 
 from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.se3 import inverse, matrix_from_euler_xyz, transform
+from cdpr_twin.se3 import inverse, matrix_from_euler_xyz, pose_distance, transform
 from cdpr_twin.types import CameraIntrinsics
 from cdpr_twin.vision import inside_image, tag_pixels
 from cdpr_twin.workspace import inside_frame, is_feasible
@@ -116,10 +116,8 @@ def tour(poses: list[np.ndarray], start: np.ndarray) -> list[np.ndarray]:
     T = np.asarray(poses, dtype=float)
     left, out, here = np.ones(len(T), dtype=bool), [], np.asarray(start, dtype=float)
     for _ in range(len(T)):
-        # the angle between here and each pose: tr(Rᵀ R_i) = Σ R ⊙ R_i
-        c = np.clip(0.5 * (np.einsum("ij,kij->k", here[:3, :3], T[:, :3, :3]) - 1.0), -1.0, 1.0)
-        d = np.linalg.norm(T[:, :3, 3] - here[:3, 3], axis=1) + 0.2 * np.arccos(c)
-        j = int(np.argmin(np.where(left, d, np.inf)))
+        dt, dr = pose_distance(here, T)
+        j = int(np.argmin(np.where(left, dt + 0.2 * dr, np.inf)))
         left[j], here = False, T[j]
         out.append(poses[j])
     return out

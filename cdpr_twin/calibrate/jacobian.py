@@ -39,23 +39,19 @@ def grouped_jacobian(
     n = len(x)
     groups = [[j] for j in range(n_shared)]
     groups += [list(range(n_shared + j, n, 6)) for j in range(6)]
-    data = np.zeros(pattern.nnz)
+    data, rows = np.zeros(pattern.nnz), slice(0, pattern.shape[0])
     for cols in groups:
-        _differentiate(fun, x, cols, h, pattern, data, 0)
+        at, r = _where(pattern, cols, rows)
+        data[at] = _differentiate(fun, x, cols, h)[r]
     J = csc_matrix((data, pattern.indices, pattern.indptr), shape=pattern.shape)
     return J, 2 * len(groups)
 
 
-def _differentiate(fun, x, cols, h, pattern, data, row0) -> None:
-    """Put ∂fun/∂x[c] for ``cols`` (residuals disjoint) into ``data`` on ``pattern``."""
+def _differentiate(fun, x: np.ndarray, cols: list[int], h: float) -> np.ndarray:
+    """Central differences of ``fun`` moving the columns ``cols`` together (rows disjoint)."""
     dx = np.zeros(len(x))
     dx[cols] = h
-    d = (fun(x + dx) - fun(x - dx)) / (2.0 * h)
-    for c in cols:
-        at = slice(pattern.indptr[c], pattern.indptr[c + 1])
-        rows = pattern.indices[at]
-        inside = (rows >= row0) & (rows < row0 + len(d))
-        data[at][inside] = d[rows[inside] - row0]
+    return (fun(x + dx) - fun(x - dx)) / (2.0 * h)
 
 
 def _where(pattern: csc_matrix, cols: list[int], rows: slice) -> tuple[np.ndarray, np.ndarray]:
@@ -63,7 +59,8 @@ def _where(pattern: csc_matrix, cols: list[int], rows: slice) -> tuple[np.ndarra
 
     The rows are counted from ``rows.start``.
     """
-    at = np.concatenate([np.arange(pattern.indptr[c], pattern.indptr[c + 1]) for c in cols])
+    at = np.concatenate([np.arange(pattern.indptr[c], pattern.indptr[c + 1]) for c in cols] or [[]])
+    at = at.astype(np.intp)
     r = pattern.indices[at]
     inside = (r >= rows.start) & (r < rows.stop)
     return at[inside], r[inside] - rows.start
@@ -124,11 +121,8 @@ class PartJacobian:
         """The (n_rows, n) Jacobian at ``x`` (CSC, on the pattern), and the evaluations."""
         p = self.pattern
         data = np.zeros(p.nnz)
-        h = self.h
         for (_, fun), groups, scatter in zip(self.parts, self.groups, self._scatter, strict=True):
             for cols, (at, rows) in zip(groups, scatter, strict=True):
-                dx = np.zeros(len(x))
-                dx[cols] = h
-                data[at] = ((fun(x + dx) - fun(x - dx)) / (2.0 * h))[rows]
+                data[at] = _differentiate(fun, x, cols, self.h)[rows]
         J = csc_matrix((data, p.indices, p.indptr), shape=p.shape)
         return J, self.evaluations
