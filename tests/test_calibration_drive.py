@@ -45,7 +45,7 @@ def test_tightening_leaves_every_true_cable_taut_after_an_open_loop_move():
         drive.move(physics, sensors, g, here, T, period)
         physics.advance(0.4, rest)
         slack_before += int(np.sum(physics.tensions < 0.5))
-        ticks = drive.tighten(physics, sensors)
+        ticks = drive.tighten(physics, sensors, g, T)
         physics.advance(0.4, rest)
         assert ticks != 0  # it had to reel in (-1: a cable still just under 3 N at the timeout)
         # taut where the calibration reads (above 1 N): the platform settling after the last
@@ -57,9 +57,9 @@ def test_tightening_leaves_every_true_cable_taut_after_an_open_loop_move():
 
 def test_tightening_gives_up_at_its_timeout_and_says_so():
     s = load_scenario("paper_open_loop")
-    physics, _, sensors = _robot(s)
+    physics, nominal, sensors = _robot(s)
     physics.disable_cable(0)  # a broken cable: no reeling makes it read
-    assert drive.tighten(physics, sensors, timeout=0.5) == -1
+    assert drive.tighten(physics, sensors, nominal.geometry, s.start_pose, timeout=0.5) == -1
     assert physics.time == pytest.approx(0.5, abs=0.03)  # (time restarts at a reset)
 
 

@@ -42,6 +42,10 @@ from cdpr_twin.se3 import so3_exp, so3_log, transform
 SETTLE = 0.6
 """Rest before reading at each pose [s] (the platform's swing decays in ≈ 0.3 s)."""
 
+SWING = 0.3
+"""Rest after a move before tightening [s]: the swing has decayed (≈ 0.3 s), and the
+tightening's internal-force steps do not move the platform."""
+
 SEGMENTS = 4
 """The tour is recorded in this many segments (fewer when there are fewer poses)."""
 
@@ -107,16 +111,17 @@ class Recording:
 
 
 def _read(
-    physics, sensors, period: float, frames: int, wait: int, look: bool, tighten: bool = True
+    physics, sensors, period: float, frames: int, wait: int, look: bool, tighten=None
 ) -> tuple:
-    """Rest, tighten (if ``tighten``), then average ``frames`` readings.
+    """Rest, tighten (if ``tighten``: the nominal geometry and the pose commanded), then
+    average ``frames`` readings.
 
     The camera's only if ``look``. Returns (encoders, tensions, taut, tag).
     """
     rest = np.zeros(physics.n_cables)
-    if tighten:
-        physics.advance(round(SETTLE / period) * period, rest)
-        drive.tighten(physics, sensors)
+    if tighten is not None:
+        physics.advance(round(SWING / period) * period, rest)
+        drive.tighten(physics, sensors, *tighten)
     settle = round(SETTLE / period) * period
     physics.advance(settle - period * look, rest)
     if look:  # the camera records the states of its exposures from the tick before its reads
@@ -326,7 +331,8 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
             look = tag_in_view(g, nominal.T_base_tag, nominal.intrinsics, nominal.tag_size, T,
                                VIEW_MARGIN)  # fmt: skip
             wait = s.realism.camera.latency_ticks
-            rows.append(_read(physics, sensors, period, frames, wait, look, tighten=moved))
+            at = (g, T) if moved else None
+            rows.append(_read(physics, sensors, period, frames, wait, look, at))
             truth.append(np.array(physics.T_base_platform))
             here = T
         detector, intrinsics_error = _detector(sensors.camera, nominal.tag_size, s.realism)

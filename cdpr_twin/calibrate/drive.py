@@ -7,14 +7,18 @@ lengths, the tightening from the tension readings.
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import null_space
+from scipy.optimize import linprog
 
 from cdpr_twin.controllers.open_loop import Segment
-from cdpr_twin.kinematics import cable_lengths
+from cdpr_twin.kinematics import cable_lengths, jacobian
 from cdpr_twin.se3 import so3_log
 
 SPEED = 0.16
 """Cruise speed of the moves between poses [m/s] (0.2 m/rad for rotations); the swing it
 leaves decays within the rest that follows (``acquire.SETTLE``)."""
+
+KEEP = 1.0
 
 TIGHTEN_TARGET = 3.0
 """Tightening ends once every cable reads at least this [N]. (Ending at 2.5 N instead, with
@@ -23,6 +27,16 @@ against 66.8 s median, but left 1–2 % of robot 8's poses with a cable under 1 
 readings, against none, and its calibrated exit points' shape 0.60, 0.46 and 0.38 mm off
 against 0.32, 0.27 and 0.34 mm in sessions with other noise; over the 20 robots paired with
 the run before, no trend either way. Kept: the cautious settings.)"""
+
+TIGHTEN_AIM = TIGHTEN_TARGET + 0.5
+"""The least tension the internal-force step aims at [N] (above the target: the readings'
+noise and the model's error do not leave a cable just under it)."""
+
+TIGHTEN_GAIN = 0.6
+"""Share of the internal-force step commanded per tick."""
+
+SLACK = 0.5
+"""A cable reading less is slack [N]."""
 
 TIGHTEN_SPEED = 0.002
 """Speed at which a slack cable is reeled in [m/s]."""
@@ -45,38 +59,80 @@ def move(physics, sensors, geom, T_from: np.ndarray, T_to: np.ndarray, period: f
     lengths = sensors.read(None, render=False).cable_lengths
     gap = cable_lengths(geom, T_from, "pulley") - lengths
     for k in range(1, n + 1):
-        nxt = cable_lengths(geom, seg.pose(k * period), "pulley") - gap * (1.0 - k / n)
+        nxt = cable_lengths(geom, seg.pose(k * period), "pulley") - gap * (1.0 - (1.0 - KEEP) * k / n)
         physics.advance(period, (nxt - lengths) / period)
         lengths = nxt
 
 
-def tighten(physics, sensors, timeout: float = 8.0) -> int:
-    """Reel in cables below :data:`TIGHTEN_TARGET` until every cable reads at least that.
-
-    Or until ``timeout`` [s] passes: 8 s reels in up to 16 mm of slack (robot 19, its exit
-    points 12 mm off, needed 7.3 s at one of the six poses of
-    ``tests/test_calibration_drive.py``).
+def tighten(physics, sensors, geom, T: np.ndarray, timeout: float = 8.0) -> int:
+    """Bring every cable to at least :data:`TIGHTEN_TARGET`, from the tension readings.
 
     The true robot differs from the model, so after an open-loop move some cables hang slack
     (the platform rests on six, which carry no information on the geometry). Like a real
-    CDPR's tensioning step this uses the tension readings only, at :data:`TIGHTEN_RATE`: a
-    slack cable (below 0.5 N) is reeled in at :data:`TIGHTEN_SPEED`, a taut one below the
-    target in proportion to the missing tension. Reeling one cable in unloads others, so a few
-    poses end at the timeout with a cable a little under the target (2.9 N at one of the six
-    poses of the test; at 25 Hz, 15 of robot 1's first 60 poses did, with 4 s then).
+    CDPR's tensioning step this uses the tension readings and the robot's *nominal* model
+    ``geom`` at the commanded pose ``T``, at :data:`TIGHTEN_RATE`:
+
+    - while a cable reads slack (below :data:`SLACK`), the slack ones are reeled in at
+      :data:`TIGHTEN_SPEED` (how much slack is unknown to the software);
+    - once all are taut, the tensions are moved along the platform's internal forces, the
+      null space of the nominal structure matrix Wᵀ (a change N·α of the tensions that leaves
+      the platform's wrench, hence its pose, as it is): to the least total tension with every
+      cable at :data:`TIGHTEN_AIM` or more (a linear program on α), or, where the robot
+      cannot hold every cable that high, to the greatest least tension. The lengths that make
+      that change are −N·α / k (k = E·S / l, the nominal stiffness), commanded
+      :data:`TIGHTEN_GAIN` of the way per tick (the winches' lag delivers the rest later).
+
+    Args:
+        physics: the simulated robot.
+        sensors: its sensors (the tension readings are all this uses of the robot).
+        geom: the nominal geometry.
+        T: (4, 4) the commanded pose.
+        timeout: [s]; 8 s reels in up to 16 mm of slack (robot 19, its exit points 12 mm off,
+            needed 7.3 s at one of the six poses of ``tests/test_calibration_drive.py``).
 
     Returns:
-        The loop's ticks that reeled cable in: 0 if every cable already read at least
-        :data:`TIGHTEN_TARGET`, ``-1`` if some still read less at the timeout.
+        The loop's ticks before every cable read at least :data:`TIGHTEN_TARGET` (or, where
+        the robot cannot hold that, the greatest least tension less 0.1 N): 0 if it already
+        did, ``-1`` if not at the timeout.
     """
     dt = physics.timestep * max(1, round(1.0 / TIGHTEN_RATE / physics.timestep))
+    N = null_space(jacobian(geom, T, "base", "pulley").T)  # (m, m − 6) internal forces
+    k = geom.es / cable_lengths(geom, T, "pulley")  # [N/m]
     for tick in range(round(timeout / dt)):
         tau = sensors.read(None, render=False).tensions
-        low = tau < TIGHTEN_TARGET
-        if not low.any():
-            return tick
-        k = physics.geometry.es / physics.rest_lengths  # the order of magnitude suffices
-        missing = TIGHTEN_TARGET + 1.0 - tau
-        rate = np.where(tau < 0.5, -TIGHTEN_SPEED, -missing / (k * 0.05))
-        physics.advance(dt, np.where(low, np.maximum(rate, -TIGHTEN_SPEED), 0.0))
+        slack = tau < SLACK
+        if slack.any():
+            rates = np.where(slack, -TIGHTEN_SPEED, 0.0)
+        else:
+            change, best = _internal_forces(N, tau, TIGHTEN_AIM, geom.tension_max)
+            if tau.min() >= min(TIGHTEN_TARGET, best - 0.1):
+                return tick
+            rates = -TIGHTEN_GAIN * change / k / dt
+            rates *= min(1.0, TIGHTEN_SPEED / np.abs(rates).max())
+        physics.advance(dt, rates)
     return -1
+
+
+def _internal_forces(N: np.ndarray, tau: np.ndarray, aim: float, hi: float) -> tuple:
+    """The internal-force change N·α toward the least total tension with all at ``aim`` or more.
+
+    Where no α reaches ``aim`` on every cable, the one that maximises the least tension.
+
+    Returns:
+        ((m,) tension change [N], the least tension it leads to [N]).
+    """
+    m, n = N.shape
+    bounds = [(None, None)] * n
+    upper = np.vstack([-N, N]), np.concatenate([tau - aim, hi - tau])
+    lp = linprog(N.sum(axis=0), A_ub=upper[0], b_ub=upper[1], bounds=bounds, method="highs")
+    if lp.status == 0:
+        change = N @ lp.x
+        return change, float((tau + change).min())
+    # maximise t with tau + N α ≥ t, tau + N α ≤ hi: variables (α, t)
+    A = np.block([[-N, np.ones((m, 1))], [N, np.zeros((m, 1))]])
+    c = np.r_[np.zeros(n), -1.0]
+    lp = linprog(c, A_ub=A, b_ub=np.r_[tau, hi - tau], bounds=bounds + [(None, None)],
+                 method="highs")  # fmt: skip
+    if lp.status != 0:  # not even the readings' own distribution: hold still
+        return np.zeros(m), float(tau.min())
+    return N @ lp.x[:n], float(lp.x[n])
