@@ -1,6 +1,8 @@
 """How a calibration drives and reads the robot, and the solver's damping, against truth.
 
 - tightening: the simulated robot's own cable tensions (physics, not the sensors) after it;
+  its internal-force step, against the robot's own tension change and pose (it does not move
+  the platform) and against the tension-space linear programs;
 - the tour: a greedy nearest-neighbour order written out here, pose by pose;
 - the damping: Rosenbrock's valley, whose minimum is known, from a start where Gauss–Newton's
   first step overshoots;
@@ -42,7 +44,7 @@ def test_tightening_leaves_every_true_cable_taut_after_an_open_loop_move():
     rest, slack_before = np.zeros(physics.n_cables), 0
     here = s.start_pose
     for T in poses:
-        drive.move(physics, sensors, g, here, T, period)
+        drive.move(physics, g, here, T, period)
         physics.advance(0.4, rest)
         slack_before += int(np.sum(physics.tensions < 0.5))
         ticks = drive.tighten(physics, sensors, g, T)
@@ -53,6 +55,66 @@ def test_tightening_leaves_every_true_cable_taut_after_an_open_loop_move():
         assert np.all(physics.tensions > 1.0), physics.tensions
         here = T
     assert slack_before >= len(poses)  # the nominal model's lengths left cables slack
+
+
+def test_an_internal_force_step_changes_the_tensions_without_moving_the_platform():
+    # truth: the simulated robot's tensions and pose; the step is planned on the nominal model
+    from scipy.linalg import null_space
+
+    from cdpr_twin.kinematics import cable_lengths, jacobian
+    from cdpr_twin.se3 import pose_distance
+    from cdpr_twin.sim import build_robot
+
+    s = load_scenario("paper_open_loop")  # robot 19: exit points 12 mm off the nominal ones
+    physics, nominal, _ = build_robot(s.model.file, s.truth, s.model.timestep, s.model.align_every)
+    g, T, dt = nominal.geometry, s.start_pose, 0.02
+    N = null_space(jacobian(g, T, "base", "pulley").T)
+    k = g.es / cable_lengths(g, T, "pulley")
+
+    def after(lengths):
+        physics.reset(T, settle_time=0.5)
+        tau0, P0 = physics.tensions.copy(), physics.T_base_platform
+        physics.advance(dt, lengths / dt)
+        physics.advance(0.5, np.zeros(physics.n_cables))
+        return physics.tensions - tau0, pose_distance(P0, physics.T_base_platform)
+
+    physics.reset(T, settle_time=0.5)
+    change, _ = drive._internal_forces(N, physics.tensions.copy(), 4.0, g.tension_max)
+    assert np.abs(change).max() > 0.3  # [N]: a step worth measuring
+    got, moved = after(-change / k)
+    assert np.linalg.norm(got - change) < 0.15 * np.linalg.norm(change), (got, change)
+    one = np.zeros_like(change)  # the same length, all on the cable that moves most
+    one[np.argmax(np.abs(change))] = -np.linalg.norm(change / k)
+    _, moved_one = after(one)
+    assert moved[0] < 1e-6 and moved[1] < 5e-6  # [m], [rad]
+    assert moved[0] < 0.3 * moved_one[0] and moved[1] < 0.3 * moved_one[1]
+
+
+def test_internal_forces_reach_the_least_total_tension_or_else_the_greatest_least_one():
+    # truth: the tension-space linear programs of statics and the workspace's feasibility test
+    from scipy.linalg import null_space
+    from scipy.optimize import linprog
+
+    from cdpr_twin.kinematics import gravity_wrench, jacobian
+    from cdpr_twin.sim import build_robot
+    from cdpr_twin.statics import tension_distribution
+    from cdpr_twin.workspace import is_feasible
+
+    s = load_scenario("paper_open_loop")
+    g = build_robot(s.model.file)[1].geometry
+    T = s.start_pose
+    W = jacobian(g, T, "base", "pulley").T
+    N, tau = null_space(W), tension_distribution(g, T)
+    change, best = drive._internal_forces(N, tau, 3.5, g.tension_max)
+    np.testing.assert_allclose(W @ change, 0.0, atol=1e-9)  # the same wrench
+    assert (tau + change).min() == pytest.approx(best) and best >= 3.5 - 1e-9
+    least = linprog(np.ones(g.n_cables), A_eq=W, b_eq=gravity_wrench(g, T),
+                    bounds=[(3.5, g.tension_max)] * g.n_cables, method="highs")  # fmt: skip
+    assert (tau + change).sum() == pytest.approx(least.fun, abs=1e-6)
+    change, best = drive._internal_forces(N, tau, 50.0, g.tension_max)  # out of reach
+    assert (tau + change).min() == pytest.approx(best, abs=1e-9)
+    assert is_feasible(g, T, tension_min=best - 1e-3)
+    assert not is_feasible(g, T, tension_min=best + 1e-3)
 
 
 def test_tightening_gives_up_at_its_timeout_and_says_so():
@@ -140,11 +202,11 @@ def test_a_rest_shorter_than_the_swing_would_read_a_moving_platform():
     from cdpr_twin.calibrate.acquire import SETTLE
 
     s = load_scenario("paper_open_loop")
-    physics, nominal, sensors = _robot(s)
+    physics, nominal, _ = _robot(s)
     g, period = nominal.geometry, s.model.control_period
     T = excitation_poses(g, nominal.T_base_tag, nominal.intrinsics, nominal.tag_size, 1,
                          s.start_pose)[0]  # fmt: skip
-    drive.move(physics, sensors, g, s.start_pose, T, period)
+    drive.move(physics, g, s.start_pose, T, period)
     rest = np.zeros(physics.n_cables)
     speeds = []
     for _ in range(round(SETTLE / period)):

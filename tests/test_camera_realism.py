@@ -231,6 +231,27 @@ def test_blur_subframes_are_the_states_during_the_exposure(twin, after_reset):
     assert not np.array_equal(states[0][0], states[-1][0])  # the robot moved meanwhile
 
 
+def test_a_still_exposure_drawn_once_is_its_sub_frames_average_to_the_quantum(twin):
+    """A robot at rest: its four sub-frames' mean, each drawn, against the one drawing the
+    camera makes of it (:data:`~cdpr_twin.sim.onboard_camera.STILL`), below an 8-bit step;
+    a moving robot's exposure is drawn sub-frame by sub-frame."""
+    from cdpr_twin.sim.onboard_camera import _still
+
+    twin.reset(paper_pose("p2"))
+    cam = _camera(twin, period=0.04, exposure_s=0.008, blur_subframes=4)
+    try:
+        twin.advance(0.08, np.zeros(twin.physics.n_cables))
+        states = cam.exposure.states(twin.physics.time)
+        assert _still(states) and len(cam._renders()) == 1
+        each = [imaging.linear_luminance(cam._renderer.render_state(*s), 1.0) for s in states]
+        once = imaging.linear_luminance(cam._renders()[0], 1.0)
+        assert np.abs(imaging.average(each) - once).max() < 0.5 / 255
+        twin.advance(0.04, np.full(twin.physics.n_cables, 0.01))
+        assert not _still(cam.exposure.states(twin.physics.time)) and len(cam._renders()) == 4
+    finally:
+        cam.close()
+
+
 # ---------------------------------------------------------------------------- distortion
 def _undistort_true(K, pixels):
     """OpenCV's own undistortion, iterated to convergence, with the lens's true model."""

@@ -15,10 +15,11 @@ solver gets is :class:`Observations` only; the truth (true poses and geometry) i
 :class:`Truth`, for the report's check.
 
 The tour is recorded in :data:`SEGMENTS` consecutive segments, each from the same homing (the
-twin's equivalent of one tour: at rest poses the path between them leaves no trace but the
-tightening, which each move pays back), so that segments can run side by side on several
-cores. Their number is fixed and each has its own sensor-noise seed, derived from the run
-seed: the readings do not depend on how many workers recorded them.
+twin's equivalent of homing the robot again: at rest poses the path between them leaves no
+trace but the tightening's length corrections, which a segment starts without), so that
+segments can run side by side on several cores. Their number is fixed and each has its own
+sensor-noise seed, derived from the run seed: the readings do not depend on how many workers
+recorded them.
 """
 
 from __future__ import annotations
@@ -113,10 +114,10 @@ class Recording:
 def _read(
     physics, sensors, period: float, frames: int, wait: int, look: bool, tighten=None
 ) -> tuple:
-    """Rest, tighten (if ``tighten``: the nominal geometry and the pose commanded), then
-    average ``frames`` readings.
+    """Rest, tighten, then average ``frames`` readings.
 
-    The camera's only if ``look``. Returns (encoders, tensions, taut, tag).
+    Tightening only if ``tighten`` (the nominal geometry and the pose commanded); the camera's
+    readings only if ``look``. Returns (encoders, tensions, taut, tag).
     """
     rest = np.zeros(physics.n_cables)
     if tighten is not None:
@@ -327,7 +328,7 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
         stops = [(here, False)] * (index == 0) + [(T, True) for T in poses]
         for T, moved in stops:
             if moved:
-                drive.move(physics, sensors, g, here, T, period)
+                drive.move(physics, g, here, T, period)
             look = tag_in_view(g, nominal.T_base_tag, nominal.intrinsics, nominal.tag_size, T,
                                VIEW_MARGIN)  # fmt: skip
             wait = s.realism.camera.latency_ticks
