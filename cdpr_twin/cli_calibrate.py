@@ -157,6 +157,8 @@ def _solve_and_write(args, s, source: Path, out: Path, started: float) -> int:
 
 
 def _print(cal, extra: dict, robot: Path, report: Path) -> None:
+    from cdpr_twin.calibrate.solver import GROSS_CHI2
+
     idn, chk = cal.identifiability, extra["check_against_truth"]
     t = extra["timing_s"]
     print(
@@ -179,6 +181,11 @@ def _print(cal, extra: dict, robot: Path, report: Path) -> None:
             f"{n['length_std'] * 1e6:.1f} µm, tag {n['tag_lateral_std'] * 1e3:.2f} mm lateral + "
             f"{n['tag_std_per_m'] * 1e3:.2f} mm/m, {np.degrees(n['tag_rotation_std']):.2f}°"
         )
+        if vc["tag_views_left_out"]:
+            print(
+                f"tag views left out as gross errors (χ² > {GROSS_CHI2} after the first solve): "
+                f"{len(vc['tag_views_left_out'])}, at poses {vc['tag_views_left_out']}"
+            )
     sig = cal.sigma[[i for i, n in enumerate(cal.names) if n.startswith("exit")]]
     print(f"exit points: median 1σ {np.median(sig) * 1e3:.2f} mm per axis")
     if idn.prior_determined:

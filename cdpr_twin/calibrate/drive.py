@@ -33,6 +33,11 @@ noise and the model's error do not leave a cable just under it)."""
 TIGHTEN_GAIN = 0.6
 """Share of the internal-force step commanded per tick."""
 
+SPREAD = 1.0
+"""Tightening ends only once no cable is this far from the least-total distribution [N]: the
+tensions at a pose do not depend on how the robot arrived (a move that keeps the last pose's
+length correction may arrive with every cable taut but some far above the target)."""
+
 SLACK = 0.5
 """A cable reading less is slack [N]."""
 
@@ -107,7 +112,7 @@ def tighten(physics, sensors, geom, T: np.ndarray, timeout: float = 8.0) -> int:
             rates = np.where(slack, -TIGHTEN_SPEED, 0.0)
         else:
             change, best = _internal_forces(N, tau, TIGHTEN_AIM, geom.tension_max)
-            if tau.min() >= min(TIGHTEN_TARGET, best - 0.1):
+            if tau.min() >= min(TIGHTEN_TARGET, best - 0.1) and np.abs(change).max() < SPREAD:
                 return tick
             rates = -TIGHTEN_GAIN * change / k / dt
             rates *= min(1.0, TIGHTEN_SPEED / np.abs(rates).max())

@@ -52,7 +52,7 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.sparse import csc_matrix, lil_matrix
@@ -217,7 +217,7 @@ class Problem:
         detector: Detector | None = None,
     ) -> None:
         self.nominal, self.T_base_tag, self.obs = nominal, np.asarray(T_base_tag), obs
-        self.priors, self.noise = priors, noise
+        self.priors, self.noise, self.detector = priors, noise, detector
         statics = noise.force_std is not None
         self.layout = Layout(nominal.n_cables, obs.n_poses, priors, detector is not None, statics)
         taut = np.asarray(obs.taut, bool)
@@ -254,6 +254,13 @@ class Problem:
         out = copy.copy(self)
         out.noise = noise
         return out
+
+    def without_views(self, poses: np.ndarray) -> Problem:
+        """The same problem with the tag views at ``poses`` (indices) left out, as if unseen."""
+        seen = np.array(self.obs.seen, dtype=bool)
+        seen[poses] = False
+        obs = replace(self.obs, seen=seen)
+        return Problem(self.nominal, self.T_base_tag, obs, self.priors, self.noise, self.detector)
 
     def pattern(self) -> csc_matrix:
         """:meth:`sparsity` as CSC, computed once (shared with :meth:`with_noise` copies)."""

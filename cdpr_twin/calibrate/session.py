@@ -213,9 +213,8 @@ def truth_check(session: Session, nominal_geometry, nominal_T_base_tag) -> dict:
 def weighting_report(session: Session) -> dict:
     """The noise model the solution was weighted with and how it came about (JSON-ready)."""
     w = session.weighting
-    return {
-        "noise_model": asdict(session.noise),
-        "variance_components": None
-        if w is None
-        else {"rounds": list(w.rounds), "settled": w.settled, "note": w.note},
-    }
+    components = None
+    if w is not None:
+        components = {"rounds": list(w.rounds), "settled": w.settled, "note": w.note,
+                      "tag_views_left_out": list(w.left_out)}  # fmt: skip
+    return {"noise_model": asdict(session.noise), "variance_components": components}

@@ -83,12 +83,15 @@ class Weighting:
             redundancy below :data:`MIN_REDUNDANCY`).
         settled: whether the last solve's σ̂/σ were all within the tolerance of 1.
         note: why it stopped unsettled ("" when settled).
+        left_out: the poses (indices into the observations) whose tag view was left out as a
+            gross error after the first solve.
     """
 
     noise: NoiseModel
     rounds: tuple[dict[str, float | None], ...]
     settled: bool
     note: str = ""
+    left_out: tuple[int, ...] = ()
 
 
 def group_rows(problem) -> dict[str, np.ndarray]:
