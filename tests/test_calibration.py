@@ -103,6 +103,25 @@ def test_recovers_a_synthetic_robot_within_its_stated_uncertainty():
     assert np.median(err) < 3 * np.median(cal.sigma[L.blocks["exit"]]) + 1e-4
 
 
+def test_a_tag_view_turned_by_a_wrong_solution_is_left_out_and_the_robot_still_recovered():
+    # truth: the drawn robot; one view replaced by the tag turned 80° about its normal, 1 mm off
+    # (robot 1's session 2 read one view 86° off, its four frames alike)
+    from cdpr_twin.calibrate.solver import solve_weighted
+
+    g, T_tag, obs, truth = _synthetic(camera_error=False)
+    priors = Priors(estimate=("exit", "anchor", "offset", "scale"), use_priors=False)
+    _, clean = solve_weighted(Problem(g, T_tag, obs, priors, NOISE))
+    assert clean.left_out == ()  # no view of honest noise is taken for a gross error
+    k, T = 17, obs.T_cam_tag.copy()
+    T[k] = T[k] @ se3.transform(se3.rot_z(math.radians(80.0)), [1e-3, 0.0, 0.0])
+    problem = Problem(g, T_tag, replace(obs, T_cam_tag=T), priors, NOISE)
+    cal, weighting = solve_weighted(problem)
+    assert weighting.left_out == (k,)
+    true = np.concatenate([truth[b].ravel() for b in problem.layout.blocks])
+    z = (cal.estimate - true) / cal.sigma
+    assert np.sum(z**2) < chi2.ppf(0.999, len(z)), f"normalised errors {np.round(z, 1)}"
+
+
 def test_the_normal_equations_reach_scipys_trust_region_minimum():
     # truth: scipy's least_squares (dense exact trust-region steps) on the same residuals
     from scipy.optimize import least_squares
