@@ -84,7 +84,7 @@ class Weighting:
         settled: whether the last solve's σ̂/σ were all within the tolerance of 1.
         note: why it stopped unsettled ("" when settled).
         left_out: the poses (indices into the observations) whose tag view was left out as a
-            gross error after the first solve.
+            gross error, one at a time after the first solve (``solver.GROSS_CHI2``).
     """
 
     noise: NoiseModel
