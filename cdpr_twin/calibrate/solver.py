@@ -177,14 +177,8 @@ def solve_weighted(
     started, told = time.perf_counter(), problem.noise
     res = _minimise(problem, max_iterations, None)
     nfev, history, total, settled, note = res.nfev, [], {}, False, ""
-    gross: list[int] = []  # a wrong view pulls the frame and inflates the tags' noise
-    while len(gross) < MAX_GROSS and len(errors := _tag_errors(problem, res.fun)):
-        if errors.max() <= GROSS_CHI2:
-            break
-        gross.append(int(problem.seen[np.argmax(errors)]))  # the worst first: it smears
-        problem = problem.without_views(gross[-1:])
-        res = _minimise(problem, max_iterations, res.x)
-        nfev += res.nfev
+    problem, res, gross, extra = _leave_out_gross_views(problem, res, max_iterations)
+    nfev += extra
     for k in range(rounds + 1):
         with threadpool_limits(limits=1, user_api="blas"):
             factors = variance_factors(problem, res.jac, res.fun)
@@ -210,6 +204,24 @@ def solve_weighted(
         cal = _result(problem, res, time.perf_counter() - started, rank_tol)
     weighting = Weighting(problem.noise, tuple(history), settled, note, tuple(sorted(gross)))
     return replace(cal, nfev=nfev), weighting
+
+
+def _leave_out_gross_views(problem: Problem, res, max_iterations: int) -> tuple:
+    """Leave out the tag views beyond :data:`GROSS_CHI2`, the worst first, solving after each.
+
+    A wrong view pulls the frame and inflates the tags' noise, and smears its error onto
+    honest views: one at a time. Returns (problem, solution, left-out poses, evaluations).
+    """
+    gross: list[int] = []
+    nfev = 0
+    while len(gross) < MAX_GROSS and len(errors := _tag_errors(problem, res.fun)):
+        if errors.max() <= GROSS_CHI2:
+            break
+        gross.append(int(problem.seen[np.argmax(errors)]))
+        problem = problem.without_views(gross[-1:])
+        res = _minimise(problem, max_iterations, res.x)
+        nfev += res.nfev
+    return problem, res, gross, nfev
 
 
 def _tag_errors(problem: Problem, r: np.ndarray) -> np.ndarray:
