@@ -112,7 +112,13 @@ class Recording:
 
 
 def _read(
-    physics, sensors, period: float, frames: int, wait: int, look: bool, tighten=None
+    physics,
+    sensors,
+    period: float,
+    frames: int,
+    wait: int,
+    look: bool,
+    tighten: tuple | None = None,
 ) -> tuple:
     """Rest, tighten, then average ``frames`` readings.
 
