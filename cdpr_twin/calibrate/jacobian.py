@@ -10,12 +10,12 @@ a Jacobian costs two evaluations per group instead of two per parameter.
   differentiated with its own groups. A cable's exit point reaches only that cable's length
   residuals, so within the cable part the eight cables' exit points share a group; only the
   wrench balances see every cable at once. About 3× fewer residual rows evaluated than
-  :func:`grouped_jacobian` on ACROBOT's recordings, same values up to rounding.
+  :func:`grouped_jacobian` on ACROBOT's recordings, same values up to rounding. A part may
+  give some of its columns itself (the wrench balance differentiates one cable's term at a
+  time, :func:`cdpr_twin.calibrate.balance.cable_jacobian`); the groups cover the rest.
 """
 
 from __future__ import annotations
-
-from collections.abc import Callable
 
 import numpy as np
 from scipy.sparse import csc_matrix
@@ -66,11 +66,11 @@ def _where(pattern: csc_matrix, cols: list[int], rows: slice) -> tuple[np.ndarra
     return at[inside], r[inside] - rows.start
 
 
-def _colour(block: csc_matrix) -> list[list[int]]:
-    """Greedy grouping of ``block``'s nonzero columns into sets with disjoint rows."""
+def _colour(block: csc_matrix, skip=()) -> list[list[int]]:
+    """Greedy grouping of ``block``'s nonzero columns but ``skip`` into sets of disjoint rows."""
     occupied: list[np.ndarray] = []
     groups: list[list[int]] = []
-    for c in np.flatnonzero(np.diff(block.indptr)):
+    for c in np.setdiff1d(np.flatnonzero(np.diff(block.indptr)), np.asarray(skip, dtype=int)):
         rows = block.indices[block.indptr[c] : block.indptr[c + 1]]
         for g, taken in enumerate(occupied):
             if not taken[rows].any():
@@ -89,8 +89,9 @@ class PartJacobian:
     """Central differences of residuals given in parts, each part with its own column groups.
 
     Args:
-        parts: per part, its rows (a slice of the whole residual vector) and its residuals
-            as a function of x (n,) → (rows,).
+        parts: per part, its rows (a slice of the whole residual vector), its residuals as a
+            function of x (n,) → (rows,), and optionally columns it differentiates itself:
+            ``(cols, jac)`` with ``jac(x, h)`` → (rows, len(cols)), dense.
         pattern: (n_rows, n) sparsity pattern of the whole residual vector (CSC).
         h: step [m or rad].
         groups: per part, its column groups, when already computed for this pattern.
@@ -98,31 +99,42 @@ class PartJacobian:
 
     def __init__(
         self,
-        parts: list[tuple[slice, Callable[[np.ndarray], np.ndarray]]],
+        parts: list[tuple],
         pattern: csc_matrix,
         h: float = 1e-6,
         groups: list[list[list[int]]] | None = None,
     ) -> None:
         self.parts, self.pattern, self.h = parts, csc_matrix(pattern), h
-        self.groups = groups or [_colour(self.pattern[rows]) for rows, _ in parts]
-        # per part and group: where its derivatives go in the pattern's data, and which of
-        # the part's rows they are
-        self._scatter = [
-            [_where(self.pattern, cols, rows) for cols in part_groups]
-            for (rows, _), part_groups in zip(parts, self.groups, strict=True)
+        given = [part[2][0] if len(part) > 2 else [] for part in parts]
+        self.groups = groups or [
+            _colour(self.pattern[part[0]], cols) for part, cols in zip(parts, given, strict=True)
         ]
+        # per part and group: where its derivatives go in the pattern's data, and which of
+        # the part's rows they are; the columns a part gives, likewise, one by one
+        self._scatter = [
+            [_where(self.pattern, cols, part[0]) for cols in part_groups]
+            for part, part_groups in zip(parts, self.groups, strict=True)
+        ]
+        self._given = [[_where(self.pattern, [c], part[0]) for c in cols]
+                       for part, cols in zip(parts, given, strict=True)]  # fmt: skip
 
     @property
     def evaluations(self) -> int:
-        """Part evaluations per Jacobian (each counted as one residual evaluation)."""
-        return 2 * sum(len(g) for g in self.groups)
+        """Part evaluations per Jacobian (each one residual evaluation; given columns: a pair)."""
+        return 2 * sum(len(g) for g in self.groups) + 2 * sum(map(bool, self._given))
 
     def __call__(self, x: np.ndarray) -> tuple[csc_matrix, int]:
         """The (n_rows, n) Jacobian at ``x`` (CSC, on the pattern), and the evaluations."""
         p = self.pattern
         data = np.zeros(p.nnz)
-        for (_, fun), groups, scatter in zip(self.parts, self.groups, self._scatter, strict=True):
+        for part, groups, scatter, given in zip(
+            self.parts, self.groups, self._scatter, self._given, strict=True
+        ):
             for cols, (at, rows) in zip(groups, scatter, strict=True):
-                data[at] = _differentiate(fun, x, cols, self.h)[rows]
+                data[at] = _differentiate(part[1], x, cols, self.h)[rows]
+            if given:
+                block = part[2][1](x, self.h)
+                for j, (at, rows) in enumerate(given):
+                    data[at] = block[rows, j]
         J = csc_matrix((data, p.indices, p.indptr), shape=p.shape)
         return J, self.evaluations

@@ -6,8 +6,10 @@ shared parameters). ``scipy.optimize.least_squares`` offers dense exact trust-re
 SVD of the whole Jacobian per iteration: O(rows · n²), minutes at 240 poses) or iterative LSMR
 steps (which stall on this problem's conditioning). Here each step solves the damped normal
 equations (JᵀJ + λ·diag(JᵀJ)) δ = −Jᵀr by a Cholesky factorisation of the n × n matrix
-(O(n³/3), a fraction of a second at n = 1 500), with Marquardt's scaling and Nielsen's update
-of λ (Madsen, Nielsen, Tingleff, *Methods for Non-Linear Least Squares Problems*, 2004, §3.2).
+(O(n³/3), a fraction of a second at n = 1 500) — or, told how many unknowns are shared, by
+eliminating the poses' 6 × 6 blocks (:mod:`cdpr_twin.calibrate.schur`) —, with Marquardt's
+scaling and Nielsen's update of λ (Madsen, Nielsen, Tingleff, *Methods for Non-Linear Least
+Squares Problems*, 2004, §3.2).
 """
 
 from __future__ import annotations
@@ -18,6 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import LinAlgError, cho_factor, cho_solve
 from scipy.sparse import csc_matrix
+
+from cdpr_twin.calibrate.schur import Arrow, arrow, damped_step, inverse_parts
 
 
 @dataclass(frozen=True, eq=False)
@@ -46,15 +50,10 @@ class Solution:
 
 
 def levenberg_marquardt(
-    fun: Callable[[np.ndarray], np.ndarray],
-    jac: Callable[[np.ndarray], tuple[csc_matrix, int]],
-    x0: np.ndarray,
-    max_iterations: int = 100,
-    ftol: float = 1e-10,
-    xtol: float = 1e-10,
-    lam0: float = 1e-3,
-    shrink: float = 1.0 / 3.0,
-) -> Solution:
+    fun: Callable[[np.ndarray], np.ndarray], jac: Callable[[np.ndarray], tuple[csc_matrix, int]],
+    x0: np.ndarray, max_iterations: int = 100, ftol: float = 1e-10, xtol: float = 1e-10,
+    lam0: float = 1e-3, shrink: float = 1.0 / 3.0, n_shared: int | None = None,
+) -> Solution:  # fmt: skip
     """Minimise ½‖fun(x)‖² from ``x0``.
 
     Args:
@@ -67,6 +66,9 @@ def levenberg_marquardt(
         lam0: the damping λ to start from (Marquardt's scaling): small where the first
             steps should be Gauss–Newton's (``x0`` near the minimum, nearly linear residuals).
         shrink: the most λ shrinks by after a step (Nielsen's rule).
+        n_shared: the first ``n_shared`` unknowns are shared and the rest come in blocks of
+            six that no residual couples (poses): steps by the Schur complement. None, or
+            a Jacobian without that shape: a dense factorisation.
 
     Returns:
         The solution (``converged`` False at the iteration limit).
@@ -76,10 +78,10 @@ def levenberg_marquardt(
     nfev, cost = 1, 0.5 * float(r @ r)
     J, n = jac(x)
     nfev += n
-    N, g = _normal(J, r)
+    N, g = _normal(J, r, n_shared)
     lam, nu = lam0, 2.0  # with Marquardt's scaling λ is dimensionless
     for it in range(1, max_iterations + 1):
-        d = np.maximum(np.diag(N), 1e-300)
+        d = np.maximum(_diagonal(N), 1e-300)
         step = _damped_step(N, g, lam * d)
         if step is None:  # not positive definite at this damping: damp more
             lam, nu = lam * nu, 2.0 * nu
@@ -101,20 +103,30 @@ def levenberg_marquardt(
             return Solution(x, r, J, cost, nfev + n, it, True, "the cost decrease is below ftol")
         J, n = jac(x)
         nfev += n
-        N, g = _normal(J, r)
+        N, g = _normal(J, r, n_shared)
         lam *= max(shrink, 1.0 - (2.0 * rho - 1.0) ** 3)
         nu = 2.0
     return Solution(x, r, J, cost, nfev, max_iterations, False, "the iteration limit was hit")
 
 
-def _normal(J: csc_matrix, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """JᵀJ (dense, n × n) and Jᵀr."""
+def _normal(J: csc_matrix, r: np.ndarray, n_shared: int | None = None) -> tuple:
+    """JᵀJ (dense, n × n; by its blocks if it is an arrow with ``n_shared``) and Jᵀr."""
     Jt = J.T.tocsr()
-    return (Jt @ J).toarray(), Jt @ r
+    N = (Jt @ J).toarray()
+    blocks = None if n_shared is None else arrow(N, n_shared)
+    return (N if blocks is None else blocks), Jt @ r
 
 
-def _damped_step(N: np.ndarray, g: np.ndarray, damping: np.ndarray) -> np.ndarray | None:
+def _diagonal(N: np.ndarray | Arrow) -> np.ndarray:
+    if isinstance(N, Arrow):
+        return np.concatenate([np.diag(N.A), np.einsum("kii->ki", N.D).ravel()])
+    return np.diag(N)
+
+
+def _damped_step(N: np.ndarray | Arrow, g: np.ndarray, damping: np.ndarray) -> np.ndarray | None:
     """δ solving (N + diag(damping)) δ = −g, or ``None`` if that matrix is not PD."""
+    if isinstance(N, Arrow):
+        return damped_step(N, g, damping)
     A = N + np.diag(damping)
     try:
         return -cho_solve(cho_factor(A, lower=True, check_finite=False), g, check_finite=False)
@@ -129,6 +141,10 @@ def shared_covariance(J: csc_matrix, n_shared: int, s2: float) -> np.ndarray:
     singular (a parameter no residual sees). Returns (n_shared, n_shared).
     """
     N = (J.T.tocsr() @ J).toarray()
+    blocks = arrow(N, n_shared)
+    parts = None if blocks is None else inverse_parts(blocks)
+    if parts is not None and parts[0] is not None:
+        return s2 * parts[0]
     E = np.zeros((N.shape[0], n_shared))
     E[np.arange(n_shared), np.arange(n_shared)] = 1.0
     try:

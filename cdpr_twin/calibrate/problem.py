@@ -51,13 +51,13 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.sparse import csc_matrix, lil_matrix
+from scipy.sparse import coo_matrix, csc_matrix
 from scipy.spatial.transform import Rotation
 
+from cdpr_twin.calibrate.balance import cable_columns, cable_jacobian, wrench_residuals
 from cdpr_twin.calibrate.jacobian import PartJacobian
 from cdpr_twin.calibrate.layout import BLOCKS, Layout
 from cdpr_twin.calibrate.observations import Observations
@@ -242,6 +242,7 @@ class Problem:
         self.n_prior = self.layout.n_shared + 6 * len(self.home_k) if priors.use_priors else 0
         self._pattern: csc_matrix | None = None
         self._groups: list | None = None
+        self._poses: tuple[np.ndarray, np.ndarray] | None = None  # (pose twists, poses)
 
     def with_noise(self, noise: NoiseModel) -> Problem:
         """The same problem weighted with another noise model (the balance on or off alike).
@@ -277,7 +278,12 @@ class Problem:
     def model(self, x: np.ndarray) -> Model:
         """The robot and poses parameters ``x`` describe."""
         L, g = self.layout, self.nominal
-        poses = self.obs.T_guess @ exp_stack(x[L.n_shared :].reshape(-1, 6))
+        xi = x[L.n_shared :]
+        if self._poses is None or not np.array_equal(self._poses[0], xi):  # the Jacobian's
+            poses = self.obs.T_guess @ exp_stack(xi.reshape(-1, 6))  # shared columns keep them
+            poses.flags.writeable = False
+            self._poses = (xi.copy(), poses)
+        poses = self._poses[1]
         return Model(
             a_base=g.a_base + L.get(x, "exit"),
             b_platform=g.b_platform + L.get(x, "anchor"),
@@ -294,22 +300,28 @@ class Problem:
     def residuals(self, x: np.ndarray) -> np.ndarray:
         """All residuals, unitless: cables, tag poses, forces, priors. Returns (n_rows,)."""
         mod = self.model(x)
-        return np.concatenate([self._cables(mod), self._tags(mod), self._forces(mod),
+        return np.concatenate([self._cables(mod), self._tags(mod), wrench_residuals(self, mod),
                                self._priors(x)])  # fmt: skip
 
-    def parts(self) -> list[tuple[slice, Callable[[np.ndarray], np.ndarray]]]:
+    def parts(self) -> list[tuple]:
         """The residuals in parts, each with its rows: cables, tags, forces, priors.
 
         Each part reaches fewer parameters than the whole (for
-        :class:`~cdpr_twin.calibrate.jacobian.PartJacobian`).
+        :class:`~cdpr_twin.calibrate.jacobian.PartJacobian`); the wrench balance's differences
+        over each cable's own parameters are that cable's term's
+        (:func:`~cdpr_twin.calibrate.balance.cable_jacobian`).
         """
         c, t, f = self.n_cable_rows, self.n_tag_rows, self.n_force_rows
+        given = (cable_columns(self.layout) if f else [], self._cable_terms_jacobian)
         return [
             (slice(0, c), lambda x: self._cables(self.model(x))),
             (slice(c, c + t), lambda x: self._tags(self.model(x))),
-            (slice(c + t, c + t + f), lambda x: self._forces(self.model(x))),
+            (slice(c + t, c + t + f), lambda x: wrench_residuals(self, self.model(x)), given),
             (slice(self.n_data, self.n_data + self.n_prior), self._priors),
         ]
+
+    def _cable_terms_jacobian(self, x: np.ndarray, h: float) -> np.ndarray:
+        return cable_jacobian(self, self.model(x), h)
 
     def _priors(self, x: np.ndarray) -> np.ndarray:
         """The builder's tolerances, and where the robot was homed."""
@@ -331,23 +343,6 @@ class Problem:
         e = o.encoder[k, i]
         l0_enc = e + mod.offset[i] + mod.scale[i] * (e - self.e_ref[i])
         return (l0_model - l0_enc) / self.noise.length_std
-
-    def _forces(self, mod: Model) -> np.ndarray:
-        k, g, m = self.force_k, self.nominal, self.layout.m
-        T = mod.T_base_platform[k]
-        rb = np.einsum("nij,cj->nci", T[:, :3, :3], mod.b_platform)  # ᵇR_p·b_i
-        b = rb + T[:, None, :3, 3]
-        a = np.broadcast_to(mod.a_base, b.shape).reshape(-1, 3)
-        _, u = pulley_vectors(a, np.tile(g.pulley_radius, len(k)), b.reshape(-1, 3))
-        tau = (self.obs.tensions[k] - mod.tension_bias) / (1.0 + mod.tension_gain)
-        f = tau[:, :, None] * u.reshape(len(k), m, 3)  # what each cable's tension balances
-        weight = g.mass * g.gravity
-        F = f.sum(axis=1) - weight
-        M = -np.cross(rb, f).sum(axis=1) + np.cross(T[:, :3, :3] @ g.com_platform, weight)
-        n = self.noise
-        if not len(k):  # no balance (force_std None), or no pose with every cable taut
-            return np.zeros(0)
-        return np.hstack([F / n.force_std, M / n.moment_std]).ravel()
 
     def predicted_tags(self, mod: Model) -> np.ndarray:
         """The detections the model predicts where the tag was seen, (n_seen, 4, 4).
@@ -374,26 +369,32 @@ class Problem:
         dr = Rotation.from_matrix(R).as_rotvec() / n.tag_rotation_std
         return np.hstack([dt, dr]).ravel()
 
-    def sparsity(self) -> lil_matrix:
+    def sparsity(self) -> coo_matrix:
         """Which residual depends on which parameter: (n_rows, n) pattern of ones."""
-        L = self.layout
-        S = lil_matrix((self.n_data + self.n_prior, L.n), dtype=np.int8)
-        pose = [list(range(L.pose(k).start, L.pose(k).stop)) for k in range(L.n_poses)]
-        for row, (k, i) in enumerate(zip(self.rows_k, self.rows_i, strict=True)):
-            cols = pose[k] + [c for n in ("exit", "anchor", "offset", "scale")
-                              for c in L.columns(n, i)]  # fmt: skip
-            S[row, cols] = 1
-        shared = [c for n in ("camera", "tag", "intrinsics") for c in L.columns(n)]
-        for j, k in enumerate(self.seen):
-            S[self.n_cable_rows + 6 * j : self.n_cable_rows + 6 * j + 6, pose[k] + shared] = 1
-        shared = [c for n in ("exit", "anchor", "tension_bias", "tension_gain")
-                  for c in L.columns(n)]  # fmt: skip
-        at = self.n_cable_rows + self.n_tag_rows
-        for j, k in enumerate(self.force_k):
-            S[at + 6 * j : at + 6 * j + 6, pose[k] + shared] = 1
-        for j in range(L.n_shared if self.n_prior else 0):
-            S[self.n_data + j, j] = 1
-        for j, k in enumerate(self.home_k):
-            for q in range(6):
-                S[self.n_data + L.n_shared + 6 * j + q, L.pose(k).start + q] = 1
-        return S
+        L, rows, cols = self.layout, [], []
+
+        def see(r: np.ndarray, c: np.ndarray) -> None:  # each row r sees the columns c
+            rows.append(np.repeat(r, len(c))), cols.append(np.tile(c, len(r)))
+
+        def pose(k: np.ndarray) -> np.ndarray:  # (len(k), 6) the poses' columns
+            return L.n_shared + 6 * np.asarray(k)[:, None] + np.arange(6)
+
+        for i in range(L.m):  # a cable's length: its pose, its own exit, anchor, offset, scale
+            r = np.flatnonzero(self.rows_i == i)
+            see(r, np.array([c for n in ("exit", "anchor", "offset", "scale")
+                             for c in L.columns(n, i)], dtype=int))  # fmt: skip
+            rows.append(np.repeat(r, 6)), cols.append(pose(self.rows_k[r]).ravel())
+        groups = ((self.n_cable_rows, self.seen, ("camera", "tag", "intrinsics")),
+                  (self.n_cable_rows + self.n_tag_rows, self.force_k,
+                   ("exit", "anchor", "tension_bias", "tension_gain")))  # fmt: skip
+        for at, ks, names in groups:  # a tag view's, a balance's six rows
+            r = at + np.arange(6 * len(ks))
+            see(r, np.array([c for n in names for c in L.columns(n)], dtype=int))
+            rows.append(np.repeat(r, 6)), cols.append(np.repeat(pose(ks), 6, axis=0).ravel())
+        n_shared = L.n_shared if self.n_prior else 0
+        rows.append(self.n_data + np.arange(n_shared)), cols.append(np.arange(n_shared))
+        home = pose(self.home_k).ravel()
+        rows.append(self.n_data + n_shared + np.arange(len(home))), cols.append(home)
+        r, c = np.concatenate(rows), np.concatenate(cols)
+        shape = (self.n_data + self.n_prior, L.n)
+        return coo_matrix((np.ones(len(r), dtype=np.int8), (r, c)), shape=shape)

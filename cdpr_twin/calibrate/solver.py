@@ -256,6 +256,7 @@ def _minimise(problem: Problem, max_iterations: int, x0: np.ndarray | None):
             max_iterations=max_iterations,
             lam0=DAMPING[x0 is not None],
             shrink=0.1,
+            n_shared=L.n_shared,
         )
     if not res.converged or not np.all(np.isfinite(res.x)):
         raise CalibrationError(

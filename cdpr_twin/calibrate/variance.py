@@ -26,6 +26,8 @@ import numpy as np
 from scipy.linalg import LinAlgError, cho_factor, cho_solve
 from scipy.sparse import csc_matrix
 
+from cdpr_twin.calibrate.schur import arrow, inverse_parts, leverages
+
 
 @dataclass(frozen=True)
 class NoiseModel:
@@ -127,20 +129,32 @@ def variance_factors(problem, jac: csc_matrix, r: np.ndarray) -> dict[str, float
         Group name → σ̂²/σ² (``None`` where the group's redundancy is below
         :data:`MIN_REDUNDANCY`).
     """
-    J = csc_matrix(jac)
-    N = (J.T @ J).toarray()
-    try:
-        N_inv = cho_solve(cho_factor(N, lower=True, check_finite=False), np.eye(len(N)))
-    except LinAlgError:  # directions nothing sees (no priors): how they are fixed changes
-        N_inv = np.linalg.pinv(N, hermitian=True)  # no residual's redundancy
-    Jr = J.tocsr()
+    h = _leverages(csc_matrix(jac), problem.layout.n_shared)
     out: dict[str, float | None] = {}
     for g, rows in group_rows(problem).items():
-        Jg = Jr[rows]
-        redundancy = len(rows) - float(Jg.multiply(Jg @ N_inv).sum())
+        redundancy = len(rows) - float(h[rows].sum())
         rg = r[rows]
         out[g] = float(rg @ rg) / redundancy if redundancy >= MIN_REDUNDANCY else None
     return out
+
+
+def _leverages(J: csc_matrix, n_shared: int) -> np.ndarray:
+    """Each row's J_j N⁻¹ J_jᵀ (N = JᵀJ), by the pose blocks' Schur complement where it can.
+
+    Where N is singular (directions nothing sees: no priors) its pseudo-inverse: how those
+    directions are fixed changes no residual's redundancy.
+    """
+    N = (J.T @ J).toarray()
+    blocks = arrow(N, n_shared)
+    parts = None if blocks is None else inverse_parts(blocks)
+    if parts is not None:
+        return leverages(J, n_shared, parts)
+    try:
+        N_inv = cho_solve(cho_factor(N, lower=True, check_finite=False), np.eye(len(N)))
+    except LinAlgError:
+        N_inv = np.linalg.pinv(N, hermitian=True)
+    Jr = J.tocsr()
+    return np.asarray(Jr.multiply(Jr @ N_inv).sum(axis=1)).ravel()
 
 
 def rescaled(noise: NoiseModel, factors: dict[str, float]) -> NoiseModel:
