@@ -463,9 +463,13 @@ def test_the_jacobian_by_parts_is_the_whole_residuals_derivative():
 
     from cdpr_twin.calibrate.jacobian import PartJacobian
 
+    from cdpr_twin.calibrate.problem import Detector
+
     g, T_tag, obs, *_ = _leveled_frame_robot(n_poses=8)
     noise = replace(NOISE, force_std=0.02, moment_std=0.002)
-    problem = Problem(g, T_tag, obs, Priors(), noise)
+    _, _, K, size = _nominal()  # every block: the wrench balance's and the intrinsics' too
+    problem = Problem(g, T_tag, obs, Priors(), noise, Detector(size, K.fx, (-0.2, 0.08, 0, 0)))
+    assert problem.n_force_rows and "intrinsics" in problem.layout.blocks
     x = np.random.default_rng(2).normal(0, 1e-3, problem.layout.n)
     J, _ = PartJacobian(problem.parts(), csc_matrix(problem.sparsity()))(x)
     h, ref = 1e-6, np.zeros(J.shape)

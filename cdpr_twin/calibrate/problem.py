@@ -55,13 +55,19 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.sparse import coo_matrix, csc_matrix
-from scipy.spatial.transform import Rotation
 
 from cdpr_twin.calibrate.balance import cable_columns, cable_jacobian, wrench_residuals
 from cdpr_twin.calibrate.jacobian import PartJacobian
 from cdpr_twin.calibrate.layout import BLOCKS, Layout
 from cdpr_twin.calibrate.observations import Observations
 from cdpr_twin.calibrate.variance import NoiseModel
+from cdpr_twin.calibrate.views import (
+    exp_stack,
+    predicted_tags,
+    tag_residuals,
+    view_columns,
+    view_jacobian,
+)
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.kinematics import pulley_vectors
 from cdpr_twin.se3 import inverse, se3_exp
@@ -136,35 +142,6 @@ class Detector:
     lens: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0)
 
 
-def exp_stack(xi: np.ndarray) -> np.ndarray:
-    """SE(3) exponential of a stack of twists ``[v, ω]`` (K, 6). Returns (K, 4, 4)."""
-    v, w = xi[:, :3], xi[:, 3:]
-    th2 = np.einsum("ij,ij->i", w, w)
-    small = th2 < 1e-8
-    th = np.sqrt(np.where(small, 1.0, th2))
-    b = np.where(small, 0.5 - th2 / 24.0, (1.0 - np.cos(th)) / np.where(small, 1.0, th2))
-    c = np.where(small, 1.0 / 6.0 - th2 / 120.0, (th - np.sin(th)) / (th * th * th))
-    K = np.zeros((len(xi), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
-    K = K - K.transpose(0, 2, 1)
-    V = np.eye(3) + b[:, None, None] * K + c[:, None, None] * (K @ K)
-    T = np.zeros((len(xi), 4, 4))
-    T[:, :3, :3] = Rotation.from_rotvec(w).as_matrix()
-    T[:, :3, 3] = np.einsum("nij,nj->ni", V, v)
-    T[:, 3, 3] = 1.0
-    return T
-
-
-def inverse_stack(T: np.ndarray) -> np.ndarray:
-    """Inverse of a stack of rigid transforms (K, 4, 4)."""
-    out = np.zeros_like(T)
-    Rt = T[:, :3, :3].transpose(0, 2, 1)
-    out[:, :3, :3] = Rt
-    out[:, :3, 3] = -np.einsum("nij,nj->ni", Rt, T[:, :3, 3])
-    out[:, 3, 3] = 1.0
-    return out
-
-
 @dataclass(frozen=True, eq=False)
 class Model:
     """The robot the parameters describe (nominal + corrections), and the poses.
@@ -226,12 +203,12 @@ class Problem:
         self.e_ref = np.where(taut, obs.encoder, 0.0).sum(axis=0) / counts
         self.rows_k, self.rows_i = np.nonzero(taut)
         self.seen = np.flatnonzero(obs.seen)
-        self._G = None  # (n_seen, 6, 8): each detection's intrinsics-error Jacobian
+        self.intrinsics_jacobian = None  # (n_seen, 6, 8): each detection's, over the intrinsics
         if "intrinsics" in self.layout.blocks:
             from cdpr_twin.estimators.fused_models import tag_calibration_jacobian
 
             d = detector
-            self._G = np.array(
+            self.intrinsics_jacobian = np.array(
                 [tag_calibration_jacobian(T, d.tag_size, d.focal_px, d.lens)
                  for T in obs.T_cam_tag[self.seen]]
             )  # fmt: skip
@@ -313,9 +290,10 @@ class Problem:
         """
         c, t, f = self.n_cable_rows, self.n_tag_rows, self.n_force_rows
         given = (cable_columns(self.layout) if f else [], self._cable_terms_jacobian)
+        views = (view_columns(self.layout) if t else [], lambda x, h: view_jacobian(self, x, h))
         return [
             (slice(0, c), lambda x: self._cables(self.model(x))),
-            (slice(c, c + t), lambda x: self._tags(self.model(x))),
+            (slice(c, c + t), lambda x: self._tags(self.model(x)), views),
             (slice(c + t, c + t + f), lambda x: wrench_residuals(self, self.model(x)), given),
             (slice(self.n_data, self.n_data + self.n_prior), self._priors),
         ]
@@ -349,25 +327,12 @@ class Problem:
 
         The detector's intrinsics error is included (when estimated).
         """
-        pred = inverse(mod.T_platform_cam) @ inverse_stack(mod.T_base_platform[self.seen])
-        pred = pred @ mod.T_base_tag
-        if self._G is not None:  # what the detector's intrinsics error does to each view
-            pred = pred @ exp_stack(self._G @ mod.intrinsics)
-        return pred
+        T_cam_platform = inverse(mod.T_platform_cam)[None]
+        return predicted_tags(self, T_cam_platform, mod.T_base_tag[None], mod.intrinsics[None],
+                              mod.T_base_platform)[0]  # fmt: skip
 
     def _tags(self, mod: Model) -> np.ndarray:
-        if not len(self.seen):
-            return np.zeros(0)
-        n = self.noise
-        pred = self.predicted_tags(mod)
-        meas = self.obs.T_cam_tag[self.seen]
-        d = np.linalg.norm(meas[:, :3, 3], axis=1)[:, None]
-        std = np.array([n.tag_lateral_std, n.tag_lateral_std, n.tag_depth_std])
-        per_m = np.array([n.tag_std_per_m, n.tag_std_per_m, n.depth_growth])
-        dt = (meas[:, :3, 3] - pred[:, :3, 3]) / (std + per_m * d)
-        R = pred[:, :3, :3].transpose(0, 2, 1) @ meas[:, :3, :3]
-        dr = Rotation.from_matrix(R).as_rotvec() / n.tag_rotation_std
-        return np.hstack([dt, dr]).ravel()
+        return tag_residuals(self, self.predicted_tags(mod)[None])[0]
 
     def sparsity(self) -> coo_matrix:
         """Which residual depends on which parameter: (n_rows, n) pattern of ones."""
