@@ -462,7 +462,6 @@ def test_the_jacobian_by_parts_is_the_whole_residuals_derivative():
     from scipy.sparse import csc_matrix
 
     from cdpr_twin.calibrate.jacobian import PartJacobian
-
     from cdpr_twin.calibrate.problem import Detector
 
     g, T_tag, obs, *_ = _leveled_frame_robot(n_poses=8)

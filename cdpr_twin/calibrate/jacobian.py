@@ -11,8 +11,9 @@ a Jacobian costs two evaluations per group instead of two per parameter.
   residuals, so within the cable part the eight cables' exit points share a group; only the
   wrench balances see every cable at once. About 3× fewer residual rows evaluated than
   :func:`grouped_jacobian` on ACROBOT's recordings, same values up to rounding. A part may
-  give some of its columns itself (the wrench balance differentiates one cable's term at a
-  time, :func:`cdpr_twin.calibrate.balance.cable_jacobian`); the groups cover the rest.
+  give some of its columns itself, vectorised (the tag views over camera, tag and intrinsics
+  at once, :func:`cdpr_twin.calibrate.views.view_jacobian`; the wrench balance one cable's term
+  at a time, :func:`cdpr_twin.calibrate.balance.cable_jacobian`); the groups cover the rest.
 """
 
 from __future__ import annotations

@@ -284,22 +284,21 @@ class Problem:
         """The residuals in parts, each with its rows: cables, tags, forces, priors.
 
         Each part reaches fewer parameters than the whole (for
-        :class:`~cdpr_twin.calibrate.jacobian.PartJacobian`); the wrench balance's differences
-        over each cable's own parameters are that cable's term's
+        :class:`~cdpr_twin.calibrate.jacobian.PartJacobian`). The tag views differentiate their
+        shared columns themselves, all at once (:func:`~cdpr_twin.calibrate.views.view_jacobian`),
+        and the wrench balance each cable's own, term by term
         (:func:`~cdpr_twin.calibrate.balance.cable_jacobian`).
         """
         c, t, f = self.n_cable_rows, self.n_tag_rows, self.n_force_rows
-        given = (cable_columns(self.layout) if f else [], self._cable_terms_jacobian)
         views = (view_columns(self.layout) if t else [], lambda x, h: view_jacobian(self, x, h))
+        terms = (cable_columns(self.layout) if f else [],
+                 lambda x, h: cable_jacobian(self, self.model(x), h))  # fmt: skip
         return [
             (slice(0, c), lambda x: self._cables(self.model(x))),
             (slice(c, c + t), lambda x: self._tags(self.model(x)), views),
-            (slice(c + t, c + t + f), lambda x: wrench_residuals(self, self.model(x)), given),
+            (slice(c + t, c + t + f), lambda x: wrench_residuals(self, self.model(x)), terms),
             (slice(self.n_data, self.n_data + self.n_prior), self._priors),
         ]
-
-    def _cable_terms_jacobian(self, x: np.ndarray, h: float) -> np.ndarray:
-        return cable_jacobian(self, self.model(x), h)
 
     def _priors(self, x: np.ndarray) -> np.ndarray:
         """The builder's tolerances, and where the robot was homed."""
