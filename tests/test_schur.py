@@ -62,3 +62,14 @@ def test_a_singular_pose_block_is_reported_not_solved():
     assert damped_step(arrow(N, S), np.ones(len(N)), np.zeros(len(N))) is None
     assert inverse_parts(arrow(N, S)) is None
     assert damped_step(arrow(N, S), np.ones(len(N)), 1e-6 * np.ones(len(N))) is not None
+
+
+def test_a_stored_zero_in_another_poses_column_does_not_move_a_leverage():
+    J = _arrow_jacobian(seed=4)
+    N_inv = np.linalg.inv(J.T @ J)
+    sparse = csc_matrix(J)
+    sparse[0, S + 6 * 3] = 1.0  # a stored entry of pose 3 in a row of pose 0 ...
+    sparse[0, S + 6 * 3] = 0.0  # ... set to zero, still stored
+    assert sparse[:, S + 6 * 3].nnz > np.count_nonzero(J[:, S + 6 * 3])
+    h = leverages(sparse, S, inverse_parts(arrow(J.T @ J, S)))
+    np.testing.assert_allclose(h, np.einsum("ij,jk,ik->i", J, N_inv, J), rtol=1e-9, atol=1e-12)

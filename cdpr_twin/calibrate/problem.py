@@ -326,11 +326,15 @@ class Problem:
 
         The detector's intrinsics error is included (when estimated).
         """
+        if not len(self.seen):
+            return np.zeros((0, 4, 4))
         T_cam_platform = inverse(mod.T_platform_cam)[None]
         return predicted_tags(self, T_cam_platform, mod.T_base_tag[None], mod.intrinsics[None],
                               mod.T_base_platform)[0]  # fmt: skip
 
     def _tags(self, mod: Model) -> np.ndarray:
+        if not len(self.seen):  # (and no views' intrinsics Jacobian to stack)
+            return np.zeros(0)
         return tag_residuals(self, self.predicted_tags(mod)[None])[0]
 
     def sparsity(self) -> coo_matrix:

@@ -92,9 +92,11 @@ def damped_step(a: Arrow, g: np.ndarray, damping: np.ndarray) -> np.ndarray | No
     return -np.concatenate([d_s, d_p.ravel()])
 
 
-def inverse_parts(a: Arrow) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """N⁻¹'s parts: S⁻¹, N⁻¹'s shared block (n_s, n_s); X (K, 6, n_s); D⁻¹ (K, 6, 6).
+def inverse_parts(a: Arrow) -> tuple[np.ndarray | None, np.ndarray, np.ndarray] | None:
+    """What N⁻¹ is made of: (S⁻¹, X, D⁻¹).
 
+    S⁻¹ (n_s, n_s) is N⁻¹'s shared block (None without shared unknowns); X = D⁻¹C
+    (K, 6, n_s) and D⁻¹ (K, 6, 6) give the rest (N⁻¹'s pose blocks are D⁻¹ + X S⁻¹ Xᵀ).
     None if N is not positive definite.
     """
     parts = _eliminate(a, np.zeros(a.n_shared + 6 * len(a.D)))
@@ -111,7 +113,8 @@ def leverages(J: csc_matrix, n_shared: int, parts: tuple) -> np.ndarray:
     A row with shared part a and pose-k part p: (a − X_kᵀ p)ᵀ S⁻¹ (a − X_kᵀ p) + pᵀ D_k⁻¹ p.
     """
     S_inv, X, D_inv = parts
-    J = csc_matrix(J)
+    J = csc_matrix(J, copy=True)
+    J.eliminate_zeros()  # a stored zero must not name another pose
     a = J[:, :n_shared].toarray()
     pose = J[:, n_shared:].tocoo()
     p = np.zeros((J.shape[0], 6))
