@@ -371,6 +371,30 @@ def test_ctrl_c_while_a_command_starts_is_one_line_not_a_traceback(monkeypatch, 
     assert capsys.readouterr().err == "cdpr-twin run: interrupted\n"
 
 
+@pytest.mark.parametrize(("shift_m", "refused"), [(0.05, False), (0.2, True)])
+def test_a_nominal_description_of_another_robot_is_refused_as_such(tmp_path, shift_m, refused):
+    # before: COGIRO's description as ACROBOT's nominal model was refused as "start.pose is
+    # outside the wrench-feasible workspace" (COGIRO's 100-5000 N tension range at ACROBOT's
+    # start pose); an exit point moved 5 cm (4x ACROBOT's 12 mm tolerance) is a belief about
+    # the same robot, 20 cm (beyond 10 % of its 1.05 m span of exit points) another robot
+    from cdpr_twin import resources
+
+    cogiro = resources.models_dir() / "cogiro" / "robot.toml"
+    with pytest.raises(ScenarioError, match=r": model\.nominal: .*cogiro.*another robot"):
+        prepare(_pbvs(**{"model.nominal": str(cogiro)}))
+    source = resources.models_dir() / "acrobot" / "robot.toml"
+    text = source.read_text().replace('"assets/', f'"{source.parent}/assets/')
+    moved = text.replace("[-0.4725, -0.5275, 1.165]", f"[-0.4725, -0.5275, {1.165 + shift_m}]")
+    assert moved != text
+    (tmp_path / "robot.toml").write_text(moved)
+    s = _pbvs(**{"model.nominal": str(tmp_path / "robot.toml")})
+    if refused:
+        with pytest.raises(ScenarioError, match=r"exit point 1 is 0\.2 m from the model's"):
+            prepare(s)
+    else:
+        prepare(s).close()
+
+
 def test_a_bad_nominal_description_is_named_by_its_own_key_and_a_directory_as_one(tmp_path):
     # before: both said model.file, and a directory was "not found"
     bad = tmp_path / "robot.toml"

@@ -69,6 +69,12 @@ def _nominal_robot(model: mujoco.MjModel) -> NominalRobot:
     )
 
 
+SAME_ROBOT = 0.1
+"""A nominal description whose exit points lie farther from the model's than this share of the
+frame's span describes another robot (a builder's tolerances and a calibration's errors are
+millimetres to centimetres: ACROBOT's 12 mm is 1 % of its 1.2 m)."""
+
+
 def nominal_from_description(path: str | Path, model_nominal: NominalRobot) -> NominalRobot:
     """What the software believes when told a robot description (e.g. a calibrated one).
 
@@ -77,7 +83,8 @@ def nominal_from_description(path: str | Path, model_nominal: NominalRobot) -> N
     and the carried mass (platform and payload) stay the model's.
 
     Raises:
-        ModelError: the description is invalid or has another cable count.
+        ModelError: the description is invalid or describes another robot (another cable
+            count, or an exit point beyond :data:`SAME_ROBOT` of the frame's span).
     """
     from cdpr_twin.robot import RobotError, load_robot
     from cdpr_twin.workspace import geometry_of
@@ -91,6 +98,15 @@ def nominal_from_description(path: str | Path, model_nominal: NominalRobot) -> N
         raise NominalError(
             f"{path}: {geom.n_cables} cables, but the model has "
             f"{known.n_cables}; give the same robot's description"
+        )
+    span = float(np.ptp(known.a_base, axis=0).max())
+    off = np.linalg.norm(geom.a_base - known.a_base, axis=1)
+    if off.max() > SAME_ROBOT * span:
+        i = int(np.argmax(off))
+        raise NominalError(
+            f"{path}: exit point {i + 1} is {off[i]:.3g} m from the model's, more than "
+            f"{SAME_ROBOT:.0%} of its {span:.3g} m span: a description of another robot; give "
+            "the same robot's description (e.g. `cdpr-twin calibrate`'s calibrated_robot.toml)"
         )
     # what is carried (platform and payload) is known, not calibrated
     geom = replace(geom, mass=known.mass, com_platform=known.com_platform)
