@@ -146,7 +146,7 @@ def _view(args: argparse.Namespace) -> int:
 
 def _description(path: Path) -> str:
     try:
-        return str(tomllib.loads(path.read_text(encoding="utf-8")).get("description", ""))
+        return str(tomllib.loads(path.read_text(encoding="utf-8-sig")).get("description", ""))
     except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
         return "(unreadable)"
 

@@ -314,7 +314,7 @@ def _read(path: Path) -> dict:
     if not path.is_file():
         raise RobotError(f"{path}: robot description not found")
     try:
-        return tomllib.loads(path.read_text(encoding="utf-8"))
+        return tomllib.loads(path.read_text(encoding="utf-8-sig"))
     except tomllib.TOMLDecodeError as exc:
         raise RobotError(f"{path}: not valid TOML: {exc}") from None
     except UnicodeDecodeError as exc:

@@ -324,7 +324,7 @@ def _read(source: Path) -> OptionReader:
         why = "a directory, not a scenario file" if kind == "dir" else "scenario file not found"
         raise ScenarioError(f"{source}: {why}")
     try:
-        data = tomllib.loads(source.read_text(encoding="utf-8"))
+        data = tomllib.loads(source.read_text(encoding="utf-8-sig"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ScenarioError(f"{source}: not valid TOML: {exc}") from None
     except OSError as exc:

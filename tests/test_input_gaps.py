@@ -406,3 +406,33 @@ def test_a_bad_nominal_description_is_named_by_its_own_key_and_a_directory_as_on
     data["model"] = {"file": str(tmp_path)}
     with pytest.raises(ScenarioError, match=r": model\.file: model file .* is a directory"):
         prepare(scenario_from_data(data, ROOT / "scenarios" / "paper_open_loop.toml"))
+
+
+def test_a_file_saved_with_a_byte_order_mark_reads_as_without_it(tmp_path):
+    # before: "not valid TOML: Invalid statement (at line 1, column 1)", the mark invisible
+    # in an editor; now a scenario, a robot description and a campaign read as without it
+    from dataclasses import replace
+
+    from cdpr_twin import resources
+    from cdpr_twin.campaign import load_campaign
+    from cdpr_twin.robot import load_robot
+
+    def marked(source: Path, to: Path, text: str | None = None) -> Path:
+        to.parent.mkdir(exist_ok=True)
+        to.write_text("\ufeff" + (text or source.read_text(encoding="utf-8")), encoding="utf-8")
+        assert to.read_bytes()[:3] == b"\xef\xbb\xbf"
+        return to
+
+    scenario = ROOT / "scenarios" / "paper_open_loop.toml"
+    read = load_scenario(marked(scenario, tmp_path / "scenarios" / scenario.name))
+    assert repr(read) == repr(replace(load_scenario(scenario), source=read.source))
+    robot = resources.models_dir() / "acrobot" / "robot.toml"
+    (tmp_path / "assets").symlink_to(robot.parent / "assets")  # its tag texture, beside it
+    read = load_robot(marked(robot, tmp_path / "robot.toml"))
+    plain = load_robot(robot)
+    assert read.name == plain.name and read.mass == plain.mass
+    assert np.array_equal(read.exit_points, plain.exit_points)
+    campaign = ROOT / "campaigns" / "paper_study.toml"
+    text = campaign.read_text(encoding="utf-8").replace("../scenarios/", f"{ROOT}/scenarios/")
+    tasks = load_campaign(marked(campaign, tmp_path / "campaigns" / "c.toml", text)).tasks
+    assert [t.run_id for t in tasks] == [t.run_id for t in load_campaign(campaign).tasks]

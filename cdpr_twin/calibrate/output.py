@@ -60,7 +60,7 @@ def calibrated_description(
             to it when both lie in one tree below the root (a clone or copy of that tree still
             finds it); otherwise, or ``None``, by its absolute path.
     """
-    data = tomllib.loads(source.read_text(encoding="utf-8"))
+    data = tomllib.loads(source.read_text(encoding="utf-8-sig"))
     mod = cal.model
     data["cables"]["exit_points_m"] = np.round(mod.a_base, 7).tolist()
     data["cables"]["anchor_points_m"] = np.round(mod.b_platform, 7).tolist()
