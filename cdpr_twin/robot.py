@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from cdpr_twin.paths import path_kind
 from cdpr_twin.robot_schema import (
     RobotError,
     TensionSensorSpec,
@@ -311,7 +312,10 @@ def _scene(scene: _Table, outer_min: np.ndarray, outer_max: np.ndarray) -> dict:
 
 
 def _read(path: Path) -> dict:
-    if not path.is_file():
+    kind = path_kind(path, RobotError)
+    if kind == "dir":
+        raise RobotError(f"{path}: a directory, not a robot description; give its robot.toml")
+    if kind != "file":
         raise RobotError(f"{path}: robot description not found")
     try:
         return tomllib.loads(path.read_text(encoding="utf-8-sig"))

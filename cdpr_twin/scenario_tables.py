@@ -26,6 +26,7 @@ from cdpr_twin.options import (
     parse_options,
     read_options,
 )
+from cdpr_twin.paths import path_kind
 from cdpr_twin.realism import PARTS, PROFILES, Realism, profile
 
 
@@ -144,8 +145,10 @@ def read_nominal(m: OptionReader, source: Path) -> Path | None:
         return None
     path = Path(m.string("nominal"))
     path = path if path.is_absolute() else (source.parent / path).resolve()
-    if not path.is_file():
-        raise m.fail("nominal", f"{path} not found; give a robot.toml (cdpr-twin calibrate)")
+    kind = path_kind(path, lambda why: m.fail("nominal", why))
+    if kind != "file":
+        what = "is a directory" if kind == "dir" else "not found"
+        raise m.fail("nominal", f"{path} {what}; give a robot.toml (cdpr-twin calibrate)")
     return path
 
 

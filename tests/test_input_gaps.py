@@ -436,3 +436,17 @@ def test_a_file_saved_with_a_byte_order_mark_reads_as_without_it(tmp_path):
     text = campaign.read_text(encoding="utf-8").replace("../scenarios/", f"{ROOT}/scenarios/")
     tasks = load_campaign(marked(campaign, tmp_path / "campaigns" / "c.toml", text)).tasks
     assert [t.run_id for t in tasks] == [t.run_id for t in load_campaign(campaign).tasks]
+
+
+def test_a_directory_given_for_a_description_is_called_a_directory(tmp_path):
+    # before: "not found" for a directory that is there (model.nominal, a robot description)
+    from cdpr_twin.robot import RobotError, load_robot
+
+    with pytest.raises(ScenarioError, match=r": model\.nominal: .* is a directory; give a robot"):
+        _pbvs(**{"model.nominal": str(tmp_path)})
+    with pytest.raises(ScenarioError, match=r": model\.nominal: .*nothing\.toml not found"):
+        _pbvs(**{"model.nominal": str(tmp_path / "nothing.toml")})
+    with pytest.raises(RobotError, match=r": a directory, not a robot description; give its"):
+        load_robot(tmp_path)
+    with pytest.raises(RobotError, match=r"nothing\.toml: robot description not found"):
+        load_robot(tmp_path / "nothing.toml")
