@@ -69,7 +69,8 @@ def cable_jacobian(problem, mod, h: float) -> np.ndarray:
     scale = np.array([1 / n.force_std] * 3 + [1 / n.moment_std] * 3)
     out = []
     for i in range(L.m):
-        # the parameters at the cable's values, then each moved by ±h: (2p + ..., 8)
+        # the cable's 8 parameters (exit, anchor, bias, gain), each of the p estimated moved
+        # by +h then −h: (2p, 8)
         base = np.concatenate([mod.a_base[i], mod.b_platform[i],
                                [mod.tension_bias[i], mod.tension_gain[i]]])  # fmt: skip
         moved = [at + j for at, (name, w) in zip((0, 3, 6, 7), TERMS, strict=True)
