@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from scipy.sparse import csc_matrix
+from scipy.sparse import coo_matrix, csc_matrix
 
 from cdpr_twin.calibrate.normal_equations import shared_covariance
 from cdpr_twin.calibrate.schur import arrow, damped_step, inverse_parts, leverages
@@ -67,9 +67,9 @@ def test_a_singular_pose_block_is_reported_not_solved():
 def test_a_stored_zero_in_another_poses_column_does_not_move_a_leverage():
     J = _arrow_jacobian(seed=4)
     N_inv = np.linalg.inv(J.T @ J)
-    sparse = csc_matrix(J)
-    sparse[0, S + 6 * 3] = 1.0  # a stored entry of pose 3 in a row of pose 0 ...
-    sparse[0, S + 6 * 3] = 0.0  # ... set to zero, still stored
+    rows, cols = np.nonzero(J)  # and an entry of pose 3 in a row of pose 0, stored as a zero
+    rows, cols = np.append(rows, 0), np.append(cols, S + 6 * 3)
+    sparse = coo_matrix((np.append(J[np.nonzero(J)], 0.0), (rows, cols)), shape=J.shape).tocsc()
     assert sparse[:, S + 6 * 3].nnz > np.count_nonzero(J[:, S + 6 * 3])
     h = leverages(sparse, S, inverse_parts(arrow(J.T @ J, S)))
     np.testing.assert_allclose(h, np.einsum("ij,jk,ik->i", J, N_inv, J), rtol=1e-9, atol=1e-12)
