@@ -207,11 +207,11 @@ class Problem:
         if "intrinsics" in self.layout.blocks:
             from cdpr_twin.estimators.fused_models import tag_calibration_jacobian
 
-            d = detector
+            d = detector  # (no view: an empty (0, 6, 8) stack, which every step carries)
             self.intrinsics_jacobian = np.array(
                 [tag_calibration_jacobian(T, d.tag_size, d.focal_px, d.lens)
                  for T in obs.T_cam_tag[self.seen]]
-            )  # fmt: skip
+            ).reshape(-1, 6, 8)  # fmt: skip
         self.n_cable_rows, self.n_tag_rows = len(self.rows_k), 6 * len(self.seen)
         self.n_force_rows = 6 * len(self.force_k)
         self.n_data = self.n_cable_rows + self.n_tag_rows + self.n_force_rows
@@ -326,15 +326,11 @@ class Problem:
 
         The detector's intrinsics error is included (when estimated).
         """
-        if not len(self.seen):
-            return np.zeros((0, 4, 4))
         T_cam_platform = inverse(mod.T_platform_cam)[None]
         return predicted_tags(self, T_cam_platform, mod.T_base_tag[None], mod.intrinsics[None],
                               mod.T_base_platform)[0]  # fmt: skip
 
     def _tags(self, mod: Model) -> np.ndarray:
-        if not len(self.seen):  # (and no views' intrinsics Jacobian to stack)
-            return np.zeros(0)
         return tag_residuals(self, self.predicted_tags(mod)[None])[0]
 
     def sparsity(self) -> coo_matrix:
