@@ -38,6 +38,8 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any, TypeVar
 
+from cdpr_twin.paths import path_kind
+
 KINDS = ("estimator", "controller")
 RESERVED_NAMES = frozenset({"t", "true", "plan", "tag", "status", "tension", "length", "rate"})
 """Column prefixes of ``timeseries.csv`` that no plugin may take as its name."""
@@ -242,8 +244,9 @@ def load_modules(refs: list[str], base_dir: Path) -> None:
     for ref in refs:
         if ref.endswith(".py"):
             path = Path(ref) if Path(ref).is_absolute() else (base_dir / ref).resolve()
-            if not path.is_file():
-                raise ImportError(f"plugin file {path} not found")
+            if (kind := path_kind(path, ImportError)) != "file":
+                why = "a directory, not a Python file" if kind == "dir" else "plugin file not found"
+                raise ImportError(f"{path}: {why}")
             digest = hashlib.sha1(str(path).encode()).hexdigest()[:12]
             mod_name = f"cdpr_twin_plugin_{path.stem}_{digest}"  # one module per file path
             if mod_name in sys.modules:

@@ -137,3 +137,21 @@ def test_a_seventh_estimator_goes_through_reproduce(tmp_path):
     assert "midpoint" in rep["open_loop"]["estimators"]
     assert "midpoint" in rep["pbvs"]
     assert "midpoint" in (out / "report.md").read_text()
+
+
+@pytest.mark.parametrize("make", ["missing", "dir", "file"])
+def test_a_plugin_file_that_is_missing_or_a_directory_is_named_as_such(tmp_path, make):
+    text = (ROOT / "scenarios" / "paper_open_loop.toml").read_text()
+    scenario = tmp_path / "s.toml"
+    text = text.replace('"../models/', f'"{ROOT}/models/')
+    scenario.write_text('plugins = ["extra.py"]\n' + text)
+    target = tmp_path / "extra.py"
+    if make == "dir":
+        target.mkdir()
+    elif make == "file":  # the control: a module of that name imports, and the scenario loads
+        target.write_text("VALUE = 1\n")
+        assert load_scenario(scenario).plugins == ("extra.py",)
+        return
+    why = {"missing": "plugin file not found", "dir": "a directory, not a Python file"}[make]
+    with pytest.raises(ScenarioError, match=f"plugins: cannot import: .*extra.py: {why}$"):
+        load_scenario(scenario)
