@@ -74,13 +74,13 @@ class OptionReader:
         exclusive: bool = False,
         unit: str = "",
         value: Any = ...,
+        infinite: bool = False,
     ) -> float:
-        """A finite number, at least ``minimum``."""
+        """A finite number (or ``inf`` where ``infinite``), at least ``minimum``."""
         v = self.raw(key, default, f"number{' ' + unit if unit else ''}") if value is ... else value
-        if not _is_number(v):
-            raise self.fail(
-                key, f"must be a finite number{' in ' + unit if unit else ''}, got {v!r}"
-            )
+        if not (_is_number(v) or (infinite and isinstance(v, float) and v == math.inf)):
+            what = "a finite number or inf" if infinite else "a finite number"
+            raise self.fail(key, f"must be {what}{' in ' + unit if unit else ''}, got {v!r}")
         if minimum is not None and (v <= minimum if exclusive else v < minimum):
             raise self.fail(
                 key,
@@ -164,7 +164,10 @@ def _read_field(r: OptionReader, f: dataclasses.Field, hint: Any) -> Any:
         else:
             value = r.pose(key)
     elif hint is float:
-        value = r.number(key, minimum=spec.minimum, exclusive=spec.exclusive, unit=spec.unit)
+        value = r.number(
+            key, minimum=spec.minimum, exclusive=spec.exclusive, unit=spec.unit,
+            infinite=spec.infinite,
+        )  # fmt: skip
         value = math.radians(value) if spec.unit == "deg" else value
     elif hint is bool:
         value = r.boolean(key)

@@ -77,6 +77,7 @@ class OptionSpec:
         unit: unit in the file (``"deg"`` is converted to radians; others are SI already).
         minimum: lowest allowed value (numbers).
         exclusive: the minimum itself is not allowed.
+        infinite: ``inf`` is allowed (written ``inf`` in TOML: "no limit", "instant").
         pose: the value is a pose ``[x, y, z, rx, ry, rz]`` (m, deg) → (4, 4) transform.
         convert: applied to the parsed value (e.g. a frame change).
         doc: one line for error messages and listings.
@@ -86,6 +87,7 @@ class OptionSpec:
     unit: str = ""
     minimum: float | None = None
     exclusive: bool = False
+    infinite: bool = False
     pose: bool = False
     convert: Callable[[Any], Any] | None = None
     doc: str = ""

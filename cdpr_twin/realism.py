@@ -36,6 +36,17 @@ MAX_FULL_WELL_E = 1e30
 """The largest full well [e-] the float32 frame arithmetic holds without overflow."""
 MAX_LATENCY_TICKS = 100
 """The longest camera latency [control ticks] (4 s at 25 Hz)."""
+MAX_CENTER_ERROR_STD_PX = 20.0
+"""The largest per-robot std of the calibrated principal point [px]: calibrations leave
+0.3–1.3 px (``models/acrobot/README.md``), and a 10σ draw stays inside a 640×480 frame."""
+MAX_DISTORTION_ERROR_STD = 0.1
+"""The largest per-robot std of a calibrated distortion coefficient: calibrations leave
+3e-4–7e-3; at 0.1 a 10σ draw moves k1 by 1, a different lens."""
+MAX_HOMING_POSITION_STD = 0.05
+"""The largest homing repeatability [m] per axis: a robot that homes farther off than this
+starts somewhere else (set ``start.pose``); CDPRs home within millimetres."""
+MAX_HOMING_ROTATION_STD = math.radians(5.0)
+"""The largest homing repeatability [rad] per axis (5°; CDPRs home within tenths of one)."""
 
 
 def check_relative_std(field: str, std: float, what: str) -> None:
@@ -105,6 +116,18 @@ class CameraRealism:
             if len(getattr(self, name)) != 4:
                 raise OptionError(name, "must list 4 values, for k1, k2, p1, p2")
         check_relative_std("focal_error_std", self.focal_error_std, "focal length")
+        if self.center_error_std_px > MAX_CENTER_ERROR_STD_PX:
+            raise OptionError(
+                "center_error_std_px",
+                f"must be ≤ {MAX_CENTER_ERROR_STD_PX:g} px (calibrations place the principal "
+                f"point within 0.3–1.3 px), got {self.center_error_std_px:g}",
+            )
+        if max(self.distortion_error_std) > MAX_DISTORTION_ERROR_STD:
+            raise OptionError(
+                "distortion_error_std",
+                f"each must be ≤ {MAX_DISTORTION_ERROR_STD:g} (calibrations leave 3e-4–7e-3), "
+                f"got {list(self.distortion_error_std)}",
+            )
         if self.full_well_e > MAX_FULL_WELL_E:
             raise OptionError(
                 "full_well_e",
@@ -133,8 +156,8 @@ class WinchRealism:
         drum_radius_error_std: per-robot relative std of the true drum radius.
     """
 
-    bandwidth_hz: float = option(math.inf, minimum=0.0, exclusive=True, unit="Hz")
-    max_accel: float = option(math.inf, minimum=0.0, exclusive=True, unit="m/s2")
+    bandwidth_hz: float = option(math.inf, minimum=0.0, exclusive=True, infinite=True, unit="Hz")
+    max_accel: float = option(math.inf, minimum=0.0, exclusive=True, infinite=True, unit="m/s2")
     encoder_counts: int = option(0, minimum=0)
     drum_radius: float = option(math.nan, minimum=0.0, exclusive=True, unit="m")
     drum_radius_error_std: float = option(0.0, minimum=0.0)
@@ -213,6 +236,21 @@ class HomingRealism:
 
     position_std: float = option(0.0, minimum=0.0, unit="m")
     rotation_std: float = option(0.0, minimum=0.0, unit="deg")
+
+    def __post_init__(self) -> None:
+        if self.position_std > MAX_HOMING_POSITION_STD:
+            raise OptionError(
+                "position_std",
+                f"must be ≤ {MAX_HOMING_POSITION_STD:g} m (a repeatability: a robot homing "
+                f"farther off starts elsewhere; set start.pose), got {self.position_std:g}",
+            )
+        if self.rotation_std > MAX_HOMING_ROTATION_STD:
+            raise OptionError(
+                "rotation_std_deg",
+                f"must be ≤ {math.degrees(MAX_HOMING_ROTATION_STD):g}° (a repeatability: a "
+                f"robot homing farther off starts elsewhere; set start.pose), got "
+                f"{math.degrees(self.rotation_std):g}°",
+            )
 
 
 @dataclass(frozen=True)
@@ -326,6 +364,10 @@ def for_robot(realism: Realism, robot: RobotSensing) -> Realism:
     """The profile with its robot-data fields (``nan``, ``repeatability_noise``) filled in.
 
     The accuracy becomes a rectangular bias, std a/√3 (GUM 4.3.7; see :class:`TensionRealism`).
+
+    Raises:
+        OptionError: naming ``realism.tension.range_min``/``range_max`` when the range, with
+            the robot's value for the field left out, is empty or does not hold 0 N.
     """
     w, t = realism.winch, realism.tension
     if math.isnan(w.drum_radius):
@@ -338,6 +380,15 @@ def for_robot(realism: Realism, robot: RobotSensing) -> Realism:
     }
     if t.repeatability_noise and math.isnan(t.noise_std):
         filled["noise_std"] = robot.repeatability
+    low, high = filled["range_min"], filled["range_max"]
+    if not low <= 0.0 < high:  # a slack cable reads 0 N: every load cell's range holds it
+        set_max, set_min = not math.isnan(t.range_max), not math.isnan(t.range_min)
+        given = "range_max" if (set_max and not high > 0.0) or not set_min else "range_min"
+        raise OptionError(
+            f"realism.tension.{given}",
+            f"the readings' range {low:g}…{high:g} N (the robot's {lo:g}…{hi:g} N where not "
+            "set) must hold 0 N, the slack cable's reading, with range_min ≤ 0 < range_max",
+        )
     return replace(realism, winch=w, tension=replace(t, **filled))
 
 

@@ -123,8 +123,9 @@ class TensionSensorSpec:
 def tension_sensors(t: _Table) -> TensionSensorSpec:
     """``[tension_sensors]``: range_n, accuracy_n, repeatability_n, location."""
     lo, hi = (float(v) for v in t.array("range_n", (2,)))
-    if not lo < hi:
-        raise t.fail("range_n", f"must be [min, max] with min < max, got {[lo, hi]}")
+    if not lo <= 0.0 < hi:  # a slack cable reads 0 N
+        raise t.fail("range_n", f"must be [min, max] with min ≤ 0 < max (a slack cable's 0 N "
+                     f"in range), got {[lo, hi]}")  # fmt: skip
     accuracy = t.number("accuracy_n", positive=True)
     repeatability = t.number("repeatability_n", positive=True)
     location = t.string("location")

@@ -174,6 +174,10 @@ def prepare(scenario: Scenario) -> RunSetup:
         raise ScenarioError(f"{src}: {exc.field}: {exc}") from None
     except SimulationError as exc:
         raise ScenarioError(f"{src}: sensors.camera: {exc}") from None
+    except OptionError as exc:
+        if not exc.field.startswith("realism."):
+            raise ScenarioError(f"{src}: model: {exc}") from None
+        raise ScenarioError(f"{src}: {exc.field}: {exc.problem}") from None
     except ValueError as exc:
         raise ScenarioError(f"{src}: model: {exc}") from None
     try:

@@ -221,6 +221,13 @@ class TagDetector:
     ) -> None:
         if not tag_size > 0:
             raise ValueError(f"tag_size must be > 0 m, got {tag_size}")
+        K = intrinsics
+        if not (K.fx > 0 and K.fy > 0 and 0 <= K.cx <= K.width and 0 <= K.cy <= K.height):
+            raise ValueError(  # the detector's pose fit would run on nonsense (or crash in C)
+                f"intrinsics fx={K.fx:g}, fy={K.fy:g} px, principal point ({K.cx:g}, {K.cy:g}) "
+                f"px: need positive focal lengths and the point inside the {K.width}×{K.height} "
+                "px image"
+            )
         self.intrinsics = intrinsics
         self.tag_size = float(tag_size)
         self.tag_id = int(tag_id)

@@ -159,6 +159,7 @@ def _edited(tmp_path: Path, old: str, new: str) -> Path:
         ('location = "anchor"', 'location = "winch"', "tension_sensors.location"),
         ("accuracy_n = 0.24\n", "", "tension_sensors.accuracy_n"),  # missing
         ("range_n = [-25.0, 75.0]", "range_n = [75.0, -25.0]", "tension_sensors.range_n"),
+        ("range_n = [-25.0, 75.0]", "range_n = [5.0, 75.0]", "tension_sensors.range_n"),  # no 0 N
         ("max_mass_kg = 0.0", "max_mass_kg = -1.0", "payload.max_mass_kg"),
         # before: MuJoCo's "Error opening file" with a path relative to --out, at build time
         ('texture = "assets/tag36h11_00000.png"', 'texture = "nope.png"', "tag.texture"),

@@ -11,6 +11,7 @@ import os
 import mujoco
 import numpy as np
 
+from cdpr_twin.plugins import OptionError
 from cdpr_twin.se3 import matrix_from_quat_wxyz, rot_x, transform
 from cdpr_twin.sim.imaging import lens_margins
 from cdpr_twin.types import CameraIntrinsics
@@ -40,22 +41,27 @@ def check_frame_size(
             (:func:`~cdpr_twin.sim.imaging.lens_margins`).
 
     Raises:
-        ValueError: saying which limit and what to lower.
+        ValueError: saying which limit and what to lower (an ``OptionError`` naming
+            ``realism.camera.supersample`` when that multiplies the render).
     """
     field = "realism.camera.supersample" if scale > 1 else "the camera's resolution"
+
+    def error(text: str) -> ValueError:
+        return OptionError(field, text) if scale > 1 else ValueError(text)
+
     w, h = width * scale + 2 * margins[0], height * scale + 2 * margins[1]
     size = f"{w}×{h} px"
     if margins[0] or margins[1]:
         size += f" (a {width * scale}×{height * scale} px frame and what the lens sees beyond it)"
     if max(w, h) > MAX_BUFFER_PX:
-        raise ValueError(
+        raise error(
             f"the camera renders {size}: more than an offscreen "
             f"buffer can hold ({MAX_BUFFER_PX} px a side with Mesa); lower {field}"
         )
     need = BYTES_PER_SAMPLE * w * h
     free = _available_memory()
     if free is not None and need > free:
-        raise ValueError(
+        raise error(
             f"the camera renders {size}, which takes about "
             f"{need / 1e9:.1f} GB of images ({BYTES_PER_SAMPLE} B a sample), more than the "
             f"{free / 1e9:.1f} GB of memory available; lower {field}"

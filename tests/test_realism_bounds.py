@@ -1,0 +1,110 @@
+"""What a ``[realism]`` table may ask for: magnitudes no real robot has are refused by name.
+
+Each bound is checked on both sides: the largest accepted value loads (or runs), a value past
+it is a one-line error naming ``realism.<part>.<field>``. Before these bounds a principal-point
+error std of 1e6 px crashed the process in the AprilTag detector (SIGSEGV, no message), 10⁶
+blur sub-frames held a 5-tick run for minutes while its memory grew without end, and a
+homing repeatability of 10⁶ degrees started a run 140° from where the robot believed it was.
+"""
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cdpr_twin import realism as rl
+from cdpr_twin.cli import main
+from cdpr_twin.scenario import ScenarioError, load_scenario
+from cdpr_twin.types import CameraIntrinsics
+
+ROOT = Path(__file__).resolve().parent.parent
+PBVS = (
+    (ROOT / "scenarios" / "paper_pbvs.toml").read_text().replace('"../models/', f'"{ROOT}/models/')
+)
+
+
+def _scenario(tmp_path: Path, part: str, lines: str) -> Path:
+    path = tmp_path / "s.toml"
+    path.write_text(PBVS + f"\n[realism.{part}]\n{lines}\n")
+    return path
+
+
+@pytest.mark.parametrize(
+    ("part", "ok", "bad", "match"),
+    [
+        ("camera", "center_error_std_px = 20.0", "center_error_std_px = 1e6",
+         r"realism\.camera\.center_error_std_px: must be ≤ 20 px"),
+        ("camera", "distortion_error_std = [0.1, 0.1, 0.1, 0.1]",
+         "distortion_error_std = [0.01, 10.0, 0.0, 0.0]",
+         r"realism\.camera\.distortion_error_std: each must be ≤ 0\.1"),
+        ("homing", "position_std = 0.05", "position_std = 1.0",
+         r"realism\.homing\.position_std: must be ≤ 0\.05 m"),
+        ("homing", "rotation_std_deg = 5.0", "rotation_std_deg = 1e6",
+         r"realism\.homing\.rotation_std_deg: must be ≤ 5°"),
+    ],
+)  # fmt: skip
+def test_magnitudes_beyond_any_real_robot_are_refused_when_the_file_loads(
+    tmp_path, part, ok, bad, match
+):
+    load_scenario(_scenario(tmp_path, part, ok))
+    with pytest.raises(ScenarioError, match=match):
+        load_scenario(_scenario(tmp_path, part, bad))
+
+
+def test_inf_switches_one_winch_effect_off_as_documented(tmp_path):
+    """``inf`` is the documented "off" of the velocity loop and of the slew limit: each can be
+    switched off alone under the acrobot profile (before: "must be a finite number")."""
+    s = load_scenario(_scenario(tmp_path, "winch", "bandwidth_hz = inf"))
+    acrobot = rl.profile("acrobot").winch
+    assert math.isinf(s.realism.winch.bandwidth_hz)
+    assert s.realism.winch.max_accel == acrobot.max_accel and math.isfinite(acrobot.max_accel)
+    s = load_scenario(_scenario(tmp_path, "winch", "max_accel = inf"))
+    assert math.isinf(s.realism.winch.max_accel)
+    for bad in ("max_accel = -inf", "bandwidth_hz = nan", "encoder_counts = inf"):
+        with pytest.raises(ScenarioError, match=r"realism\.winch\.\w+: must be"):
+            load_scenario(_scenario(tmp_path, "winch", bad))
+
+
+@pytest.mark.parametrize(
+    ("part", "ok", "bad", "match"),
+    [
+        # the robot's exposure 8 ms at a 0.5 ms step: 16 distinct states to average
+        ("camera", "blur_subframes = 16", "blur_subframes = 17",
+         r"realism\.camera\.blur_subframes: 17 sub-frames in a 0\.008 s exposure: at most 16"),
+        ("camera", "exposure_s = 0.04", "exposure_s = 0.05",
+         r"realism\.camera\.exposure_s: 0\.05 s needs the camera's read period"),
+        # before: "model: range_max: must exceed range_min", naming a field nobody wrote
+        ("tension", "range_min = 0.0", "range_min = 1e6",
+         r"realism\.tension\.range_min: the readings' range 1e\+06…75 N .* must hold 0 N"),
+        ("tension", "range_max = 100.0", "range_max = -5.0",
+         r"realism\.tension\.range_max: the readings' range -25…-5 N .* must hold 0 N"),
+    ],
+)  # fmt: skip
+def test_what_only_the_built_robot_can_check_names_the_realism_field(
+    tmp_path, capsys, part, ok, bad, match
+):
+    import re
+
+    for lines, code in ((ok, 0), (bad, 2)):
+        path = _scenario(tmp_path, part, lines)
+        out = tmp_path / f"out{code}"
+        assert main(["run", str(path), "--duration", "0.08", "--out", str(out)]) == code
+        err = capsys.readouterr().err
+        if code == 2:
+            assert re.search(f"^cdpr-twin: error: {re.escape(str(path))}: {match}", err), err
+            assert err.count("\n") == 1 and not out.exists()
+
+
+def test_the_detector_refuses_intrinsics_it_cannot_fit_a_pose_with():
+    """A principal point far outside the image crashed pupil-apriltags' pose fit (SIGSEGV at
+    cx = 1e6 px); a non-positive focal length has no pinhole. Both are refused up front."""
+    from cdpr_twin.vision import TagDetector
+
+    K = CameraIntrinsics(640, 480, 600.0, 600.0, 320.0, 240.0)
+    TagDetector(K)
+    TagDetector(CameraIntrinsics(640, 480, 600.0, 600.0, 640.0, 0.0))  # on the edge: fine
+    for bad in ({"cx": 1e6}, {"cy": -1.0}, {"fx": 0.0}, {"fy": np.nan}, {"cx": np.nan}):
+        with pytest.raises(ValueError, match=r"need positive focal lengths and the point inside"):
+            TagDetector(dataclasses.replace(K, **bad))
