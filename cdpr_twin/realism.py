@@ -4,7 +4,8 @@ Each effect is *generated* by the simulation layer (rendered, integrated, quanti
 magnitude from ``models/acrobot/README.md`` (its source named there), and each can be switched
 off. What is robot data — the drum radius, the tension sensors' range, accuracy and
 repeatability — is not here: ``nan`` fields (and ``repeatability_noise``) take it from the
-robot description (``robot.toml`` → the model's ``<numeric>``; :func:`for_robot`).
+robot description (``robot.toml`` → the model's ``<numeric>``;
+:func:`cdpr_twin.robot_sensing.for_robot`).
 Profiles: ``profile = "ideal"`` is the twin before realism, bit for bit. Magnitudes come in two
 kinds, as physics dictates:
 
@@ -341,55 +342,6 @@ def profile(name: str, **parts: dict[str, Any]) -> Realism:
             raise ValueError(f"realism.{part}: unknown field {unknown[0]!r}")
         out = replace(out, **{part: cls(**values)})
     return out
-
-
-@dataclass(frozen=True)
-class RobotSensing:
-    """What a robot description says of its winches and tension sensors (SI units).
-
-    Attributes:
-        drum_radius: the drums' radius [m].
-        tension_range: (min, max) the sensors' calibrated range [N].
-        accuracy: the sensors' accuracy, a bound ±a on the error [N].
-        repeatability: 1σ of their reading noise [N].
-    """
-
-    drum_radius: float
-    tension_range: tuple[float, float]
-    accuracy: float
-    repeatability: float
-
-
-def for_robot(realism: Realism, robot: RobotSensing) -> Realism:
-    """The profile with its robot-data fields (``nan``, ``repeatability_noise``) filled in.
-
-    The accuracy becomes a rectangular bias, std a/√3 (GUM 4.3.7; see :class:`TensionRealism`).
-
-    Raises:
-        OptionError: naming ``realism.tension.range_min``/``range_max`` when the range, with
-            the robot's value for the field left out, is empty or does not hold 0 N.
-    """
-    w, t = realism.winch, realism.tension
-    if math.isnan(w.drum_radius):
-        w = replace(w, drum_radius=robot.drum_radius)
-    lo, hi = robot.tension_range
-    filled = {
-        "range_min": lo if math.isnan(t.range_min) else t.range_min,
-        "range_max": hi if math.isnan(t.range_max) else t.range_max,
-        "bias_std": robot.accuracy / math.sqrt(3.0) if math.isnan(t.bias_std) else t.bias_std,
-    }
-    if t.repeatability_noise and math.isnan(t.noise_std):
-        filled["noise_std"] = robot.repeatability
-    low, high = filled["range_min"], filled["range_max"]
-    if not low <= 0.0 < high:  # a slack cable reads 0 N: every load cell's range holds it
-        set_max, set_min = not math.isnan(t.range_max), not math.isnan(t.range_min)
-        given = "range_max" if (set_max and not high > 0.0) or not set_min else "range_min"
-        raise OptionError(
-            f"realism.tension.{given}",
-            f"the readings' range {low:g}…{high:g} N (the robot's {lo:g}…{hi:g} N where not "
-            "set) must hold 0 N, the slack cable's reading, with range_min ≤ 0 < range_max",
-        )
-    return replace(realism, winch=w, tension=replace(t, **filled))
 
 
 _STREAMS = {"camera": 1, "winch": 2, "tension": 3, "homing": 4}

@@ -205,8 +205,8 @@ class Scenario:
         if in_loop is not None:
             try:
                 plugins.lookup("estimator", in_loop)
-            except ValueError as exc:
-                raise ScenarioError(f"--in-loop: {exc}") from None
+            except ValueError as exc:  # named as the caller names it: --in-loop, estimator=
+                raise ScenarioError(f"{names[0].strip(' =')}: {exc}") from None
             passive = tuple(n for n in s.estimators.names if n != in_loop)
             s = replace(s, estimators=replace(s.estimators, in_loop=in_loop, passive=passive))
             done["in_loop"] = in_loop
@@ -234,8 +234,12 @@ class Scenario:
         done = {**self.overrides, "without": [*self.overrides.get("without", ()), *sources]}
         return replace(s, overrides=MappingProxyType(done))
 
-    def with_realism(self, name: str) -> Scenario:
+    def with_realism(self, name: str, label: str = "--realism") -> Scenario:
         """A copy with a named realism profile (no field overridden): ``--realism ideal``.
+
+        Args:
+            name: the profile.
+            label: how the caller's errors name the choice (the CLI's option, an argument).
 
         Raises:
             ScenarioError: for an unknown profile.
@@ -243,7 +247,7 @@ class Scenario:
         try:
             realism = profile(name)
         except ValueError as exc:
-            raise ScenarioError(f"--realism: {exc}") from None
+            raise ScenarioError(f"{label}: {exc}") from None
         done = {**self.overrides, "realism": name}
         return replace(self, realism=realism, overrides=MappingProxyType(done))
 

@@ -23,7 +23,10 @@ which the policy commands the winches at every control tick:
   the scenario's ``[monitor] on_fault = "stop"``; one already present at reset ends the first
   step, the robot unmoved) ends the episode (``terminated``, ``info["failure"]``) with a reward
   no policy gains by: the step's cost (where the robot was, when the simulation lost its
-  state) for every step left to the horizon, plus :data:`FAILURE_REWARD`;
+  state) for every step left to the horizon, plus :data:`FAILURE_REWARD`. A lost (non-finite)
+  estimate ends the step that produced it; the observation then keeps the last finite pose
+  estimate (``info["estimate_valid"]`` says so). After an episode ends (terminated or
+  truncated), ``step()`` raises until ``reset()``;
 - ``reset(seed=)`` draws the robot (its calibration errors; ``random_robot=False`` keeps the
   scenario's) and the run seed (sensor noise, homing offset) from the seed.
 """
@@ -31,18 +34,17 @@ which the policy commands the winches at every control tick:
 from __future__ import annotations
 
 import dataclasses
-import numbers
-from types import MappingProxyType
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from cdpr_twin.gym.configuration import camera_choice, check_arguments, configure, needs_camera
 from cdpr_twin.gym.tasks import Score, Truth, make_task
 from cdpr_twin.kinematics import jacobian
 from cdpr_twin.runner import RunSetup, prepare, start
-from cdpr_twin.scenario import EstimatorConfig, Scenario, load_scenario
+from cdpr_twin.scenario import Scenario
 from cdpr_twin.se3 import so3_log
 from cdpr_twin.sim import SimulationError, WinchLimitError
 from cdpr_twin.types import Command, Measurement, PoseEstimate
@@ -60,31 +62,6 @@ def pose6(T: np.ndarray) -> np.ndarray:
     return np.concatenate([T[:3, 3], so3_log(T[:3, :3])])
 
 
-def _configure(
-    scenario: str | Scenario, estimator: str, camera: bool, scale: float, realism: str | None
-) -> Scenario:
-    """The scenario an episode runs: one estimator, the camera as asked, scaled truth."""
-    s = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-    s = s if realism is None else s.with_realism(realism)
-    opts = {n: o for n, o in s.estimators.options.items() if n == estimator}
-    s = dataclasses.replace(s, estimators=EstimatorConfig(estimator, (), MappingProxyType(opts)))
-    if not (np.isfinite(scale) and scale >= 0):
-        raise ValueError(f"truth_scale must be ≥ 0 (0: the nominal robot), got {scale}")
-    stds = {f.name: getattr(s.truth, f.name) * scale for f in dataclasses.fields(s.truth)}
-    del stds["seed"]
-    s = dataclasses.replace(s, truth=dataclasses.replace(s.truth, **stds))
-    return s.with_overrides(in_loop=estimator, camera=camera, names=("estimator=", "camera=False"))
-
-
-def _check(on_fault: str | None, **scales: float) -> None:
-    """Refuse an unknown ``on_fault`` and scales that are not positive numbers (ValueError)."""
-    if on_fault not in (None, "stop", "continue"):
-        raise ValueError(f"on_fault must be 'stop', 'continue' or None, got {on_fault!r}")
-    for name, v in scales.items():
-        if isinstance(v, bool) or not (isinstance(v, numbers.Real) and v > 0 and v < np.inf):
-            raise ValueError(f"{name} must be a positive number, got {v!r}")
-
-
 class CdprEnv(gym.Env):
     """The twin as a Gymnasium environment (see the module's description).
 
@@ -95,8 +72,8 @@ class CdprEnv(gym.Env):
         scenario: a shipped scenario's name, a scenario file or a :class:`Scenario`.
         action: ``"twist"`` or ``"cable_rates"``.
         estimator: the registered estimator behind ``pose_estimate`` (and the twist's Jacobian).
-        camera: render the camera and detect the tag (default: when the task, ``image`` or the
-            render mode needs it).
+        camera: render the camera and detect the tag (default: when the task, the estimator,
+            ``image`` or the render mode needs it).
         image: add the camera frame to the observation.
         random_robot: draw the robot's calibration errors at each seeded reset.
         truth_scale: factor on the scenario's calibration-error magnitudes (0: nominal robot).
@@ -135,20 +112,19 @@ class CdprEnv(gym.Env):
         on_fault: str | None = None,
     ) -> None:
         self.task = make_task(task)
-        _check(on_fault, max_speed=max_speed, max_angular_speed=max_angular_speed,
-               max_cable_rate=max_cable_rate)  # fmt: skip
+        check_arguments(on_fault, max_speed=max_speed, max_angular_speed=max_angular_speed,
+                        max_cable_rate=max_cable_rate)  # fmt: skip
         if action not in ACTIONS:
             raise ValueError(f"unknown action {action!r}; choose one of {', '.join(ACTIONS)}")
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"unknown render_mode {render_mode!r}; use None or 'rgb_array'")
-        wants_camera = self.task.needs_camera or image or render_mode is not None
-        if camera is None:
-            camera = wants_camera
-        elif wants_camera and not camera:
-            raise ValueError("the task, image=True or render_mode needs camera=True")
+        camera = camera_choice(camera, {
+            "the task": self.task.needs_camera, "image=True": image,
+            f"render_mode={render_mode!r}": render_mode is not None,
+        }, needs_camera(estimator))  # fmt: skip
         self.action_kind, self.image, self.render_mode = action, bool(image), render_mode
         self.random_robot, self.estimator = bool(random_robot), estimator
-        self.scenario = _configure(scenario, estimator, bool(camera), truth_scale, realism)
+        self.scenario = configure(scenario, estimator, bool(camera), truth_scale, realism)
         if on_fault is not None:
             monitor = dataclasses.replace(self.scenario.monitor, on_fault=on_fault)
             self.scenario = dataclasses.replace(self.scenario, monitor=monitor)
@@ -173,6 +149,8 @@ class CdprEnv(gym.Env):
         self._m: Measurement | None = None
         self._last: Truth | None = None  # the truth after the last step that went through
         self._pending: str | None = None  # a stopping fault found at reset
+        self._ended: str | None = None  # how the episode ended: step() then needs a reset()
+        self._pose = np.zeros(6)  # the last finite estimate's pose6 (the observation's)
         self._estimate: PoseEstimate | None = None
         self._steps, self._seeds = 0, (self.scenario.truth.seed, self.scenario.seed)
 
@@ -218,7 +196,7 @@ class CdprEnv(gym.Env):
         start(self._setup)
         physics = self._setup.physics
         self._setup.events.fire(0.5 * physics.timestep)  # what is due at t = 0
-        self._steps, self._seeds = 0, (robot_seed, run_seed)
+        self._steps, self._seeds, self._ended = 0, (robot_seed, run_seed), None
         self._read(None)
         self._last = self._truth()
         faults = self._faults()
@@ -234,6 +212,8 @@ class CdprEnv(gym.Env):
         """
         if self._setup is None or self._m is None:
             raise RuntimeError("call reset() before step()")
+        if self._ended is not None:  # gymnasium leaves it undefined: here it is an error
+            raise RuntimeError(f"the episode ended ({self._ended}); call reset() before step()")
         a = np.asarray(action, dtype=float)
         if a.shape != self.action_space.shape or not np.isfinite(a).all():
             raise ValueError(
@@ -259,9 +239,13 @@ class CdprEnv(gym.Env):
         faults = self._faults()
         if "failure" in faults:
             return self._failed(faults.pop("failure"), {**extra, **faults})
+        if not np.isfinite(self._estimate.T_base_platform).all():  # ends now, not a step later
+            return self._failed(f"the {self.estimator} estimate is not finite", extra)
         self._last = self._truth()
         score = self.task.score(self._last)
         truncated = self._steps >= self._horizon and not score.success
+        if score.success or truncated:
+            self._ended = "reached the goal" if score.success else "the horizon: truncated"
         info = {**self._info(score, self._last), **extra, **faults}
         return self._observation(), float(score.reward), score.success, truncated, info
 
@@ -280,6 +264,7 @@ class CdprEnv(gym.Env):
         left = max(self._horizon - self._steps, 0) + 1
         reward = float(score.reward) * left + FAILURE_REWARD
         info = {**self._info(score, truth), **extra, "failure": why}
+        self._ended = f"terminated: {why}"
         return self._observation(), reward, True, False, info
 
     def _faults(self) -> dict[str, Any]:
@@ -336,11 +321,18 @@ class CdprEnv(gym.Env):
             "tensions": np.array(m.tensions, dtype=np.float64),
             "tag_detected": np.int64(m.tag is not None),
             "tag_pose": pose6(m.tag.T_cam_tag) if m.tag is not None else np.zeros(6),
-            "pose_estimate": pose6(self._estimate.T_base_platform),
+            "pose_estimate": self._pose_estimate(),
         }
         if self.image:
             obs["image"] = np.array(m.image, dtype=np.uint8)
         return obs
+
+    def _pose_estimate(self) -> np.ndarray:
+        """The estimate's pose6, or the last finite one (a lost estimate ends the episode)."""
+        T = self._estimate.T_base_platform
+        if np.isfinite(T).all():
+            self._pose = pose6(T)
+        return self._pose.copy()
 
     def _info(self, score: Score, truth: Truth) -> dict[str, Any]:
         """Truth and scores, for evaluation (a policy must not read them)."""
@@ -350,7 +342,8 @@ class CdprEnv(gym.Env):
             "translation_error": score.translation_error,
             "rotation_error": score.rotation_error,
             "is_success": score.success,
-            "estimate_valid": bool(self._estimate.valid),
+            "estimate_valid": bool(self._estimate.valid)
+            and bool(np.isfinite(self._estimate.T_base_platform).all()),
             "robot_seed": self._seeds[0],
             "run_seed": self._seeds[1],
         }

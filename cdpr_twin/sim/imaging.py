@@ -23,6 +23,8 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
+from cdpr_twin.plugins import OptionError
+from cdpr_twin.realism import CameraRealism
 from cdpr_twin.types import CameraIntrinsics
 
 LUMA = (0.299, 0.587, 0.114)
@@ -317,3 +319,24 @@ def subframe_offsets(exposure_s: float, n: int) -> np.ndarray:
     [t − exposure, t]: ``exposure · (1 − (i + 0.5)/n)`` before t. Returns (n,).
     """
     return exposure_s * (1.0 - (np.arange(n) + 0.5) / n)
+
+
+def check_exposure(r: CameraRealism, period: float | None, timestep: float) -> None:
+    """Refuse an exposure longer than the read period, or more sub-frames than it has steps.
+
+    Raises:
+        OptionError: naming ``realism.camera.exposure_s`` or ``blur_subframes``.
+    """
+    if r.exposure_s > 0 and not (period is not None and r.exposure_s <= period):
+        raise OptionError(
+            "realism.camera.exposure_s",
+            f"{r.exposure_s:g} s needs the camera's read period (got {period}) and must not "
+            "exceed it",
+        )
+    steps = max(math.floor(r.exposure_s / timestep + 1e-9), 1)  # distinct states exposed
+    if r.exposure_s > 0 and r.blur_subframes > steps:
+        raise OptionError(
+            "realism.camera.blur_subframes",
+            f"{r.blur_subframes} sub-frames in a {r.exposure_s:g} s exposure: at most {steps}, "
+            f"one per physics step of {timestep:g} s (more would render the same state again)",
+        )

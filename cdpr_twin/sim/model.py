@@ -16,7 +16,7 @@ import numpy as np
 
 from cdpr_twin.deviations import TruthDeviations
 from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.realism import RobotSensing
+from cdpr_twin.robot_sensing import RobotSensing
 from cdpr_twin.se3 import matrix_from_quat_wxyz, quat_wxyz_from_matrix, so3_exp, transform
 from cdpr_twin.sim import camera
 from cdpr_twin.sim.occluder import add_occluder

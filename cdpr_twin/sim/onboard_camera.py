@@ -45,7 +45,6 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import cv2
 import numpy as np
 
-from cdpr_twin.plugins import OptionError
 from cdpr_twin.realism import CameraRealism
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim import imaging
@@ -219,20 +218,7 @@ class OnboardCamera:
                 f"{physics.source} has no camera {cam_mod.CAMERA_NAME!r}; run with the camera off"
             )
         r = realism
-        if r.exposure_s > 0 and not (period is not None and r.exposure_s <= period):
-            raise OptionError(
-                "realism.camera.exposure_s",
-                f"{r.exposure_s:g} s needs the camera's read period (got {period}) and must not "
-                "exceed it",
-            )
-        steps = math.floor(r.exposure_s / physics.timestep + 1e-9)  # distinct states exposed
-        if r.exposure_s > 0 and r.blur_subframes > max(steps, 1):
-            raise OptionError(
-                "realism.camera.blur_subframes",
-                f"{r.blur_subframes} sub-frames in a {r.exposure_s:g} s exposure: at most "
-                f"{max(steps, 1)}, one per physics step of {physics.timestep:g} s (more would "
-                "render the same state again)",
-            )
+        imaging.check_exposure(r, period, physics.timestep)
         from cdpr_twin.vision import TagDetector  # OpenCV and pupil-apriltags, on demand
 
         self.physics, self.realism, self.run_rng = physics, realism, run_rng
