@@ -31,6 +31,8 @@ import hashlib
 import importlib
 import importlib.metadata
 import importlib.util
+import inspect
+import math
 import sys
 import warnings
 from collections.abc import Callable, Mapping
@@ -122,22 +124,34 @@ class NoOptions:
     """Options of a plugin that has none."""
 
 
+class PluginWarning(UserWarning):
+    """An installed plugin could not be loaded (it is skipped; naming it is an error)."""
+
+
 def register(cls: C) -> C:
     """Class decorator: add an estimator or controller to the registry under ``cls.name``.
 
     Raises:
-        TypeError: when the class has no name, no known kind, or no dataclass ``Options``.
+        TypeError: when the class has no name, no known kind, no dataclass ``Options``, is not
+            an :class:`~cdpr_twin.estimators.base.Estimator` or
+            :class:`~cdpr_twin.controllers.base.Controller`, or leaves an abstract method out.
         ValueError: when another class already has that name.
     """
     kind, name = getattr(cls, "kind", ""), getattr(cls, "name", "")
     if kind not in KINDS or not name:
         raise TypeError(f"{cls.__name__}: set class attributes kind (one of {KINDS}) and name")
+    base = _base(kind)
+    if not (isinstance(cls, type) and issubclass(cls, base)):
+        raise TypeError(f"{cls!r}: {_a(kind)} must subclass {base.__module__}.{base.__name__}")
+    if inspect.isabstract(cls):
+        missing = ", ".join(sorted(cls.__abstractmethods__))
+        raise TypeError(f"{cls.__name__}: implement {missing} (abstract in {base.__name__})")
     options = getattr(cls, "Options", None)
     if not (dataclasses.is_dataclass(options) and options.__dataclass_params__.frozen):
         raise TypeError(f"{cls.__name__}: Options must be a frozen dataclass")
     if name in RESERVED_NAMES or not name.isidentifier():
         raise ValueError(
-            f"{cls.__name__}: {name!r} cannot name a {kind} (a column prefix of run files, or "
+            f"{cls.__name__}: {name!r} cannot name {_a(kind)} (a column prefix of run files, or "
             f"not an identifier); reserved: {', '.join(sorted(RESERVED_NAMES))}"
         )
     known = _REGISTRY[kind].get(name)
@@ -145,9 +159,25 @@ def register(cls: C) -> C:
         cls.__module__,
         cls.__qualname__,
     ):
-        raise ValueError(f"a {kind} named {name!r} is already registered ({known.__module__})")
+        raise ValueError(f"{_a(kind)} named {name!r} is already registered ({known.__module__})")
     _REGISTRY[kind][name] = cls
     return cls
+
+
+def _a(kind: str) -> str:
+    """``kind`` with its article: "an estimator", "a controller"."""
+    return f"{'an' if kind[0] in 'aeiou' else 'a'} {kind}"
+
+
+def _base(kind: str) -> type:
+    """The class a plugin of ``kind`` subclasses (imported here: the bases import this module)."""
+    if kind == "estimator":
+        from cdpr_twin.estimators.base import Estimator
+
+        return Estimator
+    from cdpr_twin.controllers.base import Controller
+
+    return Controller
 
 
 def _load_builtins() -> None:
@@ -180,7 +210,10 @@ def _load_entry_point(kind: str, ep: importlib.metadata.EntryPoint) -> None:
         what = f"sys.exit({exc.code!r})" if isinstance(exc, SystemExit) else exc
         why = f"entry point {ep.name} = {ep.value!r} of {dist} failed to load: {what}"
         _BROKEN[kind][ep.name] = why
-        warnings.warn(f"cdpr_twin: {why}; fix or uninstall {dist}", stacklevel=3)
+        # one line, blamed on no source line (it is read whatever a command is doing)
+        warnings.warn_explicit(
+            f"{why}; fix or uninstall {dist}", PluginWarning, "cdpr_twin plugins", 0
+        )
         return
     _ORIGIN[kind][ep.name] = f"{ep.name} (from {dist})"
 
@@ -234,7 +267,21 @@ def build(kind: str, name: str, geometry: Any, **options: Any) -> Any:
         ) from None
     except OptionError as exc:
         raise ValueError(f"{name}: {exc}") from None
+    for f in dataclasses.fields(opts):  # the bounds a scenario file's reader checks
+        if (problem := _below_minimum(spec_of(f), getattr(opts, f.name))) is not None:
+            raise ValueError(f"{name}: {f.name}: {problem}")
     return cls(geometry, opts)
+
+
+def _below_minimum(spec: OptionSpec, value: Any) -> str | None:
+    """Why ``value`` (SI; a number or a tuple of them) breaks ``spec.minimum``, or ``None``."""
+    if spec.minimum is None:
+        return None
+    low = math.radians(spec.minimum) if spec.unit == "deg" else spec.minimum
+    for v in value if isinstance(value, tuple) else (value,):
+        if isinstance(v, (int, float)) and not (v > low if spec.exclusive else v >= low):
+            return f"must be {'>' if spec.exclusive else '≥'} {low:g} (SI units), got {v!r}"
+    return None
 
 
 def load_modules(refs: list[str], base_dir: Path) -> None:
@@ -268,6 +315,14 @@ def load_modules(refs: list[str], base_dir: Path) -> None:
                 importlib.import_module(ref)
             except SystemExit as exc:
                 _no_exit(exc, f"plugin module {ref}")
+            except ModuleNotFoundError as exc:
+                beside = base_dir / f"{ref.replace('.', '/')}.py"
+                if exc.name != ref.split(".")[0] or not beside.is_file():
+                    raise
+                raise ModuleNotFoundError(  # the file is there: name it as a file
+                    f"{exc}; {beside.name} beside the scenario is named with its .py: "
+                    f'"{ref.replace(".", "/")}.py"'
+                ) from None
 
 
 def _no_exit(exc: BaseException, what: str) -> None:

@@ -76,6 +76,10 @@ def test_an_installed_estimator_runs_by_name_in_a_scenario(site, tmp_path):
     assert moved.max() > 0.01  # the platform did move (1.9 cm in 2 s)
     # a broken entry point is skipped with a warning; the run above was not disturbed by it
     assert "broken_controller" in proc.stderr and "fix or uninstall" in proc.stderr
+    # one line, blamed on no line of cdpr_twin (before: plugins.py:193 and its source line)
+    said = [line for line in proc.stderr.splitlines() if "broken_controller" in line]
+    assert len(said) == 1 and said[0].startswith("cdpr_twin plugins:0: PluginWarning: entry poi")
+    assert "_load_builtins" not in proc.stderr
 
 
 def test_unknown_names_list_what_is_installed_and_broken_plugins_say_why(site, tmp_path):

@@ -155,3 +155,73 @@ def test_a_plugin_file_that_is_missing_or_a_directory_is_named_as_such(tmp_path,
     why = {"missing": "plugin file not found", "dir": "a directory, not a Python file"}[make]
     with pytest.raises(ScenarioError, match=f"plugins: cannot import: .*extra.py: {why}$"):
         load_scenario(scenario)
+
+
+def test_a_module_name_that_is_a_file_beside_the_scenario_says_to_add_py(tmp_path):
+    text = (ROOT / "scenarios" / "paper_open_loop.toml").read_text()
+    text = text.replace('"../models/', f'"{ROOT}/models/')
+    scenario = tmp_path / "s.toml"
+    scenario.write_text('plugins = ["beside_it"]\n' + text)
+    with pytest.raises(ScenarioError, match=r"No module named 'beside_it'$"):
+        load_scenario(scenario)  # no such file either: Python's words alone
+    (tmp_path / "beside_it.py").write_text("VALUE = 1\n")
+    with pytest.raises(ScenarioError, match=r"'beside_it'; beside_it\.py beside the scenario is"):
+        load_scenario(scenario)
+    scenario.write_text('plugins = ["beside_it.py"]\n' + text)
+    assert load_scenario(scenario).plugins == ("beside_it.py",)
+
+
+def test_register_refuses_what_could_not_run_and_build_checks_the_bounds():
+    from cdpr_twin.controllers.base import Controller
+
+    class NoUpdate(Estimator):  # abstract: update() left out
+        name = "no_update"
+
+    with pytest.raises(TypeError, match=r"NoUpdate: implement update \(abstract in Estimator\)"):
+        plugins.register(NoUpdate)
+
+    class DuckTyped:  # the right attributes, not an Estimator
+        kind, name, Options = "estimator", "duck_typed", MidpointOptions
+
+        def update(self, measurement, inputs=NO_INPUTS): ...
+
+    with pytest.raises(TypeError, match=r"an estimator must subclass cdpr_twin\.estimators\.base"):
+        plugins.register(DuckTyped)
+    with pytest.raises(ValueError, match=r"^an estimator named 'control' is already registered"):
+
+        @plugins.register
+        class Control(MidpointEstimator):
+            name = "control"
+
+    with pytest.raises(ValueError, match=r"^a controller named 'pbvs' is already registered"):
+
+        @plugins.register
+        class Pbvs(Controller):
+            name = "pbvs"
+
+            def reset(self, T): ...
+
+            def command(self, measurement, estimate): ...
+
+    @dataclasses.dataclass(frozen=True)
+    class Bounded:
+        after: int = option(3, minimum=0)
+        angle: float = option(0.1, minimum=1.0, unit="deg")  # SI: ≥ 0.01745 rad
+
+    @plugins.register
+    class BoundedEstimator(MidpointEstimator):
+        name = "bounded_estimator"
+        Options = Bounded
+
+        @property
+        def inputs(self):
+            return ()
+
+    from cdpr_twin.sim import Twin
+
+    g = Twin(camera=False).nominal_geometry
+    plugins.build("estimator", "bounded_estimator", g, after=0, angle=0.02)  # the bounds hold
+    with pytest.raises(ValueError, match=r"^bounded_estimator: after: must be ≥ 0 \(SI units\)"):
+        plugins.build("estimator", "bounded_estimator", g, after=-1)
+    with pytest.raises(ValueError, match=r"angle: must be ≥ 0\.0174533 \(SI units\), got 0\.01"):
+        plugins.build("estimator", "bounded_estimator", g, angle=0.01)
