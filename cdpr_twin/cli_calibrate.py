@@ -83,6 +83,11 @@ def _calibrate(args: argparse.Namespace) -> int:
             )
         check(s)  # the robot builds, its start pose can be homed at (as `cdpr-twin run` checks)
         out = Path(args.out or Path("runs") / f"{s.name}_calibration")
+        if source.resolve() in {(out / name).resolve() for name in NAMES}:
+            raise ScenarioError(  # before: cleared first, then "robot description not found"
+                f"--out {out}: this calibration would replace {source}, the description it "
+                "starts from (model.nominal); give another --out, or copy that file elsewhere"
+            )
         made = _missing(out)
         # a run's, campaign's or study's directory is refused (its files are not ours to clear)
         owner = OutputDir(out, outputs=(), foreign=others("calibration"), partials=NAMES)
@@ -116,7 +121,8 @@ def _guarded(args, s, source: Path, out: Path, started: float) -> int:
         print(f"cdpr-twin calibrate: error: {exc}", file=sys.stderr)
         return 2
     except OutputError as exc:
-        print(f"cdpr-twin calibrate: error: cannot write {exc}", file=sys.stderr)
+        fix = exc.fix("give another --out")
+        print(f"cdpr-twin calibrate: error: cannot write {exc}; {fix}", file=sys.stderr)
         return 1
     except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (Terminated): nothing half-written
         term = isinstance(exc, Terminated)

@@ -25,6 +25,7 @@ recorded them.
 from __future__ import annotations
 
 import multiprocessing
+import os
 import signal
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -35,7 +36,7 @@ import numpy as np
 from cdpr_twin.calibrate import drive
 from cdpr_twin.calibrate.excitation import tag_in_view
 from cdpr_twin.calibrate.problem import Detector, Observations
-from cdpr_twin.campaign.executor import stop_workers
+from cdpr_twin.campaign.executor import exit_with, stop_workers
 from cdpr_twin.procedure import homing
 from cdpr_twin.scenario import Scenario, ScenarioError
 from cdpr_twin.se3 import so3_exp, so3_log, transform
@@ -223,7 +224,9 @@ def _in_processes(items: list, workers: int, s: Scenario, frames: int) -> list[t
     process — ends the other segments at once: nothing is left running.
     """
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_ignore_sigint) as pool:
+    with ProcessPoolExecutor(
+        workers, mp_context=ctx, initializer=_worker_start, initargs=(os.getpid(),)
+    ) as pool:
         futures = [pool.submit(_segment, item, s, frames) for item in items]
         try:
             for f in as_completed(futures):
@@ -299,9 +302,14 @@ def _refuse_what_it_cannot_use(s: Scenario) -> None:
             raise ScenarioError(f"{s.source}: {field}: a calibration {why}; remove it from a copy")
 
 
-def _ignore_sigint() -> None:
-    """In a worker: Ctrl-C is the parent's to handle (it ends the workers)."""
+def _worker_start(parent: int) -> None:
+    """In a worker: Ctrl-C is the parent's to handle; a parent killed without cleanup ends it.
+
+    The parent ends its workers on Ctrl-C or SIGTERM; after SIGKILL or the OOM killer they
+    would record on for nobody (and hold the command's output pipe open).
+    """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    exit_with(parent)
 
 
 def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tuple:

@@ -39,7 +39,7 @@ def run_local(
     pending: set = set()
     todo = iter(items)
     with ProcessPoolExecutor(
-        max_workers=workers, mp_context=ctx, initializer=_exit_with, initargs=(os.getpid(),)
+        max_workers=workers, mp_context=ctx, initializer=exit_with, initargs=(os.getpid(),)
     ) as pool:
         try:
             for item in todo:
@@ -63,7 +63,7 @@ def run_local(
             raise
 
 
-def _exit_with(parent: int) -> None:
+def exit_with(parent: int) -> None:
     """In a worker: end the process when its parent is gone (a killed campaign, SIGKILL).
 
     A spawned worker outlives a parent killed without cleanup and would simulate on, at full
