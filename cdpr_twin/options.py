@@ -103,6 +103,8 @@ class OptionReader:
         v = self.raw(key, default, "string")
         if not isinstance(v, str):
             raise self.fail(key, f"must be a string, got {v!r}")
+        if "\x00" in v:  # TOML's "\u0000": no name, path or choice holds one
+            raise self.fail(key, f"must not hold a NUL character, got {v!r}")
         if choices and v not in choices:
             raise self.fail(key, f"{v!r} is not one of {', '.join(choices)}")
         return v

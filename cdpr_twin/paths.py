@@ -16,7 +16,8 @@ def path_kind(path: Path, error: Callable[[str], Exception]) -> str | None:
     """What is at ``path`` (links followed): ``"dir"``, ``"file"`` (regular), ``"other"``, ``None``.
 
     ``None`` when nothing is there. Another ``OSError`` (a name too long, permission denied),
-    which ``Path.exists()`` raises on Python 3.11 and takes for "missing" on 3.12, is refused.
+    which ``Path.exists()`` raises on Python 3.11 and takes for "missing" on 3.12, is refused,
+    and so is a NUL character (TOML's ``"\u0000"``).
 
     Raises:
         Exception: ``error``, given one line naming the path, the OS's reason and the fix.
@@ -25,6 +26,8 @@ def path_kind(path: Path, error: Callable[[str], Exception]) -> str | None:
         mode = os.stat(path).st_mode
     except (FileNotFoundError, NotADirectoryError):
         return None
+    except ValueError:  # "embedded null byte": no file system names one so
+        raise error(f"{str(path)!r}: a path cannot hold a NUL character; give another") from None
     except OSError as exc:
         fix = {errno.ENAMETOOLONG: "give shorter names", errno.EACCES: "check its permissions"}
         raise error(f"{path}: {exc.strerror}; {fix.get(exc.errno, 'give another path')}") from None

@@ -99,7 +99,7 @@ def _one_part(name: str, part: str, **values: Any) -> Realism:
 def read_plugins(top: OptionReader) -> tuple[str, ...]:
     """``plugins``: import them (they register estimators or controllers) and list them."""
     refs = top.raw("plugins", [], "list of module names or .py files")
-    if not isinstance(refs, list) or not all(isinstance(x, str) for x in refs):
+    if not isinstance(refs, list) or not all(isinstance(x, str) and "\x00" not in x for x in refs):
         raise top.fail("plugins", f"must be a list of module names or .py files, got {refs!r}")
     try:
         plugins.load_modules(refs, top.source.parent)

@@ -128,3 +128,38 @@ def test_more_runs_than_the_bound_are_refused_at_once(tmp_path, capsys, text, ru
 )
 def test_a_description_that_is_not_text_is_refused(tmp_path, capsys, text):
     _refused(tmp_path, capsys, text, "description: must be text")
+
+
+@pytest.mark.parametrize(
+    ("override", "axis", "says"),
+    [('"truth.seed" = 7', _axis("truth", "values = [{exit_point_std = 0.001}]"),
+      "overrides.\"truth.seed\": 'truth.seed' is varied by an axis ('truth')"),
+     ("truth = {seed = 7}", _axis("truth.seed", "values = [1, 2]"),
+      "overrides.\"truth\": 'truth' is varied by an axis ('truth.seed')"),
+     ("seed = 7", _axis("seed", "values = [1, 2]"), "overrides.\"seed\": 'seed' is varied")],
+)  # fmt: skip
+def test_an_override_under_an_axis_is_refused_not_dropped(tmp_path, capsys, override, axis, says):
+    # before: the axis replaced the whole `truth` table and the override's seed was lost (the
+    # results said truth_seed 0), without a word
+    text = (SCENARIO + FAST + axis).replace("duration = 0.08\n", f"duration = 0.08\n{override}\n")
+    _refused(tmp_path, capsys, text, says)
+
+
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [("blocks = [1, 2]\n", "blocks: must be a non-empty array of tables"),
+     ('name = "a\\u0000b"\n' + SCENARIO, "name: must be a plain name"),
+     ('name = "a\\u0007b"\n' + SCENARIO, "name: must be a plain name"),
+     (SCENARIO + '[overrides]\n"model.nominal" = "/tmp/a\\u0000b"\n',
+      "model.nominal: must not hold a NUL character")],
+)  # fmt: skip
+def test_malformed_blocks_and_nul_characters_are_one_line_errors(tmp_path, capsys, text, says):
+    # before: TypeError: 'int' object is not iterable; ValueError: embedded null byte (tracebacks)
+    _refused(tmp_path, capsys, text, says)
+
+
+def test_every_shipped_campaign_still_loads():
+    from cdpr_twin.campaign import load_campaign
+
+    for path in sorted((ROOT / "campaigns").glob("*.toml")):
+        assert load_campaign(path).tasks, path

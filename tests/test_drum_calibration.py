@@ -186,3 +186,15 @@ def test_a_calibrated_description_moved_with_its_tree_still_finds_its_tag(tmp_pa
     model = mujoco.MjModel.from_xml_path(str(scene))
     tag = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXTURE, "tag36h11_00000")
     assert tag >= 0 and model.tex_width[tag] * model.tex_height[tag] > 0
+
+
+def test_the_written_description_reads_back_whatever_its_text_holds():
+    """Every string a description may hold (TOML allows any escaped) reads back as written.
+
+    Before: DEL (U+007F) went out raw, which TOML forbids: the calibrated description of a
+    source whose ``description`` held "\\u007f" could not be read back."""
+    import tomllib
+
+    text = "".join(map(chr, range(0x20))) + '\x7f quoted " back\\slash ünïcode ✓ \U0001f600'
+    data = {"description": text, "frame": {"name": text, "size_m": [1.0, float("inf")]}}
+    assert tomllib.loads(toml_text(data, header="a header\nof two lines")) == data

@@ -37,7 +37,6 @@ override applied), so a campaign can be resumed, and re-running a finished one d
 from __future__ import annotations
 
 import copy
-import hashlib
 import itertools
 import json
 import math
@@ -49,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from cdpr_twin import resources
+from cdpr_twin.campaign.keys import as_read, run_id, set_dotted
 
 DRAWS = ("integers", "uniform", "normal", "choice")
 ARTEFACTS = ("none", "csv", "all")
@@ -107,42 +107,6 @@ class Campaign:
     source: Path
     description: str
     tasks: tuple[Task, ...]
-
-
-def set_dotted(data: dict, key: str, value: Any) -> None:
-    """Set ``data[a][b]…[z] = value`` for ``key = "a.b….z"`` (tables created as needed).
-
-    Raises:
-        KeyError: a part of the path is not a table.
-    """
-    parts = key.split(".")
-    node = data
-    for part in parts[:-1]:
-        node = node.setdefault(part, {})
-        if not isinstance(node, dict):
-            raise KeyError(f"{part!r} in {key!r} is not a table")
-    node[parts[-1]] = copy.deepcopy(value)
-
-
-def run_id(data: dict) -> str:
-    """The id of a resolved scenario: 16 hex digits of its canonical JSON's SHA-256."""
-    text = json.dumps(data, sort_keys=True, separators=(",", ":"), default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
-def _as_read(value: Any) -> Any:
-    """``value`` with every integer as a float (bools kept): two runs' data equal so are one run.
-
-    A float field reads 0 and 0.0 alike, and an integer field refuses 1.0, so data that differ
-    only there were either one scenario or refused.
-    """
-    if isinstance(value, dict):
-        return {k: _as_read(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_as_read(v) for v in value]
-    if isinstance(value, int) and not isinstance(value, bool):
-        return float(value)
-    return value
 
 
 def _fail(source: Path, where: str, problem: str) -> CampaignError:
@@ -262,6 +226,12 @@ def _block(source: Path, table: dict, index: int, where: str) -> _Block:
     if not isinstance(table.get("description", ""), str):
         raise _fail(source, f"{where}description", 'must be text: description = "..."')
     axes = _axes(source, table.get("axes", []), where)
+    for axis in axes:  # an axis varying a table would drop an override inside it, unsaid
+        for key in overrides:
+            a = axis["key"]
+            if a == key or key.startswith(f"{a}.") or a.startswith(f"{key}."):
+                use = f"{key!r} is varied by an axis ({a!r}) too: set it in one place"
+                raise _fail(source, f'{where}overrides."{key}"', use)
     samples, artefacts = table.get("samples", 1), table.get("artefacts", "none")
     if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
         raise _fail(source, f"{where}samples", f"must be an integer ≥ 1, got {samples!r}")
@@ -373,12 +343,17 @@ def load_campaign(path: str | Path) -> Campaign:
     name, description = top.get("name", source.stem), top.get("description", "")
     if not isinstance(description, str):
         raise _fail(source, "description", 'must be text: description = "..."')
-    if not isinstance(name, str) or name in ("", ".", "..") or any(c in name for c in "/\\"):
+    if (
+        not isinstance(name, str)
+        or name in ("", ".", "..")
+        or any(c in name for c in "/\\")
+        or not name.isprintable()  # a NUL or a control character: no directory's name
+    ):
         raise _fail(source, "name", f"must be a plain name usable as a directory, got {name!r}")
     blocks = top.get("blocks")
     if blocks is None:
         parsed = [_block(source, top, 0, "")]
-    elif not isinstance(blocks, list) or not blocks:
+    elif not isinstance(blocks, list) or not blocks or not all(isinstance(b, dict) for b in blocks):
         raise _fail(source, "blocks", "must be a non-empty array of tables [[blocks]]")
     elif extra := sorted(set(top) - {"name", "seed", "description", "blocks"}):
         raise _fail(source, extra[0], "not allowed beside [[blocks]] (give it in each block)")
@@ -389,7 +364,7 @@ def load_campaign(path: str | Path) -> Campaign:
              f"blocks[{i}]." if blocks else "")]  # fmt: skip
     seen: dict[str, str] = {}
     for t in tasks:
-        key = run_id(_as_read(t.data))  # 0 and 0.0: one value, as the scenario reads both
+        key = run_id(as_read(t.data))  # 0 and 0.0: one value, as the scenario reads both
         if key in seen:
             raise _fail(source, "axes", f"runs {seen[key]} and {t.name} are identical")
         seen[key] = t.name

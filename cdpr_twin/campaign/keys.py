@@ -1,0 +1,44 @@
+"""Dotted keys into a scenario's data, and the id of a resolved scenario."""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+from typing import Any
+
+
+def set_dotted(data: dict, key: str, value: Any) -> None:
+    """Set ``data[a][b]…[z] = value`` for ``key = "a.b….z"`` (tables created as needed).
+
+    Raises:
+        KeyError: a part of the path is not a table.
+    """
+    parts = key.split(".")
+    node = data
+    for part in parts[:-1]:
+        node = node.setdefault(part, {})
+        if not isinstance(node, dict):
+            raise KeyError(f"{part!r} in {key!r} is not a table")
+    node[parts[-1]] = copy.deepcopy(value)
+
+
+def run_id(data: dict) -> str:
+    """The id of a resolved scenario: 16 hex digits of its canonical JSON's SHA-256."""
+    text = json.dumps(data, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def as_read(value: Any) -> Any:
+    """``value`` with every integer as a float (bools kept): two runs' data equal so are one run.
+
+    A float field reads 0 and 0.0 alike, and an integer field refuses 1.0, so data that differ
+    only there were either one scenario or refused.
+    """
+    if isinstance(value, dict):
+        return {k: as_read(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [as_read(v) for v in value]
+    if isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    return value
