@@ -10,12 +10,14 @@ runs run, and a finished campaign runs nothing.
 
 from __future__ import annotations
 
+import json
 import multiprocessing
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 from cdpr_twin.campaign.executor import ExecutorError, run_local, run_ray
+from cdpr_twin.campaign.keys import changed_inputs, digests, input_files
 from cdpr_twin.campaign.report import report_files
 from cdpr_twin.campaign.spec import Campaign, CampaignError, Task, load_campaign
 from cdpr_twin.campaign.table import RESULTS, ResultTable, load_table
@@ -95,13 +97,28 @@ def run_campaign(
                 "have (another campaign's, or this file's before an edit): resuming would mix "
                 "them into one table; choose another --out"
             )
+        inputs = digests(input_files(campaign.tasks))
+        if done_ids and (changed := changed_inputs(_recorded_inputs(out), inputs)):
+            raise OutputDirError(
+                f"{changed[0]} changed since the runs in {out} were made: resuming would mix "
+                "two versions of it in one table; restore it, or choose another --out"
+            )
         todo = [t for t in campaign.tasks if t.run_id not in done_ids]
-        return _execute(campaign, out, table, todo, workers, ray_address, progress)
+        return _execute(campaign, out, table, todo, workers, ray_address, progress, inputs)
     finally:
         owner.release()
 
 
-def _outdated(out: Path, campaign, todo: list) -> None:
+def _recorded_inputs(out: Path) -> dict[str, str]:
+    """The input files' digests ``campaign.json`` recorded (none from an older version)."""
+    try:
+        recorded = json.loads((out / "campaign.json").read_text(encoding="utf-8"))["inputs"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}
+    return recorded if isinstance(recorded, dict) else {}
+
+
+def _outdated(out: Path, campaign, todo: list, inputs: dict) -> None:
     """Before new runs, what described the runs so far goes: ``campaign.json`` says running.
 
     The table, report and figures would be stale under their final names (the parts keep the
@@ -112,13 +129,14 @@ def _outdated(out: Path, campaign, todo: list) -> None:
             path.unlink(missing_ok=True)
     state = {"campaign": campaign.name, "source": str(campaign.source), "status": "running"}
     write_json_atomic(
-        out / "campaign.json", {**state, "runs": len(campaign.tasks), "to_run": len(todo)}
+        out / "campaign.json",
+        {**state, "runs": len(campaign.tasks), "to_run": len(todo), "inputs": inputs},
     )
 
 
-def _execute(campaign, out, table, todo, workers, ray_address, progress) -> dict:
+def _execute(campaign, out, table, todo, workers, ray_address, progress, inputs) -> dict:
     if todo:
-        _outdated(Path(out), campaign, todo)
+        _outdated(Path(out), campaign, todo, inputs)
     runs_dir = str(Path(out) / "runs")
     start, n, status = time.perf_counter(), 0, "completed"
     if ray_address is False:
@@ -158,6 +176,7 @@ def _execute(campaign, out, table, todo, workers, ray_address, progress) -> dict
                 "skipped_done": len(campaign.tasks) - len(todo),
                 "wall_time_s": time.perf_counter() - start,
                 "executor": "local" if ray_address is False else "ray",
+                "inputs": inputs,  # the files the runs read: a --resume checks them
             }
             if any(Path(out, "parts").glob("part-*.parquet")):
                 summary["table"] = str(table.gather([t.run_id for t in campaign.tasks]))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import json
+from pathlib import Path
 from typing import Any
 
 
@@ -42,3 +43,34 @@ def as_read(value: Any) -> Any:
     if isinstance(value, int) and not isinstance(value, bool):
         return float(value)
     return value
+
+
+def input_files(tasks) -> list[Path]:
+    """The files the runs read beside their scenario data (a run's id does not hold them).
+
+    ``model.file``, ``model.nominal`` and ``.py`` plugins, resolved beside each task's
+    scenario file; shipped robots (``model.robot``) are the package's own.
+    """
+    found: set[Path] = set()
+    for task in tasks:
+        base, model = Path(task.source).parent, task.data.get("model", {})
+        refs = [model.get("file"), model.get("nominal")]
+        refs += [p for p in task.data.get("plugins", []) if str(p).endswith(".py")]
+        found |= {(base / r).resolve() for r in refs if isinstance(r, str)}
+    return sorted(found)
+
+
+def digests(paths: list[Path]) -> dict[str, str]:
+    """SHA-256 of each readable file, by path (a file that cannot be read: its error)."""
+    out = {}
+    for path in paths:
+        try:
+            out[str(path)] = hashlib.sha256(path.read_bytes()).hexdigest()
+        except OSError as exc:
+            out[str(path)] = f"unreadable: {exc.strerror}"
+    return out
+
+
+def changed_inputs(recorded: dict[str, str], now: dict[str, str]) -> list[str]:
+    """The files whose content differs from when the runs already made were made."""
+    return [p for p, digest in recorded.items() if p in now and now[p] != digest]
