@@ -163,3 +163,8 @@ def test_every_shipped_campaign_still_loads():
 
     for path in sorted((ROOT / "campaigns").glob("*.toml")):
         assert load_campaign(path).tasks, path
+
+
+def test_a_missing_block_scenario_names_the_campaign_and_the_block(tmp_path, capsys):
+    block = _block("a", _axis("seed", "values = [1]")).replace(SCENARIO, 'scenario = "nope.toml"\n')
+    _refused(tmp_path, capsys, block, "bad.toml: blocks[0].scenario: ", "nope.toml: scenario file")

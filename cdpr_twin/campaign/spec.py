@@ -240,9 +240,13 @@ def _block(source: Path, table: dict, index: int, where: str) -> _Block:
     random = tuple(a for a in axes if "draw" in a)
     if samples > 1 and not random:
         raise _fail(source, f"{where}samples", "> 1 repeats identical runs: add a random axis")
+    try:
+        base = _read_toml(scenario, "scenario file")
+    except CampaignError as exc:  # the campaign's field too: which block names it
+        raise _fail(source, f"{where}scenario", str(exc)) from None
     return _Block(
         str(table.get("name", "main" if not where else f"block{index}")), index, scenario,
-        _read_toml(scenario, "scenario file"), overrides,
+        base, overrides,
         tuple(a for a in axes if "draw" not in a), random, samples, artefacts,
     )  # fmt: skip
 
