@@ -26,47 +26,18 @@ from typing import Any
 import numpy as np
 
 from cdpr_twin.plugins import OptionError, option
+from cdpr_twin.realism_limits import (
+    MAX_CENTER_ERROR_STD_PX,
+    MAX_DISTORTION_ERROR_STD,
+    MAX_FULL_WELL_E,
+    MAX_HOMING_POSITION_STD,
+    MAX_HOMING_ROTATION_STD,
+    MAX_LATENCY_TICKS,
+    check_at_most,
+    check_relative_std,
+)
 
 PROFILES = ("ideal", "acrobot")
-
-
-MAX_RELATIVE_STD = 0.1
-"""The largest per-robot relative std of a positive quantity (a radius, a focal length, a
-gain): a non-positive draw is then a 10σ event; built and calibrated parts are within 1 %."""
-MAX_FULL_WELL_E = 1e30
-"""The largest full well [e-] the float32 frame arithmetic holds without overflow."""
-MAX_LATENCY_TICKS = 100
-"""The longest camera latency [control ticks] (4 s at 25 Hz)."""
-MAX_CENTER_ERROR_STD_PX = 20.0
-"""The largest per-robot std of the calibrated principal point [px]: calibrations leave
-0.3–1.3 px (``models/acrobot/README.md``), and a 10σ draw stays inside a 640×480 frame."""
-MAX_DISTORTION_ERROR_STD = 0.1
-"""The largest per-robot std of a calibrated distortion coefficient: calibrations leave
-3e-4–7e-3; at 0.1 a 10σ draw moves k1 by 1, a different lens."""
-MAX_HOMING_POSITION_STD = 0.05
-"""The largest homing repeatability [m] per axis: a robot that homes farther off than this
-starts somewhere else (set ``start.pose``); CDPRs home within millimetres."""
-MAX_HOMING_ROTATION_STD = math.radians(5.0)
-"""The largest homing repeatability [rad] per axis (5°; CDPRs home within tenths of one)."""
-
-
-def check_relative_std(field: str, std: float, what: str) -> None:
-    """Refuse a relative std that could draw a non-positive ``what`` (> :data:`MAX_RELATIVE_STD`).
-
-    Raises:
-        OptionError: naming ``field``.
-    """
-    if std > MAX_RELATIVE_STD:
-        raise OptionError(
-            field,
-            f"must be ≤ {MAX_RELATIVE_STD:g} (a relative std: at {std:g} a draw of 1 + std·z "
-            f"makes the {what} ≤ 0 once in {1 / _tail(1 / std):.3g} robots), got {std:g}",
-        )
-
-
-def _tail(k: float) -> float:
-    """P(z < −k) for a standard normal z."""
-    return 0.5 * math.erfc(k / math.sqrt(2.0))
 
 
 @dataclass(frozen=True)
@@ -117,30 +88,30 @@ class CameraRealism:
             if len(getattr(self, name)) != 4:
                 raise OptionError(name, "must list 4 values, for k1, k2, p1, p2")
         check_relative_std("focal_error_std", self.focal_error_std, "focal length")
-        if self.center_error_std_px > MAX_CENTER_ERROR_STD_PX:
-            raise OptionError(
-                "center_error_std_px",
-                f"must be ≤ {MAX_CENTER_ERROR_STD_PX:g} px (calibrations place the principal "
-                f"point within 0.3–1.3 px), got {self.center_error_std_px:g}",
-            )
-        if max(self.distortion_error_std) > MAX_DISTORTION_ERROR_STD:
-            raise OptionError(
-                "distortion_error_std",
-                f"each must be ≤ {MAX_DISTORTION_ERROR_STD:g} (calibrations leave 3e-4–7e-3), "
-                f"got {list(self.distortion_error_std)}",
-            )
-        if self.full_well_e > MAX_FULL_WELL_E:
-            raise OptionError(
-                "full_well_e",
-                f"must be ≤ {MAX_FULL_WELL_E:g} e- (the frame is formed in float32; sensors "
-                f"hold 1e3-1e6), got {self.full_well_e:g}",
-            )
-        if self.latency_ticks > MAX_LATENCY_TICKS:
-            raise OptionError(
-                "latency_ticks",
-                f"must be ≤ {MAX_LATENCY_TICKS} (every frame in flight is held in memory; "
-                f"cameras deliver within a few frames), got {self.latency_ticks}",
-            )
+        check_at_most(
+            "center_error_std_px",
+            self.center_error_std_px,
+            MAX_CENTER_ERROR_STD_PX,
+            " px (calibrations place the principal point within 0.3–1.3 px)",
+        )
+        check_at_most(
+            "distortion_error_std",
+            max(self.distortion_error_std),
+            MAX_DISTORTION_ERROR_STD,
+            " each (calibrations leave 3e-4–7e-3)",
+        )
+        check_at_most(
+            "full_well_e",
+            self.full_well_e,
+            MAX_FULL_WELL_E,
+            " e- (the frame is formed in float32; sensors hold 1e3-1e6)",
+        )
+        check_at_most(
+            "latency_ticks",
+            self.latency_ticks,
+            MAX_LATENCY_TICKS,
+            " (every frame in flight is held in memory; cameras deliver within a few frames)",
+        )
 
 
 @dataclass(frozen=True)
@@ -239,19 +210,14 @@ class HomingRealism:
     rotation_std: float = option(0.0, minimum=0.0, unit="deg")
 
     def __post_init__(self) -> None:
-        if self.position_std > MAX_HOMING_POSITION_STD:
-            raise OptionError(
-                "position_std",
-                f"must be ≤ {MAX_HOMING_POSITION_STD:g} m (a repeatability: a robot homing "
-                f"farther off starts elsewhere; set start.pose), got {self.position_std:g}",
-            )
-        if self.rotation_std > MAX_HOMING_ROTATION_STD:
-            raise OptionError(
-                "rotation_std_deg",
-                f"must be ≤ {math.degrees(MAX_HOMING_ROTATION_STD):g}° (a repeatability: a "
-                f"robot homing farther off starts elsewhere; set start.pose), got "
-                f"{math.degrees(self.rotation_std):g}°",
-            )
+        why = " (a repeatability: a robot homing farther off starts elsewhere; set start.pose)"
+        check_at_most("position_std", self.position_std, MAX_HOMING_POSITION_STD, " m" + why)
+        check_at_most(
+            "rotation_std_deg",
+            math.degrees(self.rotation_std),
+            math.degrees(MAX_HOMING_ROTATION_STD),
+            "°" + why,
+        )
 
 
 @dataclass(frozen=True)

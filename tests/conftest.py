@@ -2,6 +2,7 @@
 
 import os
 from collections import Counter
+from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # before any test module imports mujoco
 
@@ -53,6 +54,28 @@ EXACT_OPEN_LOOP = {
 }
 """Dotted overrides of ``paper_open_loop``: the robot exactly as modelled, ideal sensors, no
 camera, p0 → p1 (10 s): what a test then switches on is the only error."""
+
+
+def processes() -> list[tuple[int, str, int, int]]:
+    """Every process's (pid, state, parent pid, process group), from ``/proc``."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()  # after "comm)"
+        except OSError:
+            continue
+        out.append((int(stat.parent.name), fields[0], int(fields[1]), int(fields[2])))
+    return out
+
+
+def group_alive(pgid: int) -> bool:
+    """Whether a process of group ``pgid`` still runs (zombies awaiting their reaper do not)."""
+    return any(group == pgid and state != "Z" for _, state, _, group in processes())
+
+
+def children(pid: int) -> list[int]:
+    """The live child processes of ``pid``."""
+    return [p for p, state, parent, _ in processes() if parent == pid and state != "Z"]
 
 
 def paper_pose(name: str) -> np.ndarray:

@@ -15,6 +15,8 @@ import sys
 import time
 from pathlib import Path
 
+from conftest import children, group_alive
+
 from cdpr_twin.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -48,30 +50,6 @@ def test_out_on_the_nominal_descriptions_folder_is_refused_and_nothing_is_touche
     assert main(["calibrate", str(scenario), "--out", str(tmp_path / "new"), "--poses", "12"]) == 0
 
 
-def _group_alive(pgid: int) -> bool:
-    """Whether a process of group ``pgid`` still runs (zombies do not count)."""
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[2]) == pgid and fields[0] != "Z":
-            return True
-    return False
-
-
-def _children(pid: int) -> list[int]:
-    kids = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[1]) == pid and fields[0] != "Z":
-            kids.append(int(stat.parent.name))
-    return kids
-
-
 def test_a_calibration_killed_without_cleanup_leaves_no_worker_recording(tmp_path):
     cmd = [sys.executable, "-m", "cdpr_twin", "calibrate", "paper_open_loop",
            "--out", str(tmp_path / "out"), "--poses", "12", "--workers", "2"]  # fmt: skip
@@ -81,17 +59,17 @@ def test_a_calibration_killed_without_cleanup_leaves_no_worker_recording(tmp_pat
     )  # fmt: skip
     try:
         deadline = time.monotonic() + 120
-        while len(_children(proc.pid)) < 2 and time.monotonic() < deadline:
+        while len(children(proc.pid)) < 2 and time.monotonic() < deadline:
             time.sleep(0.1)  # the pool's workers (and its resource tracker) have spawned
-        assert proc.poll() is None and len(_children(proc.pid)) >= 2
+        assert proc.poll() is None and len(children(proc.pid)) >= 2
         time.sleep(2.0)  # the workers imported the package and record
         os.kill(proc.pid, signal.SIGKILL)  # the parent alone, without any cleanup
         proc.wait()
         deadline = time.monotonic() + 10
-        while _group_alive(proc.pid) and time.monotonic() < deadline:
+        while group_alive(proc.pid) and time.monotonic() < deadline:
             time.sleep(0.2)
-        alive = _group_alive(proc.pid)
+        alive = group_alive(proc.pid)
     finally:
-        if _group_alive(proc.pid):
+        if group_alive(proc.pid):
             os.killpg(proc.pid, signal.SIGKILL)
     assert not alive, "a worker kept recording after its calibration was killed"

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+from conftest import group_alive
 
 from cdpr_twin.campaign import load_campaign, load_table, run_campaign
 from cdpr_twin.cli import main
@@ -87,18 +88,6 @@ def test_an_empty_out_is_refused_not_taken_for_the_current_directory(tmp_path, c
     assert exit_.value.code == 2 and "--out: is empty" in capsys.readouterr().err
 
 
-def _group_alive(pgid: int) -> bool:
-    """Whether a process of group ``pgid`` still runs (zombies awaiting their reaper do not)."""
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[2]) == pgid and fields[0] != "Z":  # after "comm)": state, ppid, pgrp
-            return True
-    return False
-
-
 def _start_slow_campaign(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
     """Two 30 s camera-on runs on one worker (each many seconds of wall time)."""
     src = _campaign(tmp_path, "slow", 30.0, camera=True, seeds=(1, 2))
@@ -128,7 +117,7 @@ def test_sigterm_ends_the_runs_under_way_and_says_nothing_was_recorded(tmp_path)
         _, err = proc.communicate(timeout=60)
         waited = time.monotonic() - t0
     finally:
-        if _group_alive(proc.pid):
+        if group_alive(proc.pid):
             os.killpg(proc.pid, signal.SIGKILL)  # (the test fails below)
     assert proc.returncode == 143, err
     # before: the worker finished both queued runs (≈ 2 × 20 s), and neither was recorded
@@ -138,7 +127,7 @@ def test_sigterm_ends_the_runs_under_way_and_says_nothing_was_recorded(tmp_path)
     assert json.loads((out / "campaign.json").read_text())["status"] == "terminated"
     assert not (out / "results.parquet").exists()
     time.sleep(0.5)
-    assert not _group_alive(proc.pid), "a worker process outlived the campaign"
+    assert not group_alive(proc.pid), "a worker process outlived the campaign"
     assert not _leftovers(out)  # before: the run under way kept its .lock and *.partial files
 
 
@@ -154,9 +143,9 @@ def test_a_killed_campaign_leaves_no_worker_simulating(tmp_path):
     os.kill(proc.pid, signal.SIGKILL)  # the parent alone, without any cleanup
     proc.wait()
     deadline = time.monotonic() + 10
-    while _group_alive(proc.pid) and time.monotonic() < deadline:
+    while group_alive(proc.pid) and time.monotonic() < deadline:
         time.sleep(0.2)
-    alive = _group_alive(proc.pid)
+    alive = group_alive(proc.pid)
     if alive:
         os.killpg(proc.pid, signal.SIGKILL)
     assert not alive, "the spawned worker kept running after its campaign was killed"
@@ -386,11 +375,11 @@ def _sigterm_a_ray_campaign(tmp_path: Path, ready) -> tuple[subprocess.Popen, st
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=120)
         deadline = time.monotonic() + 30
-        while _group_alive(proc.pid) and time.monotonic() < deadline:
+        while group_alive(proc.pid) and time.monotonic() < deadline:
             time.sleep(0.2)
-        left = _group_alive(proc.pid)  # Ray's head and actors are in the campaign's group
+        left = group_alive(proc.pid)  # Ray's head and actors are in the campaign's group
     finally:
-        if _group_alive(proc.pid):
+        if group_alive(proc.pid):
             os.killpg(proc.pid, signal.SIGKILL)
     assert not left, "a Ray process outlived the stopped campaign"
     return proc, err, out

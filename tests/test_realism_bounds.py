@@ -38,7 +38,7 @@ def _scenario(tmp_path: Path, part: str, lines: str) -> Path:
          r"realism\.camera\.center_error_std_px: must be ≤ 20 px"),
         ("camera", "distortion_error_std = [0.1, 0.1, 0.1, 0.1]",
          "distortion_error_std = [0.01, 10.0, 0.0, 0.0]",
-         r"realism\.camera\.distortion_error_std: each must be ≤ 0\.1"),
+         r"realism\.camera\.distortion_error_std: must be ≤ 0\.1 each"),
         ("homing", "position_std = 0.05", "position_std = 1.0",
          r"realism\.homing\.position_std: must be ≤ 0\.05 m"),
         ("homing", "rotation_std_deg = 5.0", "rotation_std_deg = 1e6",
