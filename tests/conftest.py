@@ -78,6 +78,23 @@ def children(pid: int) -> list[int]:
     return [p for p, state, parent, _ in processes() if parent == pid and state != "Z"]
 
 
+def outlived_by_its_group(proc, wait: float = 10.0) -> bool:
+    """SIGKILL the process ``proc`` (started with ``start_new_session``) alone, without any
+    cleanup: whether a process of its group still runs ``wait`` seconds later (then killed)."""
+    import signal
+    import time
+
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    deadline = time.monotonic() + wait
+    while group_alive(proc.pid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    alive = group_alive(proc.pid)
+    if alive:
+        os.killpg(proc.pid, signal.SIGKILL)
+    return alive
+
+
 def paper_pose(name: str) -> np.ndarray:
     return se3.pose_from_vector(PAPER_POSES[name])
 

@@ -15,7 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from conftest import children, group_alive
+from conftest import children, group_alive, outlived_by_its_group
 
 from cdpr_twin.cli import main
 
@@ -63,12 +63,7 @@ def test_a_calibration_killed_without_cleanup_leaves_no_worker_recording(tmp_pat
             time.sleep(0.1)  # the pool's workers (and its resource tracker) have spawned
         assert proc.poll() is None and len(children(proc.pid)) >= 2
         time.sleep(2.0)  # the workers imported the package and record
-        os.kill(proc.pid, signal.SIGKILL)  # the parent alone, without any cleanup
-        proc.wait()
-        deadline = time.monotonic() + 10
-        while group_alive(proc.pid) and time.monotonic() < deadline:
-            time.sleep(0.2)
-        alive = group_alive(proc.pid)
+        alive = outlived_by_its_group(proc)
     finally:
         if group_alive(proc.pid):
             os.killpg(proc.pid, signal.SIGKILL)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from conftest import group_alive
+from conftest import group_alive, outlived_by_its_group
 
 from cdpr_twin.campaign import load_campaign, load_table, run_campaign
 from cdpr_twin.cli import main
@@ -140,14 +140,7 @@ def _leftovers(out: Path) -> list[str]:
 @pytest.mark.slow
 def test_a_killed_campaign_leaves_no_worker_simulating(tmp_path):
     proc, _ = _start_slow_campaign(tmp_path)
-    os.kill(proc.pid, signal.SIGKILL)  # the parent alone, without any cleanup
-    proc.wait()
-    deadline = time.monotonic() + 10
-    while group_alive(proc.pid) and time.monotonic() < deadline:
-        time.sleep(0.2)
-    alive = group_alive(proc.pid)
-    if alive:
-        os.killpg(proc.pid, signal.SIGKILL)
+    alive = outlived_by_its_group(proc)  # the parent alone, without any cleanup
     assert not alive, "the spawned worker kept running after its campaign was killed"
 
 
