@@ -36,8 +36,8 @@ def for_robot(realism: Realism, robot: RobotSensing) -> Realism:
     The accuracy becomes a rectangular bias, std a/√3 (GUM 4.3.7; see :class:`TensionRealism`).
 
     Raises:
-        OptionError: naming ``realism.tension.range_min``/``range_max`` when the range, with
-            the robot's value for the field left out, is empty or does not hold 0 N.
+        OptionError: naming ``realism.tension.range_min``/``range_max`` when the scenario sets
+            one and the range, with the robot's value for the other, does not hold 0 N.
     """
     w, t = realism.winch, realism.tension
     if math.isnan(w.drum_radius):
@@ -51,8 +51,10 @@ def for_robot(realism: Realism, robot: RobotSensing) -> Realism:
     if t.repeatability_noise and math.isnan(t.noise_std):
         filled["noise_std"] = robot.repeatability
     low, high = filled["range_min"], filled["range_max"]
-    if not low <= 0.0 < high:  # a slack cable reads 0 N: every load cell's range holds it
-        set_max, set_min = not math.isnan(t.range_max), not math.isnan(t.range_min)
+    set_min, set_max = not math.isnan(t.range_min), not math.isnan(t.range_max)
+    # a slack cable reads 0 N: every load cell's range holds it (the model's own range is the
+    # model's data, checked in robot descriptions; a scenario's is checked here)
+    if (set_min or set_max) and not low <= 0.0 < high:
         given = "range_max" if (set_max and not high > 0.0) or not set_min else "range_min"
         raise OptionError(
             f"realism.tension.{given}",

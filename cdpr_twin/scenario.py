@@ -362,7 +362,9 @@ def scenario_from_data(data: Mapping[str, Any], source: str | Path) -> Scenario:
 
 def _scenario(top: OptionReader, source: Path) -> Scenario:
     loaded = read_plugins(top)  # first: the file may name what they register
-    name = top.string("name", source.stem)
+    name = top.raw("name", source.stem, "string")  # (its NUL: the plain-name rule's words)
+    if not isinstance(name, str):
+        raise top.fail("name", f"must be a string, got {name!r}")
     control = any(ord(c) < 0x20 or c == "\x7f" for c in name)  # NUL, newline, tab, DEL
     if not name or any(c in name for c in "/\\") or name in (".", "..") or control:
         raise top.fail(

@@ -134,8 +134,6 @@ def test_a_description_that_is_not_text_is_refused(tmp_path, capsys, text):
     ("override", "axis", "says"),
     [('"truth.seed" = 7', _axis("truth", "values = [{exit_point_std = 0.001}]"),
       "overrides.\"truth.seed\": 'truth.seed' is varied by an axis ('truth')"),
-     ("truth = {seed = 7}", _axis("truth.seed", "values = [1, 2]"),
-      "overrides.\"truth\": 'truth' is varied by an axis ('truth.seed')"),
      ("seed = 7", _axis("seed", "values = [1, 2]"), "overrides.\"seed\": 'seed' is varied")],
 )  # fmt: skip
 def test_an_override_under_an_axis_is_refused_not_dropped(tmp_path, capsys, override, axis, says):
@@ -168,3 +166,18 @@ def test_every_shipped_campaign_still_loads():
 def test_a_missing_block_scenario_names_the_campaign_and_the_block(tmp_path, capsys):
     block = _block("a", _axis("seed", "values = [1]")).replace(SCENARIO, 'scenario = "nope.toml"\n')
     _refused(tmp_path, capsys, block, "bad.toml: blocks[0].scenario: ", "nope.toml: scenario file")
+
+
+def test_an_override_of_a_table_an_axis_varies_within_keeps_both(tmp_path):
+    """The override is applied first, the axis's value lands inside it: nothing is dropped."""
+    from cdpr_twin.campaign import load_campaign
+
+    text = SCENARIO + FAST.replace("duration = 0.08\n", "duration = 0.08\n"
+        '"realism.camera" = {focal_error_std = 0.003, center_error_std_px = 0.5}\n'
+    ) + _axis("realism.camera.exposure_s", "values = [0.004, 0.008]")  # fmt: skip
+    path = tmp_path / "c.toml"
+    path.write_text(text)
+    tasks = load_campaign(path).tasks
+    cams = [t.data["realism"]["camera"] for t in tasks]
+    assert [c["exposure_s"] for c in cams] == [0.004, 0.008]
+    assert all(c["focal_error_std"] == 0.003 and c["center_error_std_px"] == 0.5 for c in cams)

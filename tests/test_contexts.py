@@ -25,6 +25,16 @@ def _drop_in_thread(obj_box: list) -> None:
     t.join()
 
 
+def _waiting() -> list:
+    """What waits for its maker thread (taken out of the queue and put back, in order)."""
+    items = []
+    while not contexts._WAITING.empty():
+        items.append(contexts._WAITING.get_nowait())
+    for item in items:
+        contexts._WAITING.put(item)
+    return items
+
+
 def test_a_renderer_dropped_on_another_thread_waits_for_its_maker(monkeypatch):
     unraisable = []
     monkeypatch.setattr(sys, "unraisablehook", unraisable.append)
@@ -35,10 +45,10 @@ def test_a_renderer_dropped_on_another_thread_waits_for_its_maker(monkeypatch):
     gc.collect()
     assert not unraisable  # before: EGLError(EGL_BAD_ACCESS, eglMakeCurrent) from __del__
     assert gl() is not None and gl()._gl_context is not None  # not freed there: it waits
-    assert any(r is gl() for _, r in contexts._WAITING)
+    assert any(r is gl() for _, r in _waiting())
     other = camera.CameraRenderer(model)  # its maker builds the next one: freed then
     assert gl() is None or gl()._gl_context is None
-    assert not any(r is gl() for _, r in contexts._WAITING)
+    assert not any(r is gl() for _, r in _waiting())
     other.close()
     other.close()  # twice is fine
     assert other._renderer is None and not unraisable
@@ -51,3 +61,31 @@ def test_a_renderer_dropped_on_its_own_thread_is_freed_at_once():
     del r
     gc.collect()
     assert gl._gl_context is None and gl._mjr_context is None
+
+
+def test_a_drop_inside_free_waiting_itself_does_not_deadlock():
+    """A finalizer may run inside any code, the waiting list's own drain included (cyclic GC
+    on allocation): a lock there would be held by the very thread the finalizer runs on."""
+    model = build_model(MODEL)
+    box = [camera.CameraRenderer(model)]
+    gl = weakref.ref(box[0]._renderer)
+    _drop_in_thread(box)  # it waits for this thread
+    other_thread = threading.Thread(target=lambda: None)
+    contexts._WAITING.put((other_thread, object()))  # someone else's, put back by the drain
+    dropped_during = []
+
+    class Reentrant:  # dropped while the drain runs: its finalizer queues from inside it
+        def close(self) -> None:
+            dropped_during.append(True)
+            contexts._free(object(), other_thread)
+
+    contexts._WAITING.put((threading.current_thread(), Reentrant()))
+    done = threading.Event()
+    t = threading.Thread(target=lambda: (contexts.free_waiting(), done.set()))
+    contexts.free_waiting()  # this thread's two: the renderer and the re-entrant one
+    assert dropped_during and (gl() is None or gl()._gl_context is None)
+    assert sum(maker is other_thread for maker, _ in _waiting()) == 2
+    t.start()
+    assert done.wait(10.0)  # no lock to deadlock on
+    while not contexts._WAITING.empty():  # leave nothing of this test behind
+        contexts._WAITING.get_nowait()

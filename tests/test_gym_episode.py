@@ -12,7 +12,7 @@ import pytest
 
 from cdpr_twin import plugins
 from cdpr_twin.estimators.base import NO_INPUTS, Estimator
-from cdpr_twin.gym import CdprEnv
+from cdpr_twin.gym import CdprEnv, pose6
 from cdpr_twin.gym.tasks import ReachPose
 from cdpr_twin.scenario import ScenarioError
 from cdpr_twin.types import PoseEstimate
@@ -86,3 +86,55 @@ def test_an_estimator_that_reads_the_tag_turns_the_camera_on_by_default():
 def test_the_environments_errors_name_its_arguments_not_the_cli_options(kwargs, match):
     with pytest.raises(ScenarioError, match=match):
         CdprEnv(**kwargs)
+
+
+def test_an_estimator_a_scenarios_plugin_registers_turns_the_camera_on_too(tmp_path):
+    """Its need is asked once the scenario, which imports the plugin, is loaded (before: the
+    name was unknown then, the camera stayed off, and the error blamed a camera=False the user
+    never passed)."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    (tmp_path / "reads_the_tag.py").write_text(
+        "from cdpr_twin import plugins\n"
+        "from cdpr_twin.estimators.control import ControlEstimator\n\n\n"
+        "@plugins.register\n"
+        "class ReadsTheTag(ControlEstimator):\n"
+        '    name = "reads_the_tag"\n'
+        "    needs_camera = True\n"
+    )
+    text = (root / "scenarios" / "paper_open_loop.toml").read_text()
+    text = text.replace('"../models/', f'"{root}/models/')
+    (tmp_path / "s.toml").write_text('plugins = ["reads_the_tag.py"]\n' + text)
+    env = CdprEnv(scenario=str(tmp_path / "s.toml"), estimator="reads_the_tag", realism="ideal")
+    try:
+        assert env.scenario.sensors.camera
+        obs, _ = env.reset(seed=0)
+        assert obs["tag_detected"] == 1
+    finally:
+        env.close()
+
+
+@plugins.register
+class NeverFinite(Estimator):
+    """No finite pose at all (not even at reset)."""
+
+    name = "never_finite"
+
+    def update(self, measurement, inputs=NO_INPUTS) -> PoseEstimate:
+        return PoseEstimate(measurement.time, np.full((4, 4), np.nan))
+
+
+def test_a_new_episode_does_not_carry_the_last_ones_pose():
+    """A lost estimate keeps the last finite pose in the observation, within its episode only:
+    lost from the reset on, the observation holds the start pose, not the last episode's."""
+    env = CdprEnv(estimator="never_finite", realism="ideal")
+    try:
+        env._pose = np.full(6, 0.5)  # as if an episode before had ended elsewhere
+        obs, info = env.reset(seed=1)
+        np.testing.assert_allclose(obs["pose_estimate"], pose6(env.scenario.start_pose))
+        assert not info["estimate_valid"] and env.observation_space.contains(obs)
+        _, _, terminated, _, info = env.step(np.zeros(6, np.float32))
+        assert terminated and info["failure"].startswith("the never_finite estimate is not fin")
+    finally:
+        env.close()

@@ -108,3 +108,27 @@ def test_the_detector_refuses_intrinsics_it_cannot_fit_a_pose_with():
     for bad in ({"cx": 1e6}, {"cy": -1.0}, {"fx": 0.0}, {"fy": np.nan}, {"cx": np.nan}):
         with pytest.raises(ValueError, match=r"need positive focal lengths and the point inside"):
             TagDetector(dataclasses.replace(K, **bad))
+
+
+def test_a_model_files_own_tension_range_is_the_models_data_not_refused(tmp_path, capsys):
+    """A hand-written MJCF whose sensors read 5…75 N (``<numeric tension_sensor_range>``) ran
+    before the 0 N rule and runs still, under both profiles: only a range the scenario sets is
+    held to it (robot descriptions are checked when read)."""
+    import shutil
+
+    shutil.copytree(ROOT / "models" / "acrobot", tmp_path / "robot")
+    scene = tmp_path / "robot" / "scene.xml"
+    text = scene.read_text()
+    assert 'name="tension_sensor_range" size="2" data="-25 75"' in text
+    scene.write_text(text.replace('data="-25 75"', 'data="5 75"'))
+    path = tmp_path / "s.toml"
+    path.write_text(PBVS.replace('robot = "acrobot"', f'file = "{scene}"', 1))
+    for profile in ("ideal", "acrobot"):
+        out = tmp_path / profile
+        code = main(
+            ["run", str(path), "--duration", "0.08", "--realism", profile, "--out", str(out)]
+        )
+        assert code == 0, capsys.readouterr().err
+    path.write_text(path.read_text() + "\n[realism.tension]\nrange_max = 100.0\n")
+    assert main(["run", str(path), "--duration", "0.08", "--out", str(tmp_path / "set")]) == 2
+    assert "realism.tension.range_max: the readings' range 5…100 N" in capsys.readouterr().err

@@ -227,9 +227,9 @@ def _block(source: Path, table: dict, index: int, where: str) -> _Block:
         raise _fail(source, f"{where}description", 'must be text: description = "..."')
     axes = _axes(source, table.get("axes", []), where)
     for axis in axes:  # an axis varying a table would drop an override inside it, unsaid
-        for key in overrides:
+        for key in overrides:  # (an override of a table an axis varies within: applied first)
             a = axis["key"]
-            if a == key or key.startswith(f"{a}.") or a.startswith(f"{key}."):
+            if a == key or key.startswith(f"{a}."):
                 use = f"{key!r} is varied by an axis ({a!r}) too: set it in one place"
                 raise _fail(source, f'{where}overrides."{key}"', use)
     samples, artefacts = table.get("samples", 1), table.get("artefacts", "none")

@@ -14,15 +14,24 @@ from cdpr_twin.scenario import EstimatorConfig, Scenario, load_scenario
 
 
 def configure(
-    scenario: str | Scenario, estimator: str, camera: bool, scale: float, realism: str | None
+    scenario: str | Scenario,
+    estimator: str,
+    camera: bool | None,
+    wants: Mapping[str, bool],
+    scale: float,
+    realism: str | None,
 ) -> Scenario:
     """The scenario an episode runs: one estimator, the camera as asked, scaled truth.
 
+    ``camera`` ``None``: on where ``wants`` (the environment's own needs, named) or the
+    estimator needs it — asked once the scenario is loaded, whose plugins may register it.
+
     Raises:
         ScenarioError: an unknown estimator or profile, or the camera off where it is needed.
-        ValueError: a truth scale that is not a number ≥ 0.
+        ValueError: a truth scale that is not a number ≥ 0; ``camera=False`` against ``wants``.
     """
     s = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    camera = camera_choice(camera, wants, needs_camera(estimator))
     s = s if realism is None else s.with_realism(realism, label="realism")
     opts = {n: o for n, o in s.estimators.options.items() if n == estimator}
     s = dataclasses.replace(s, estimators=EstimatorConfig(estimator, (), MappingProxyType(opts)))

@@ -40,7 +40,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from cdpr_twin.gym.configuration import camera_choice, check_arguments, configure, needs_camera
+from cdpr_twin.gym.configuration import check_arguments, configure
 from cdpr_twin.gym.tasks import Score, Truth, make_task
 from cdpr_twin.kinematics import jacobian
 from cdpr_twin.runner import RunSetup, prepare, start
@@ -118,13 +118,11 @@ class CdprEnv(gym.Env):
             raise ValueError(f"unknown action {action!r}; choose one of {', '.join(ACTIONS)}")
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"unknown render_mode {render_mode!r}; use None or 'rgb_array'")
-        camera = camera_choice(camera, {
-            "the task": self.task.needs_camera, "image=True": image,
-            f"render_mode={render_mode!r}": render_mode is not None,
-        }, needs_camera(estimator))  # fmt: skip
+        wants = {"the task": self.task.needs_camera, "image=True": image,
+                 f"render_mode={render_mode!r}": render_mode is not None}  # fmt: skip
         self.action_kind, self.image, self.render_mode = action, bool(image), render_mode
         self.random_robot, self.estimator = bool(random_robot), estimator
-        self.scenario = configure(scenario, estimator, bool(camera), truth_scale, realism)
+        self.scenario = configure(scenario, estimator, camera, wants, truth_scale, realism)
         if on_fault is not None:
             monitor = dataclasses.replace(self.scenario.monitor, on_fault=on_fault)
             self.scenario = dataclasses.replace(self.scenario, monitor=monitor)
@@ -197,6 +195,7 @@ class CdprEnv(gym.Env):
         physics = self._setup.physics
         self._setup.events.fire(0.5 * physics.timestep)  # what is due at t = 0
         self._steps, self._seeds, self._ended = 0, (robot_seed, run_seed), None
+        self._pose = pose6(self.scenario.start_pose)  # a lost first estimate: the start's
         self._read(None)
         self._last = self._truth()
         faults = self._faults()
