@@ -1,10 +1,11 @@
-"""Dotted keys into a scenario's data, and the id of a resolved scenario."""
+"""Dotted keys into a scenario's data, the id of a resolved scenario, and the files it reads."""
 
 from __future__ import annotations
 
 import copy
 import hashlib
 import json
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -45,7 +46,7 @@ def as_read(value: Any) -> Any:
     return value
 
 
-def input_files(tasks) -> list[Path]:
+def input_files(tasks: Iterable[Any]) -> list[Path]:
     """The files the runs read beside their scenario data (a run's id does not hold them).
 
     ``model.file``, ``model.nominal`` and ``.py`` plugins, resolved beside each task's
