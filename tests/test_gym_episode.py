@@ -66,14 +66,18 @@ def test_a_truncated_episode_needs_a_reset():
         env.close()
 
 
-def test_an_estimator_that_reads_the_tag_turns_the_camera_on_by_default():
-    env = CdprEnv(estimator="image", realism="ideal")
+def _sees_the_tag(env: CdprEnv) -> None:
+    """The environment's camera is on and its first observation holds the tag (then closed)."""
     try:
         assert env.scenario.sensors.camera
         obs, _ = env.reset(seed=0)
         assert obs["tag_detected"] == 1
     finally:
         env.close()
+
+
+def test_an_estimator_that_reads_the_tag_turns_the_camera_on_by_default():
+    _sees_the_tag(CdprEnv(estimator="image", realism="ideal"))
     with pytest.raises(ValueError, match=r"^image=True needs the camera: drop camera=False"):
         CdprEnv(image=True, camera=False)
 
@@ -106,13 +110,9 @@ def test_an_estimator_a_scenarios_plugin_registers_turns_the_camera_on_too(tmp_p
     text = (root / "scenarios" / "paper_open_loop.toml").read_text()
     text = text.replace('"../models/', f'"{root}/models/')
     (tmp_path / "s.toml").write_text('plugins = ["reads_the_tag.py"]\n' + text)
-    env = CdprEnv(scenario=str(tmp_path / "s.toml"), estimator="reads_the_tag", realism="ideal")
-    try:
-        assert env.scenario.sensors.camera
-        obs, _ = env.reset(seed=0)
-        assert obs["tag_detected"] == 1
-    finally:
-        env.close()
+    _sees_the_tag(
+        CdprEnv(scenario=str(tmp_path / "s.toml"), estimator="reads_the_tag", realism="ideal")
+    )
 
 
 @plugins.register
