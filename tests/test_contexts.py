@@ -63,9 +63,11 @@ def test_a_renderer_dropped_on_its_own_thread_is_freed_at_once():
     assert gl._gl_context is None and gl._mjr_context is None
 
 
-def test_a_drop_inside_free_waiting_itself_does_not_deadlock():
+def test_a_drop_during_the_drain_is_kept_for_its_maker():
     """A finalizer may run inside any code, the waiting list's own drain included (cyclic GC
-    on allocation): a lock there would be held by the very thread the finalizer runs on."""
+    on allocation): what it queues then is neither lost nor freed on the wrong thread, and
+    another thread's drain finishes. (The deadlock a lock there allowed — GC inside the
+    locked section — is ruled out by having no lock, not reproduced here.)"""
     model = build_model(MODEL)
     box = [camera.CameraRenderer(model)]
     gl = weakref.ref(box[0]._renderer)
@@ -86,6 +88,6 @@ def test_a_drop_inside_free_waiting_itself_does_not_deadlock():
     assert dropped_during and (gl() is None or gl()._gl_context is None)
     assert sum(maker is other_thread for maker, _ in _waiting()) == 2
     t.start()
-    assert done.wait(10.0)  # no lock to deadlock on
+    assert done.wait(10.0)  # another thread's drain finishes
     while not contexts._WAITING.empty():  # leave nothing of this test behind
         contexts._WAITING.get_nowait()
