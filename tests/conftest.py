@@ -95,6 +95,14 @@ def outlived_by_its_group(proc, wait: float = 10.0) -> bool:
     return alive
 
 
+def pool_threads() -> list:
+    """The live threads that manage a ``ProcessPoolExecutor``'s workers (Python's own)."""
+    import threading
+    from concurrent.futures.process import _ExecutorManagerThread
+
+    return [t for t in threading.enumerate() if isinstance(t, _ExecutorManagerThread)]
+
+
 def paper_pose(name: str) -> np.ndarray:
     return se3.pose_from_vector(PAPER_POSES[name])
 

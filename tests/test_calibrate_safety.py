@@ -15,7 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from conftest import children, group_alive, outlived_by_its_group
+from conftest import children, group_alive, outlived_by_its_group, pool_threads
 
 from cdpr_twin.cli import main
 
@@ -68,3 +68,21 @@ def test_a_calibration_killed_without_cleanup_leaves_no_worker_recording(tmp_pat
         if group_alive(proc.pid):
             os.killpg(proc.pid, signal.SIGKILL)
     assert not alive, "a worker kept recording after its calibration was killed"
+
+
+def test_a_failed_recording_waits_for_its_pools_thread_before_the_error_leaves():
+    # Before (CI, exit 143 then a trace): a SIGTERMed calibration ended its workers and left
+    # the pool's thread closing its wake-up pipe while the interpreter exited; Python's exit
+    # hook wrote to that pipe: "Exception ignored in <module 'threading'> … OSError: [Errno 9]
+    # Bad file descriptor" after "terminated". Truth: Python's own list of live threads.
+    import multiprocessing
+
+    import pytest
+
+    from cdpr_twin.calibrate.acquire import _in_processes
+
+    items = [(i, []) for i in range(4)]
+    with pytest.raises(AttributeError):  # no scenario: each segment fails in its worker
+        _in_processes(items, 2, None, 1)
+    assert pool_threads() == []
+    assert multiprocessing.active_children() == []

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from conftest import group_alive, outlived_by_its_group
+from conftest import group_alive, outlived_by_its_group, pool_threads
 
 from cdpr_twin.campaign import load_campaign, load_table, run_campaign
 from cdpr_twin.cli import main
@@ -313,6 +313,7 @@ def test_a_stopped_local_executor_ends_its_workers_without_a_thread_traceback(mo
             next(results)
         # the workers were ended, not left to finish their 5 s runs (truth: the OS's processes)
         assert multiprocessing.active_children() == []
+        assert pool_threads() == []  # none left to race Python's exit hook on its pipe
         assert escaped == []
 
 

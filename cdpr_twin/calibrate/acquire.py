@@ -36,7 +36,7 @@ import numpy as np
 from cdpr_twin.calibrate import drive
 from cdpr_twin.calibrate.excitation import tag_in_view
 from cdpr_twin.calibrate.problem import Detector, Observations
-from cdpr_twin.campaign.executor import exit_with, stop_workers
+from cdpr_twin.campaign.executor import abandon, exit_with
 from cdpr_twin.procedure import homing
 from cdpr_twin.scenario import Scenario, ScenarioError
 from cdpr_twin.se3 import so3_exp, so3_log, transform
@@ -232,8 +232,7 @@ def _in_processes(items: list, workers: int, s: Scenario, frames: int) -> list[t
             for f in as_completed(futures):
                 f.result()  # raises the segment's error (BrokenProcessPool: a worker died)
         except BaseException:
-            stop_workers(pool)
-            pool.shutdown(wait=False, cancel_futures=True)
+            abandon(pool)
             raise
         return [f.result() for f in futures]
 

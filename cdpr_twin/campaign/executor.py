@@ -51,16 +51,26 @@ def run_local(
                 done, pending = wait(pending, return_when=FIRST_COMPLETED)
                 yield from (f.result() for f in done)
         except BaseException:
-            # the pool's own thread cancels the queued runs (a future cancelled here, then
-            # failed by that thread as the workers end, is Python 3.11's InvalidStateError
-            # trace); shutdown forgets the workers and the thread: both are taken first
-            processes = list((getattr(pool, "_processes", None) or {}).values())
-            manager = getattr(pool, "_executor_manager_thread", None)
-            pool.shutdown(wait=False, cancel_futures=True)
-            stop_workers(pool, processes)  # a stop ends the runs under way, not after them
-            if manager is not None:
-                manager.join(timeout=10.0)
+            abandon(pool)  # a stop ends the runs under way, not after them
             raise
+
+
+def abandon(pool: ProcessPoolExecutor) -> None:
+    """Cancel the pool's queued tasks, end its workers now, and wait for its manager thread.
+
+    The pool's own thread cancels the queued tasks (a future cancelled here, then failed by
+    that thread as the workers end, is Python 3.11's ``InvalidStateError`` trace); ``shutdown``
+    forgets the workers and the thread, so both are taken first. The thread is waited for: one
+    still closing its wake-up pipe as the interpreter exits races ``concurrent.futures``' exit
+    hook writing to it (``OSError: [Errno 9] Bad file descriptor``, "Exception ignored in
+    <module 'threading'>", after the command's last line).
+    """
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    manager = getattr(pool, "_executor_manager_thread", None)
+    pool.shutdown(wait=False, cancel_futures=True)
+    stop_workers(pool, processes)
+    if manager is not None:
+        manager.join(timeout=10.0)
 
 
 def exit_with(parent: int) -> None:
