@@ -26,12 +26,23 @@ class Tally:
         clipped: (m,) clipped tension readings per cable (every read of the run, t = 0
             included), or ``None`` (the sensors never clip).
         faults: the robot's faults (:class:`cdpr_twin.sim.Fault`), in time order.
+        truth: the true state at the last recorded tick (``time`` [s], ``T_base_platform``
+            (4, 4), ``tensions`` (m,) [N], ``T_cam_tag`` (4, 4) or ``None``), or ``None``
+            before the first. The summary is of that tick, not of a physics state a stop
+            (Ctrl-C, SIGTERM, a failure) left mid-tick, which no file recorded.
     """
 
     last_tag: object = None
     last_tag_time: float | None = None
     clipped: np.ndarray | None = None
     faults: list = dataclasses.field(default_factory=list)
+    truth: dict | None = None
+
+    def recorded(self, physics, T_true: np.ndarray, tag_view: bool) -> None:
+        """Keep the true state of the tick just recorded (``tag_view``: the tag's pose too)."""
+        T_cam_tag = physics.T_cam_tag if tag_view else None
+        self.truth = {"time": physics.time, "T_base_platform": T_true,
+                      "tensions": physics.tensions, "T_cam_tag": T_cam_tag}  # fmt: skip
 
     def seen(self, m: Measurement) -> None:
         """Keep the read's tag detection (and its time) when it has one."""
@@ -58,11 +69,13 @@ def summarize(setup, metrics: RunMetrics, status: str, tally: Tally) -> dict:
     p, view = setup.physics, setup.controller.goal_view
     if view is not None and setup.shown_view is not None:
         view = setup.shown_view  # a taught view: what the camera truly saw when shown
+    if tally.truth is None:  # stopped before its first tick was recorded: the state now
+        tally.recorded(p, p.T_base_platform, tag_view(setup))
+    truth = tally.truth
     true_tag_error = None
-    if view is not None and p.has_camera and p.has_tag:  # truth stays here: only the error
-        true_tag_error = pose_error(p.T_cam_tag, view)
+    if view is not None and truth["T_cam_tag"] is not None:  # truth stays here: the error only
+        true_tag_error = pose_error(truth["T_cam_tag"], view)
     end = RunEnd(status, tally.last_tag, true_tag_error, tally.last_tag_time)
-    truth = {"time": p.time, "T_base_platform": p.T_base_platform, "tensions": p.tensions}
     extra = setup.controller.summary(end)
     out = run_summary(setup.scenario, status, metrics, truth, setup.goal_pose, extra)
     if setup.homing_offset is not None:
@@ -80,3 +93,9 @@ def summarize(setup, metrics: RunMetrics, status: str, tally: Tally) -> dict:
     if tally.faults:
         out["faults"] = [f.as_dict() for f in tally.faults]
     return out
+
+
+def tag_view(setup) -> bool:
+    """Whether the summary needs the true tag pose (a goal view, a camera and a tag)."""
+    p = setup.physics
+    return setup.controller.goal_view is not None and p.has_camera and p.has_tag
