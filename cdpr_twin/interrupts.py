@@ -113,9 +113,22 @@ def closed_stdout(exc: BrokenPipeError) -> int:
         sys.stdout.flush()
     except BrokenPipeError:
         pass
-    else:
-        raise exc
+    else:  # nothing was buffered (``python -u``, PYTHONUNBUFFERED): ask the pipe itself
+        if not _reader_gone(sys.stdout):
+            raise exc
     devnull = os.open(os.devnull, os.O_WRONLY)
     os.dup2(devnull, sys.stdout.fileno())
     os.close(devnull)
     return 128 + signal.SIGPIPE
+
+
+def _reader_gone(stream) -> bool:
+    """Whether ``stream``'s file is a pipe or socket whose reader has gone (poll: an error)."""
+    import select
+
+    try:
+        poll = select.poll()
+        poll.register(stream.fileno(), select.POLLOUT)
+        return any(ev & (select.POLLERR | select.POLLHUP) for _, ev in poll.poll(0))
+    except (OSError, ValueError, AttributeError):  # no file descriptor, or a closed one
+        return False

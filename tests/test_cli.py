@@ -177,9 +177,12 @@ def test_run_prints_the_table_and_writes_outputs(tmp_path, encoding):
     assert {p.name for p in out.iterdir()} == {"recording.rrd", "timeseries.csv", "summary.json"}
 
 
-def test_a_reader_that_goes_away_ends_the_command_quietly_with_sigpipes_status():
-    # before: `cdpr-twin scenarios list | head -1` printed a BrokenPipeError traceback, exit 1
+@pytest.mark.parametrize("unbuffered", [False, True])
+def test_a_reader_that_goes_away_ends_the_command_quietly_with_sigpipes_status(unbuffered):
+    # before: `cdpr-twin scenarios list | head -1` printed a BrokenPipeError traceback, exit 1;
+    # then still so with PYTHONUNBUFFERED=1 (as in many containers): no buffer left to flush
     env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # as in a shell
+    env.update({"PYTHONUNBUFFERED": "1"} if unbuffered else {})
     proc = subprocess.Popen(
         [sys.executable, "-m", "cdpr_twin", "scenarios", "list"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
