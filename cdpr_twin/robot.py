@@ -21,9 +21,13 @@ import numpy as np
 
 from cdpr_twin.paths import path_kind
 from cdpr_twin.robot_schema import (
+    MAX_TIMESTEP,
+    MIN_TIMESTEP,
     RobotError,
     TensionSensorSpec,
     _Table,
+    check_gravity,
+    check_inertia,
     payload,
     tension_sensors,
 )
@@ -145,13 +149,6 @@ class Robot:
         return self.exit_points.shape[0]
 
 
-def _boolean(t: _Table, key: str, default: bool) -> bool:
-    v = t.get(key, default)
-    if not isinstance(v, bool):
-        raise t.fail(key, f"must be true or false, got {v!r}")
-    return v
-
-
 def _frame(t: _Table) -> dict:
     out = {
         "frame_min": t.array("inner_min_m", (3,)),
@@ -163,6 +160,11 @@ def _frame(t: _Table) -> dict:
     }
     if np.any(out["frame_min"] >= out["frame_max"]):
         raise t.fail("inner_min_m", "must be below inner_max_m on every axis")
+    if np.any(out["frame_outer_min"] >= out["frame_outer_max"]):
+        raise t.fail("outer_min_m", "must be below outer_max_m on every axis")
+    if out["floor_height"] > out["frame_min"][2]:  # the workspace cannot reach under the floor
+        raise t.fail("floor_height_m", f"must be at most inner_min_m's z "
+                     f"({out['frame_min'][2]:g} m), got {out['floor_height']:g}")  # fmt: skip
     return out
 
 
@@ -190,7 +192,7 @@ def _cables(t: _Table, p: _Table) -> dict:
         "damping_time": t.number("damping_time_s", positive=True),
         "cable_diameter": d,
         "linear_density": t.number("linear_density_kg_m", positive=True),
-        "sag": _boolean(t, "sag", False),
+        "sag": t.boolean("sag", False),
         "breaking_load": t.number("breaking_load_n", positive=True),
         "sheave_radius": p.per_cable("sheave_radius_m", m),
         "sheave_half_width": p.per_cable("sheave_half_width_m", m),
@@ -208,6 +210,7 @@ def _platform(t: _Table) -> dict:
         inertia = t.array("inertia_kg_m2", (6 if n == 6 else 3,))
         if np.any(inertia[:3] <= 0):
             raise t.fail("inertia_kg_m2", "the moments Ixx, Iyy, Izz must be > 0")
+        check_inertia(t, inertia)
     com = t.get("com_m", None)
     if com is not None and inertia is None:
         raise t.fail("com_m", "needs inertia_kg_m2 (without it the platform is a uniform box)")
@@ -249,14 +252,14 @@ def _drum_scale(t: _Table, m: int) -> np.ndarray | None:
     """
     if (raw := t.get("drum_radius_scale", None)) is None:
         return None
-    scale = t.per_cable("drum_radius_scale", m)
     items = raw if isinstance(raw, list) else [raw]
-    if any(isinstance(x, bool) for x in items) or np.any(abs(scale - 1) > DRUM_SCALE_TOLERANCE):
+    booleans = any(isinstance(x, bool) for x in items)
+    if booleans or np.any(abs(t.per_cable("drum_radius_scale", m) - 1) > DRUM_SCALE_TOLERANCE):
         raise t.fail(
             "drum_radius_scale",
             f"must be each drum's radius over drum_radius_m (≈ 1, not metres), got {items}",
         )
-    return scale
+    return t.per_cable("drum_radius_scale", m)
 
 
 def _camera(t: _Table) -> Camera:
@@ -361,6 +364,9 @@ def load_robot(path: str | Path) -> Robot:
     sim = table("simulation")
     fields: dict[str, Any] = {"name": name, "source": path}
     fields["timestep"] = sim.number("timestep_s", positive=True)
+    if not MIN_TIMESTEP <= fields["timestep"] <= MAX_TIMESTEP:
+        raise sim.fail("timestep_s", f"must be in [{MIN_TIMESTEP:g}, {MAX_TIMESTEP:g}] s (stiff "
+                       f"cables diverge above), got {fields['timestep']:g}")  # fmt: skip
     fields["gravity"] = sim.array("gravity_m_s2", (3,))
     tables = [sim]
     for key, reader in (("frame", _frame), ("platform", _platform), ("winches", _winches)):
@@ -370,16 +376,16 @@ def load_robot(path: str | Path) -> Robot:
     fields["tension_sensors"] = tension_sensors(tables[-2])
     fields["max_payload"] = payload(tables[-1])
     fields.update(_cables(tables[-4], tables[-3]))
+    check_gravity(sim, fields["gravity"], fields["sag"])
     fields["drum_radius_scale"] = _drum_scale(tables[3], fields["exit_points"].shape[0])
     for key, reader in (("camera", _camera), ("tag", _tag)):
         t = table(key, required=False)
         fields[key] = None if t is None else reader(t)
         tables += [t] if t is not None else []
     mon = table("monitor", required=False) or _Table(path, {}, "monitor")
-    fields["max_speed"] = mon.number("platform_max_speed_m_s", math.inf, positive=True)
-    fields["max_angular_speed"] = mon.number(
-        "platform_max_angular_speed_rad_s", math.inf, positive=True
-    )
+    for field, key in (("max_speed", "platform_max_speed_m_s"),
+                       ("max_angular_speed", "platform_max_angular_speed_rad_s")):  # fmt: skip
+        fields[field] = mon.number(key, math.inf, positive=True, infinite=True)
     scene = table("scene", required=False) or _Table(path, {}, "scene")
     fields.update(_scene(scene, fields["frame_outer_min"], fields["frame_outer_max"]))
     for t in [*tables, mon, scene, top]:

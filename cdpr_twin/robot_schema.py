@@ -23,10 +23,34 @@ class RobotError(ValueError):
     """A robot description file is missing, malformed, or has a bad field."""
 
 
+MIN_TIMESTEP, MAX_TIMESTEP = 1e-5, 0.002
+"""Physics step bounds [s]: below, a run takes hours per simulated second; above, the stiff
+cables (k ≈ 3e5 N/m) are unstable."""
+
+
+def _finite(v: Any) -> bool:
+    """Whether a TOML number is finite as a float (an integer past 1e308 is not)."""
+    try:
+        return math.isfinite(float(v))
+    except OverflowError:
+        return False
+
+
+def _has_bool(v: Any) -> bool:
+    """Whether a (nested) TOML array holds a boolean (numpy would read it as 0 or 1)."""
+    return isinstance(v, bool) or (isinstance(v, list) and any(_has_bool(x) for x in v))
+
+
 def _frozen(a: Any) -> np.ndarray:
     out = np.array(a, dtype=float)
     out.flags.writeable = False
     return out
+
+
+def _shown(v: Any) -> str:
+    """A bad value as the error shows it (a 400-digit integer shortened)."""
+    text = repr(v)
+    return text if len(text) <= 40 else f"{text[:20]}…({len(text)} characters)"
 
 
 class _Table:
@@ -46,10 +70,15 @@ class _Table:
             raise self.fail(key, "missing (see models/acrobot/robot.toml for the schema)")
         return default
 
-    def number(self, key: str, default: Any = ..., positive: bool = False) -> float:
+    def number(
+        self, key: str, default: Any = ..., positive: bool = False, infinite: bool = False
+    ) -> float:
+        """A number (``infinite``: ``inf`` allowed, as "unchecked")."""
         v = self.get(key, default)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise self.fail(key, f"must be a finite number, got {v!r}")
+        ok = isinstance(v, (int, float)) and not isinstance(v, bool)
+        if not ok or not (_finite(v) or (infinite and v == math.inf)):
+            what = "a finite number or inf" if infinite else "a finite number"
+            raise self.fail(key, f"must be {what}, got {_shown(v)}")
         if positive and not v > 0:
             raise self.fail(key, f"must be > 0, got {v!r}")
         return float(v)
@@ -59,15 +88,15 @@ class _Table:
         v = self.get(key, default)
         try:
             a = np.array(v, dtype=float)
-        except (TypeError, ValueError):
-            raise self.fail(key, f"must be an array of numbers of shape {shape}") from None
+        except (TypeError, ValueError, OverflowError):
+            raise self.fail(key, f"must be an array of finite numbers of shape {shape}") from None
         if a.ndim != len(shape) or any(
             s not in (-1, n) for s, n in zip(shape, a.shape, strict=True)
         ):
             want = "×".join("m" if s == -1 else str(s) for s in shape)
             raise self.fail(key, f"must have shape {want}, got {'×'.join(map(str, a.shape))}")
-        if not np.all(np.isfinite(a)) or any(isinstance(x, bool) for x in np.ravel(v)):
-            raise self.fail(key, "must hold finite numbers only")
+        if not np.all(np.isfinite(a)) or _has_bool(v):
+            raise self.fail(key, "must hold finite numbers only (no true/false)")
         return _frozen(a)
 
     def quaternion(self, key: str) -> np.ndarray:
@@ -87,8 +116,14 @@ class _Table:
 
     def string(self, key: str, default: Any = ...) -> str:
         v = self.get(key, default)
-        if not isinstance(v, str) or not v:
-            raise self.fail(key, f"must be a non-empty string, got {v!r}")
+        if not isinstance(v, str) or not v or "\0" in v:
+            raise self.fail(key, f"must be a non-empty string without NUL, got {_shown(v)}")
+        return v
+
+    def boolean(self, key: str, default: Any = ...) -> bool:
+        v = self.get(key, default)
+        if not isinstance(v, bool):
+            raise self.fail(key, f"must be true or false, got {_shown(v)}")
         return v
 
     def integer(self, key: str, default: Any = ...) -> int:
@@ -140,3 +175,30 @@ def payload(t: _Table) -> float:
     if v < 0:
         raise t.fail("max_mass_kg", f"must be ≥ 0, got {v!r}")
     return v
+
+
+def check_inertia(t: _Table, inertia: np.ndarray) -> None:
+    """Refuse an inertia no rigid body has (``inertia_kg_m2``: 3 moments or 6 entries).
+
+    Its principal moments must be > 0 and each at most the sum of the other two (the triangle
+    inequality every mass distribution obeys; MuJoCo refuses the rest without naming the file).
+    """
+    if len(inertia) == 6:
+        ixx, iyy, izz, ixy, ixz, iyz = inertia
+        moments = np.linalg.eigvalsh(np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]]))
+    else:
+        moments = np.asarray(inertia, dtype=float)
+    if not np.all(moments > 0):
+        raise t.fail("inertia_kg_m2", f"must be positive definite, its principal moments are "
+                     f"{np.round(moments, 6).tolist()} kg·m²")  # fmt: skip
+    if np.any(2 * moments > moments.sum() * (1 + 1e-9)):
+        raise t.fail("inertia_kg_m2", f"principal moments {np.round(moments, 6).tolist()} "
+                     "kg·m²: each must be at most the sum of the other two (no rigid body has "
+                     "another inertia)")  # fmt: skip
+
+
+def check_gravity(t: _Table, gravity: np.ndarray, sag: bool) -> None:
+    """Refuse a gravity off the vertical for cables with mass (their catenary hangs along z)."""
+    if sag and (abs(gravity[0]) + abs(gravity[1]) > 0 or gravity[2] > 0):
+        raise t.fail("gravity_m_s2", f"must point along -z with cables.sag = true (the cables "
+                     f"hang in vertical planes), got {gravity.tolist()}")  # fmt: skip

@@ -30,6 +30,7 @@ from cdpr_twin.options import (
 )
 from cdpr_twin.paths import path_kind
 from cdpr_twin.realism import Realism, profile, without_source
+from cdpr_twin.robot_schema import MAX_TIMESTEP, MIN_TIMESTEP
 from cdpr_twin.scenario_tables import (
     MonitorConfig,
     read_events,
@@ -44,11 +45,6 @@ from cdpr_twin.scenario_tables import (
 
 MAX_TICKS = 10**9
 """The most control periods a run may last (10⁹: 116 days at 100 Hz); more is a typo."""
-
-
-MIN_TIMESTEP, MAX_TIMESTEP = 1e-5, 0.002
-"""Physics step bounds [s]: below, a run takes hours per simulated second; above, the stiff
-cables (k ≈ 3e5 N/m) are unstable."""
 
 
 @dataclass(frozen=True)

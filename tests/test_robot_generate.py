@@ -164,8 +164,25 @@ def _edited(tmp_path: Path, old: str, new: str) -> Path:
         # before: MuJoCo's "Error opening file" with a path relative to --out, at build time
         ('texture = "assets/tag36h11_00000.png"', 'texture = "nope.png"', "tag.texture"),
         ('texture = "assets/tag36h11_00000.png"', 'texture = "robot.toml"', "tag.texture"),
+        ('texture = "assets/tag36h11_00000.png"', 'texture = "a\\u0000.png"', "tag.texture"),
+        # a review found each below built, or failed with a trace or MuJoCo's nameless error
+        ("timestep_s = 0.0005", "timestep_s = 1.0", "simulation.timestep_s"),  # diverged
+        ("gravity_m_s2 = [0.0, 0.0, -9.81]", "gravity_m_s2 = [true, 0.0, -9.81]",
+         "simulation.gravity_m_s2"),  # read as [1, 0, -9.81]
+        ("box_half_size_m = [0.09, 0.085, 0.035]", "box_half_size_m = [true, true, true]",
+         "platform.box_half_size_m"),  # read as a 1 m box
+        ("mass_kg = 3.5", "mass_kg = 1" + "0" * 400, "platform.mass_kg"),  # OverflowError
+        ("gravity_m_s2 = [0.0, 0.0, -9.81]", "gravity_m_s2 = [0.0, 0.0, -1" + "0" * 400 + "]",
+         "simulation.gravity_m_s2"),
+        ("floor_height_m = -0.0505", "floor_height_m = 5.0", "frame.floor_height_m"),
+        ("outer_min_m = [-0.6, -0.6, -0.05]", "outer_min_m = [-0.6, -0.6, 1.15]",
+         "frame.outer_min_m"),  # MuJoCo's "size 2 must be positive in geom"
+        ("mass_kg = 3.5", "mass_kg = 3.5\ninertia_kg_m2 = [1.0, 1.0, 25.0]",
+         "platform.inertia_kg_m2"),  # A + B < C: no rigid body
+        ("mass_kg = 3.5", "mass_kg = 3.5\ninertia_kg_m2 = [1.0, 1.0, 1.0, -40.0, 0.0, 0.0]",
+         "platform.inertia_kg_m2"),  # not positive definite
     ],
-)
+)  # fmt: skip
 def test_a_bad_description_is_a_one_line_error_naming_file_and_field(
     tmp_path, capsys, old, new, field
 ):
@@ -260,3 +277,56 @@ def test_a_description_that_is_not_utf8_names_its_file(tmp_path):
     path.write_bytes(ACROBOT.read_bytes().replace(b"# ", b"# \x81", 1))
     with pytest.raises(RobotError, match=rf"^{re.escape(str(path))}: not UTF-8 text"):
         load_robot(path)
+
+
+def test_cables_with_mass_need_gravity_down_the_z_axis(tmp_path):
+    # before: sag's cable weight was 9.81 N/kg down z whatever the description's gravity
+    path = _edited(tmp_path, "sag = false", "sag = true")
+    text = path.read_text().replace(
+        "gravity_m_s2 = [0.0, 0.0, -9.81]", "gravity_m_s2 = [1.0, 0, -9.8]"
+    )
+    path.write_text(text)
+    with pytest.raises(RobotError, match=r"simulation\.gravity_m_s2: must point along -z"):
+        load_robot(path)
+
+
+def _buildable(tmp_path: Path, old: str, new: str) -> Path:
+    """:func:`_edited`, its tag texture by absolute path (the description leaves its folder)."""
+    path = _edited(tmp_path, old, new)
+    texture = ACROBOT.parent / "assets" / "tag36h11_00000.png"
+    path.write_text(path.read_text().replace('"assets/tag36h11_00000.png"', f'"{texture}"'))
+    return path
+
+
+def test_the_monitor_section_may_be_left_out_or_say_inf(tmp_path):
+    # before: "monitor.platform_max_speed_m_s: must be a finite number, got inf", for a key
+    # the user never wrote (the section is optional, inf its documented "unchecked")
+    text = ACROBOT.read_text()
+    section = text[text.index("[monitor]") : text.index("[scene]")]
+    robot = load_robot(_buildable(tmp_path, section, ""))
+    assert robot.max_speed == robot.max_angular_speed == float("inf")
+    speed = "platform_max_speed_m_s = 1.5"
+    robot = load_robot(_buildable(tmp_path, speed, "platform_max_speed_m_s = inf"))
+    assert robot.max_speed == float("inf") and robot.max_angular_speed == 12.0
+
+
+def test_a_home_pose_the_robot_cannot_hold_is_refused_not_written(tmp_path, capsys):
+    # before: force_limit_n = 1 N (7.06 N needed) built a home keyframe 1 m below the pose,
+    # under the floor, without a word. Truth: the settle of MuJoCo's own physics
+    path = _buildable(tmp_path, "force_limit_n = 100000.0", "force_limit_n = 1.0")
+    assert main(["model", "build", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "platform.home_pose: the platform does not rest there" in err
+    assert "force_limit_n 1 N" in err
+    assert not (tmp_path / "out" / "scene.xml").exists()
+    assert (
+        main(["model", "build", str(_buildable(tmp_path, "", "")), "--out", str(tmp_path / "ok")])
+        == 0
+    )
+
+
+def test_a_robot_description_given_as_the_model_says_to_build_it(capsys):
+    # before: "is malformed: could not find decoder for resource '…robot.toml'"
+    assert main(["demo", "--model", str(ACROBOT)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"cdpr-twin model build {ACROBOT}" in err

@@ -130,3 +130,36 @@ def test_the_tension_sensors_read_the_pulley_side_on_cogiro(cogiro_at_rest):
     twin = cogiro_at_rest
     np.testing.assert_array_equal(twin.sense().tensions, twin.physics.pulley_tensions)
     assert twin.nominal.geometry.sensors_at_pulleys
+
+
+def test_a_heavy_cable_pulls_on_across_its_chords_length_and_ends_hold_its_weight(cogiro_at_rest):
+    # Before (a review): a span 24 µm longer than its 8.7 m chord pulled 0 N on B_1, 1e-6
+    # shorter 105 N: the catenary was dropped where MuJoCo's straight cable goes slack. Truth:
+    # continuity across the chord's length, and statics (a slack span's two ends carry its
+    # whole weight w·l_s down, its horizontal pulls equal and opposite), not the solver.
+    p = cogiro_at_rest.physics
+    top, bottom = _spans(p)
+    chord = float(np.linalg.norm(top[0] - bottom[0]))
+    total = float(p.data.ten_length[p._tendons[0]]) - p._entry  # l0 = l_s · total / chord
+    unit = (top[0] - bottom[0]) / chord
+    pulls = {}
+    for r in (1 - 1e-9, 1 + 1e-9, 1.0001, 1.001, 1.01):
+        ls = r * chord
+        on_b = p._span_force(0, bottom[0], ls * total / chord)
+        on_b = on_b + p._es[0] * max(chord - ls, 0.0) / ls * unit  # + MuJoCo's straight pull
+        pulls[r] = np.linalg.norm(on_b)
+        if r > 1:  # slack in MuJoCo: the two ends hold the span, nothing else does
+            np.testing.assert_allclose(on_b + p.pulley_force[0], [0, 0, -p.weight * ls], atol=1e-6)
+    assert abs(pulls[1 + 1e-9] / pulls[1 - 1e-9] - 1) < 1e-4  # (E·S·2e-9 apart: 6e-4 N)
+    assert pulls[1.0001] > pulls[1.001] > pulls[1.01] > 0.0  # a longer cable hangs slacker
+    p.refresh()  # (the module's state back for the other tests)
+
+
+def test_cables_with_mass_refuse_a_gravity_off_the_vertical():
+    # before: the cables' weight was 9.81 N/kg straight down whatever the model's gravity
+    m = build_model(MODELS_DIR / "cogiro" / "scene.xml")
+    m.opt.gravity[:] = [1.0, 0.0, -9.81]
+    with pytest.raises(ValueError, match="gravity along -z"):
+        SaggingPhysics(m, 40, linear_density=0.064)
+    m.opt.gravity[:] = [0.0, 0.0, -3.0]  # the Moon's or a test's: the weight follows it
+    assert SaggingPhysics(m, 40, linear_density=0.064).weight == pytest.approx(0.064 * 3.0)

@@ -296,6 +296,7 @@ def add_home_key(spec: mujoco.MjSpec, r: Robot, key_name: str) -> None:
         physics.reset(pose_from_vector(r.home_pose), settle_time=0.5)
     except ValueError as exc:
         raise ValueError(f"{r.source}: platform.home_pose: {exc}") from None
+    check_rest(physics, r)
     m, d = physics.model, physics.data
 
     def rounded(a: np.ndarray) -> list[float]:
@@ -311,6 +312,30 @@ def add_home_key(spec: mujoco.MjSpec, r: Robot, key_name: str) -> None:
         act=rounded(d.act),
         mpos=rounded(d.mocap_pos),
         mquat=rounded(d.mocap_quat),
+    )
+
+
+HOME_REST = (1e-4, 1e-3)
+"""How far the settled home keyframe may lie from ``home_pose`` ([m], [rad]); a robot that
+holds the pose settles within ~1e-15 of it (its rest lengths are its static equilibrium)."""
+
+
+def check_rest(physics, r: Robot) -> None:
+    """Refuse a home keyframe that is not a rest at ``home_pose`` (the description's error).
+
+    Raises:
+        ValueError: the platform settled away from it (cables at the winches' force limit,
+            a typo in a point), naming the largest tension against the limits.
+    """
+    dt, dr = physics.settle_error
+    if dt <= HOME_REST[0] and dr <= HOME_REST[1]:
+        return
+    i = int(np.argmax(physics.tensions))
+    raise ValueError(
+        f"{r.source}: platform.home_pose: the platform does not rest there, it settles "
+        f"{dt * 1e3:.3g} mm / {np.degrees(dr):.3g}° away (cable {i + 1} pulls "
+        f"{physics.tensions[i]:.4g} N; winches.force_limit_n {r.force_limit:g} N, "
+        f"tension_range_n {r.tension_range.tolist()}); check the points, the limits and the pose"
     )
 
 

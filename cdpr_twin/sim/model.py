@@ -114,6 +114,11 @@ def _load_spec(path: Path) -> mujoco.MjSpec:
             f"model file {path} not found; pass the path of an MJCF file such as "
             "models/acrobot/scene.xml"
         )
+    if path.suffix == ".toml":  # a robot description, not its model
+        raise ModelError(
+            f"model file {path} is a robot description, not an MJCF model: run "
+            f"`cdpr-twin model build {path}` and give the scene.xml it writes"
+        )
     try:
         return mujoco.MjSpec.from_file(str(path))
     except ValueError as exc:

@@ -28,8 +28,6 @@ import numpy as np
 from cdpr_twin.catenary import CatenaryError, end_forces, solve_catenary
 from cdpr_twin.sim.physics import Physics
 
-G = 9.81
-
 
 class SaggingPhysics(Physics):
     """:class:`Physics` with heavy cables (Irvine's elastic catenary on every free span).
@@ -45,6 +43,13 @@ class SaggingPhysics(Physics):
         if not linear_density > 0:
             raise ValueError(f"linear_density must be > 0 kg/m, got {linear_density}")
         self.linear_density = float(linear_density)
+        g = model.opt.gravity
+        if abs(g[0]) + abs(g[1]) > 0 or g[2] > 0:  # the catenary hangs in a vertical plane
+            raise ValueError(
+                f"cables with mass need gravity along -z (the catenary hangs vertically), got "
+                f"{g.tolist()} m/s²; set sag = false or point gravity down"
+            )
+        self.weight = self.linear_density * float(-g[2])  # w = ρ|g| [N/m] (0: no sag)
         self.sag_force = np.zeros((self.n_cables, 3))  # the catenary − straight force on B_i [N]
         self.pulley_force = np.zeros((self.n_cables, 3))  # catenary − straight force on the sheave
         self.sensor_at_pulley = (
@@ -61,7 +66,7 @@ class SaggingPhysics(Physics):
         """
         straight = super().tensions
         pulled = straight[:, None] * self._unit + self.sag_force
-        return np.where(straight > 0, np.linalg.norm(pulled, axis=1), straight)
+        return np.where(self._hangs(straight), np.linalg.norm(pulled, axis=1), straight)
 
     @property
     def pulley_tensions(self) -> np.ndarray:
@@ -72,7 +77,15 @@ class SaggingPhysics(Physics):
         """
         straight = super().tensions
         pulled = -straight[:, None] * self._unit + self.pulley_force
-        return np.where(straight > 0, np.linalg.norm(pulled, axis=1), straight)
+        return np.where(self._hangs(straight), np.linalg.norm(pulled, axis=1), straight)
+
+    def _hangs(self, straight: np.ndarray) -> np.ndarray:
+        """(m,) whether each cable pulls: taut in MuJoCo, or hanging beyond its chord.
+
+        A heavy cable longer than its chord still holds the catenary's tension: it has no
+        slack boundary.
+        """
+        return (straight > 0) | np.any(self.sag_force != 0.0, axis=1)
 
     @property
     def sensed_tensions(self) -> np.ndarray:
@@ -116,12 +129,14 @@ class SaggingPhysics(Physics):
         ls = l0 * chord / total  # unstretched length of the free span
         es = self._es[i]
         self._unit[i] = span / chord
-        if chord <= ls:  # slack: MuJoCo's cable pulls nothing, a hanging one little; leave it
+        if self.weight == 0.0:
             return np.zeros(3)
-        straight = es * (chord - ls) / ls * span / chord
+        # longer than its chord, MuJoCo's straight cable pulls nothing, a hanging one still does
+        # (its tension continuous across the chord's length): only the straight part goes
+        straight = es * max(chord - ls, 0.0) / ls * span / chord
         try:
-            cat = solve_catenary(ls, es, self.linear_density * G, np.hypot(*span[:2]), span[2])
-        except CatenaryError:
+            cat = solve_catenary(ls, es, self.weight, np.hypot(*span[:2]), span[2])
+        except CatenaryError:  # no hanging shape found (a vertical span, or far too long)
             return np.zeros(3)
         on_b, on_a = end_forces(cat, start, b)
         self.pulley_force[i] = on_a + straight

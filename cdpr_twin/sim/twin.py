@@ -21,6 +21,7 @@ import numpy as np
 from cdpr_twin import resources
 from cdpr_twin.deviations import DeviationSpec, TruthDeviations
 from cdpr_twin.realism import WinchRealism
+from cdpr_twin.robot_schema import MAX_TIMESTEP, MIN_TIMESTEP
 from cdpr_twin.se3 import matrix_from_quat_wxyz, transform
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim.model import (
@@ -124,10 +125,10 @@ def _set_timestep(model: mujoco.MjModel, timestep: float | None) -> None:
     """Set the physics step [s] (``None``: keep the model file's), within stiff cables' range."""
     if timestep is None:
         return
-    if not (np.isfinite(timestep) and 1e-5 <= timestep <= 0.002):
+    if not (np.isfinite(timestep) and MIN_TIMESTEP <= timestep <= MAX_TIMESTEP):
         raise ValueError(
-            f"timestep must be in [1e-5, 0.002] s (stiff cables; a smaller one takes hours "
-            f"per simulated second), got {timestep}"
+            f"timestep must be in [{MIN_TIMESTEP:g}, {MAX_TIMESTEP:g}] s (stiff cables; a smaller "
+            f"one takes hours per simulated second), got {timestep}"
         )
     model.opt.timestep = float(timestep)
 
