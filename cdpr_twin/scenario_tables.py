@@ -196,6 +196,9 @@ def without_camera(
 
     Raises:
         ScenarioError: the in-loop estimator or the controller needs the camera.
+
+    Passive estimators that need the camera and ``tag_occlusion`` events are dropped, and
+    listed in ``done`` (``dropped_estimators``, ``dropped_events``).
     """
     (pick, no_cam), off = names, done.get("camera") is False  # else the file's camera = false
     fix, other = f"drop {no_cam}" if off else "set sensors.camera = true", pick.strip(" =")
@@ -218,4 +221,8 @@ def without_camera(
         passive = tuple(n for n in s.estimators.passive if n not in dropped)
         s = replace(s, estimators=replace(s.estimators, passive=passive))
         done["dropped_estimators"] = dropped
+    hidden = [f"events[{i}]" for i, e in enumerate(s.events) if e.kind == "tag_occlusion"]
+    if hidden:  # no image to hide the tag in (its occluder would be a body in the physics)
+        s = replace(s, events=tuple(e for e in s.events if e.kind != "tag_occlusion"))
+        done["dropped_events"] = hidden
     return s

@@ -109,3 +109,22 @@ def test_bad_events_are_errors_naming_the_field(tmp_path, event, field):
         from cdpr_twin.runner import prepare
 
         prepare(load_scenario(path).with_overrides(camera=False)).close()
+
+
+def test_a_tag_occlusion_without_a_camera_is_dropped_and_said_and_changes_nothing(tmp_path):
+    # before (a review): accepted, reported as fired in summary.json, and its occluder body
+    # moved the physics by ~1e-12 m. Truth: the same run without the event, byte for byte
+    text = OPEN_LOOP.replace("duration = 25.0", "duration = 1.0")
+    text = text.replace('"../models/', f'"{ROOT}/models/')
+    (tmp_path / "plain.toml").write_text(text)
+    text += '\n[[events]]\nkind = "tag_occlusion"\nat = 0.5\nuntil = 0.7\n'
+    (tmp_path / "hidden.toml").write_text(text)
+    for name in ("plain", "hidden"):
+        s = load_scenario(tmp_path / f"{name}.toml").with_overrides(camera=False)
+        run(s, tmp_path / name, record_rrd=False)
+    summary = json.loads((tmp_path / "hidden" / "summary.json").read_text())
+    assert summary["overrides"]["dropped_events"] == ["events[0]"]
+    assert "events" not in summary  # nothing fired
+    assert (tmp_path / "hidden" / "timeseries.csv").read_bytes() == (
+        tmp_path / "plain" / "timeseries.csv"
+    ).read_bytes()
