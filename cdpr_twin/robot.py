@@ -149,6 +149,14 @@ class Robot:
         return self.exit_points.shape[0]
 
 
+def _simulation(t: _Table) -> dict:
+    timestep = t.number("timestep_s", positive=True)
+    if not MIN_TIMESTEP <= timestep <= MAX_TIMESTEP:
+        raise t.fail("timestep_s", f"must be in [{MIN_TIMESTEP:g}, {MAX_TIMESTEP:g}] s (stiff "
+                     f"cables diverge above), got {timestep:g}")  # fmt: skip
+    return {"timestep": timestep, "gravity": t.array("gravity_m_s2", (3,))}
+
+
 def _frame(t: _Table) -> dict:
     out = {
         "frame_min": t.array("inner_min_m", (3,)),
@@ -362,12 +370,7 @@ def load_robot(path: str | Path) -> Robot:
         raise top.fail("name", "'scene' names the scene file model build writes; choose another")
     top.string("description", "-")
     sim = table("simulation")
-    fields: dict[str, Any] = {"name": name, "source": path}
-    fields["timestep"] = sim.number("timestep_s", positive=True)
-    if not MIN_TIMESTEP <= fields["timestep"] <= MAX_TIMESTEP:
-        raise sim.fail("timestep_s", f"must be in [{MIN_TIMESTEP:g}, {MAX_TIMESTEP:g}] s (stiff "
-                       f"cables diverge above), got {fields['timestep']:g}")  # fmt: skip
-    fields["gravity"] = sim.array("gravity_m_s2", (3,))
+    fields: dict[str, Any] = {"name": name, "source": path, **_simulation(sim)}
     tables = [sim]
     for key, reader in (("frame", _frame), ("platform", _platform), ("winches", _winches)):
         tables.append(table(key))

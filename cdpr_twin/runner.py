@@ -365,19 +365,15 @@ def _loop(setup: RunSetup, metrics: RunMetrics, recorders: Recorders, progress, 
     n_ticks = round(s.duration / period)
     start(setup)
 
-    view = tag_view(setup)
-
     def record(m: Measurement, estimates: dict[str, PoseEstimate], command) -> str | None:
-        # whole or not at all: a stop (Ctrl-C, SIGTERM) is held off until the tick is in the
-        # metrics, every file and the summary's truth, which then all end at the same tick
-        with shielded():
+        with shielded():  # a stop waits until the tick is in the metrics, files and summary
             tally.add(m)
             T_true = physics.T_base_platform
             deviations = metrics.add(m.time, T_true, estimates)
             plan = controller.planned_pose(m.time)
             marks, faults = _marks(setup)
             recorders.tick(m, T_true, estimates, deviations, command, plan, marks)
-            tally.recorded(physics, T_true, view)
+            tally.recorded(physics, T_true, tag_view(setup))
             tally.faults += faults
         stop = faults and s.monitor.on_fault == "stop"
         return faults[0].status if stop else None
