@@ -69,33 +69,45 @@ def sigterm_raises() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def shielded() -> Iterator[None]:
+def shielded(escape: bool = False) -> Iterator[None]:
     """Within: SIGINT and SIGTERM are held off, so that the outputs being saved are completed.
 
     A run completes, renames and commits its files in well under a second; a (second) Ctrl-C
     or SIGTERM during that used to interrupt it, leaving ``*.partial`` files and the lock. A
-    signal that came is delivered afterwards, to the handler it was meant for, unless it is of
-    the kind of a stop already under way (which absorbs it). SIGKILL still stops it. In
-    another thread than the main one (where signals cannot be handled) it does nothing.
+    signal that came is delivered on leaving, to the handler it was meant for, unless it is of
+    the kind of a stop already under way (which absorbs it); also when the body raised (the
+    stop came first: it is the one that leaves). SIGKILL still stops it. In another thread
+    than the main one (where signals cannot be handled) it does nothing.
+
+    Args:
+        escape: a second signal while one is held is not held but handled at once (a body
+            that hangs can still be stopped without SIGKILL).
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     held: list[int] = []
-    previous = {}
+    previous: dict = {}
+
+    def hold(signum, frame) -> None:
+        meant = previous.get(signum)
+        if escape and held and callable(meant):
+            meant(signum, frame)  # raises (Ctrl-C, Terminated) here, in the body
+        held.append(signum)
+
     try:
         for sig in (signal.SIGINT, signal.SIGTERM):
-            previous[sig] = signal.signal(sig, lambda signum, frame: held.append(signum))
+            previous[sig] = signal.signal(sig, hold)
         yield
     finally:
         for sig, handler in previous.items():
             if handler is not None:  # (None: a handler installed from C, not restorable)
                 signal.signal(sig, handler)
-    stopping = sys.exc_info()[1]  # a stop under way absorbs its own kind of signal only
-    absorbed = signal.SIGTERM if isinstance(stopping, Terminated) else signal.SIGINT
-    for sig in dict.fromkeys(held):  # each kind once, in the order they came
-        if not (isinstance(stopping, KeyboardInterrupt) and sig == absorbed):
-            signal.raise_signal(sig)  # now, to the handler it was meant for (a worker: exit)
+        stopping = sys.exc_info()[1]  # raised in the body, or a stop under way around it
+        absorbed = signal.SIGTERM if isinstance(stopping, Terminated) else signal.SIGINT
+        for sig in dict.fromkeys(held):  # each kind once, in the order they came
+            if not (isinstance(stopping, KeyboardInterrupt) and sig == absorbed):
+                signal.raise_signal(sig)  # now, to the handler it was meant for (a worker: exit)
 
 
 def closed_stdout(exc: BrokenPipeError) -> int:

@@ -366,14 +366,14 @@ def _loop(setup: RunSetup, metrics: RunMetrics, recorders: Recorders, progress, 
     start(setup)
 
     def record(m: Measurement, estimates: dict[str, PoseEstimate], command) -> str | None:
-        with shielded():  # a stop waits until the tick is in the metrics, files and summary
+        plan = controller.planned_pose(m.time)  # (a plugin's code: outside the shield)
+        (marks, faults), fired = _marks(setup), len(setup.events.fired)
+        with shielded(escape=True):  # a stop waits until the tick is in metrics, files, summary
             tally.add(m)
             T_true = physics.T_base_platform
             deviations = metrics.add(m.time, T_true, estimates)
-            plan = controller.planned_pose(m.time)
-            marks, faults = _marks(setup)
             recorders.tick(m, T_true, estimates, deviations, command, plan, marks)
-            tally.recorded(physics, T_true, tag_view(setup))
+            tally.recorded(physics, T_true, tag_view(setup), fired)
             tally.faults += faults
         stop = faults and s.monitor.on_fault == "stop"
         return faults[0].status if stop else None

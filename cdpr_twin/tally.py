@@ -30,6 +30,7 @@ class Tally:
             (4, 4), ``tensions`` (m,) [N], ``T_cam_tag`` (4, 4) or ``None``), or ``None``
             before the first. The summary is of that tick, not of a physics state a stop
             (Ctrl-C, SIGTERM, a failure) left mid-tick, which no file recorded.
+        events: how many events had fired by that tick (later ones: not reached).
     """
 
     last_tag: object = None
@@ -37,12 +38,14 @@ class Tally:
     clipped: np.ndarray | None = None
     faults: list = dataclasses.field(default_factory=list)
     truth: dict | None = None
+    events: int | None = None
 
-    def recorded(self, physics, T_true: np.ndarray, tag_view: bool) -> None:
-        """Keep the true state of the tick just recorded (``tag_view``: the tag's pose too)."""
+    def recorded(self, physics, T_true: np.ndarray, tag_view: bool, events: int) -> None:
+        """Keep the tick just recorded: its true state (the tag's too) and events fired."""
         T_cam_tag = physics.T_cam_tag if tag_view else None
         self.truth = {"time": physics.time, "T_base_platform": T_true,
                       "tensions": physics.tensions, "T_cam_tag": T_cam_tag}  # fmt: skip
+        self.events = events
 
     def seen(self, m: Measurement) -> None:
         """Keep the read's tag detection (and its time) when it has one."""
@@ -70,7 +73,7 @@ def summarize(setup, metrics: RunMetrics, status: str, tally: Tally) -> dict:
     if view is not None and setup.shown_view is not None:
         view = setup.shown_view  # a taught view: what the camera truly saw when shown
     if tally.truth is None:  # stopped before its first tick was recorded: the state now
-        tally.recorded(p, p.T_base_platform, tag_view(setup))
+        tally.recorded(p, p.T_base_platform, tag_view(setup), len(setup.events.fired))
     truth = tally.truth
     true_tag_error = None
     if view is not None and truth["T_cam_tag"] is not None:  # truth stays here: the error only
@@ -86,9 +89,12 @@ def summarize(setup, metrics: RunMetrics, status: str, tally: Tally) -> dict:
         }
     if tally.clipped is not None:
         out["tension_clipped_readings"] = tally.clipped.tolist()
-    if setup.events.fired:
-        out["events"] = [e.as_dict(t, phase) for t, e, phase in setup.events.fired]
-    if pending := setup.events.pending:  # the run ended first: said, not silently dropped
+    fired, later = setup.events.fired[: tally.events], setup.events.fired[tally.events :]
+    if fired:
+        out["events"] = [e.as_dict(t, phase) for t, e, phase in fired]
+    late = [{"due_s": t, "kind": e.kind, "phase": phase, "at": e.at} | e.fields()
+            for t, e, phase in later]  # (fired after the last recorded tick: a stop's)  # fmt: skip
+    if pending := late + setup.events.pending:  # the run ended first: said, not dropped
         out["events_not_reached"] = pending
     if tally.faults:
         out["faults"] = [f.as_dict() for f in tally.faults]

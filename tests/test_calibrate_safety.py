@@ -70,17 +70,27 @@ def test_a_calibration_killed_without_cleanup_leaves_no_worker_recording(tmp_pat
     assert not alive, "a worker kept recording after its calibration was killed"
 
 
-def test_a_failed_recording_waits_for_its_pools_thread_before_the_error_leaves():
+def test_a_failed_recording_waits_for_its_pools_thread_before_the_error_leaves(monkeypatch):
     # Before (CI, exit 143 then a trace): a SIGTERMed calibration ended its workers and left
     # the pool's thread closing its wake-up pipe while the interpreter exited; Python's exit
     # hook wrote to that pipe: "Exception ignored in <module 'threading'> … OSError: [Errno 9]
-    # Bad file descriptor" after "terminated". Truth: Python's own list of live threads.
+    # Bad file descriptor" after "terminated". The pool's thread is made slow to close its pipe
+    # (0.5 s), so a stop that does not wait for it is seen every time. Truth: Python's own list
+    # of live threads.
     import multiprocessing
+    from concurrent.futures import process
 
     import pytest
 
     from cdpr_twin.calibrate.acquire import _in_processes
 
+    closing = process._ExecutorManagerThread.join_executor_internals
+
+    def slow(self):
+        time.sleep(0.5)
+        closing(self)
+
+    monkeypatch.setattr(process._ExecutorManagerThread, "join_executor_internals", slow)
     items = [(i, []) for i in range(4)]
     with pytest.raises(AttributeError):  # no scenario: each segment fails in its worker
         _in_processes(items, 2, None, 1)

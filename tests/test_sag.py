@@ -132,11 +132,33 @@ def test_the_tension_sensors_read_the_pulley_side_on_cogiro(cogiro_at_rest):
     assert twin.nominal.geometry.sensors_at_pulleys
 
 
+def _irvine_tension(p, i: int, ls: float) -> float:
+    """The tension at B_i of the span of unstretched length ``ls`` (Irvine 1981, eqs. 2.19-2.20,
+    lower end at the origin), solved with scipy's fsolve: independent of cdpr_twin.catenary."""
+    from scipy.optimize import fsolve
+
+    top, bottom = _spans(p)
+    h, v = np.hypot(*(top[i] - bottom[i])[:2]), (top[i] - bottom[i])[2]
+    w, ea = p.weight, p._es[i]
+
+    def ends(x):
+        H, V = np.exp(x[0]), x[1]  # H > 0; V: the tension's upward part at B_i
+        s = ls
+        xe = H * s / ea + H / w * (np.arcsinh((V + w * s) / H) - np.arcsinh(V / H))
+        ze = (w * s * s / 2 + V * s) / ea + H / w * (
+            np.hypot(1, (V + w * s) / H) - np.hypot(1, V / H)
+        )
+        return [xe - h, ze - v]
+
+    H, V = fsolve(ends, [np.log(50.0), 0.0], xtol=1e-13)
+    assert np.allclose(ends([H, V]), 0, atol=1e-9)
+    return float(np.hypot(np.exp(H), V))
+
+
 def test_a_heavy_cable_pulls_on_across_its_chords_length_and_ends_hold_its_weight(cogiro_at_rest):
     # Before (a review): a span 24 µm longer than its 8.7 m chord pulled 0 N on B_1, 1e-6
     # shorter 105 N: the catenary was dropped where MuJoCo's straight cable goes slack. Truth:
-    # continuity across the chord's length, and statics (a slack span's two ends carry its
-    # whole weight w·l_s down, its horizontal pulls equal and opposite), not the solver.
+    # continuity across the chord's length, and beyond it Irvine's equations solved by scipy.
     p = cogiro_at_rest.physics
     top, bottom = _spans(p)
     chord = float(np.linalg.norm(top[0] - bottom[0]))
@@ -148,8 +170,9 @@ def test_a_heavy_cable_pulls_on_across_its_chords_length_and_ends_hold_its_weigh
         on_b = p._span_force(0, bottom[0], ls * total / chord)
         on_b = on_b + p._es[0] * max(chord - ls, 0.0) / ls * unit  # + MuJoCo's straight pull
         pulls[r] = np.linalg.norm(on_b)
-        if r > 1:  # slack in MuJoCo: the two ends hold the span, nothing else does
-            np.testing.assert_allclose(on_b + p.pulley_force[0], [0, 0, -p.weight * ls], atol=1e-6)
+        if r > 1:  # slack in MuJoCo: the pull is the hanging span's alone (Irvine, solved apart)
+            irvine = _irvine_tension(p, 0, ls)  # (measured: they agree to ~1e-10)
+            assert np.linalg.norm(on_b) == pytest.approx(irvine, rel=1e-6)
     assert abs(pulls[1 + 1e-9] / pulls[1 - 1e-9] - 1) < 1e-4  # (E·S·2e-9 apart: 6e-4 N)
     assert pulls[1.0001] > pulls[1.001] > pulls[1.01] > 0.0  # a longer cable hangs slacker
     p.refresh()  # (the module's state back for the other tests)
@@ -163,3 +186,25 @@ def test_cables_with_mass_refuse_a_gravity_off_the_vertical():
         SaggingPhysics(m, 40, linear_density=0.064)
     m.opt.gravity[:] = [0.0, 0.0, -3.0]  # the Moon's or a test's: the weight follows it
     assert SaggingPhysics(m, 40, linear_density=0.064).weight == pytest.approx(0.064 * 3.0)
+
+
+def test_a_heavy_cable_hanging_beyond_its_chord_is_slack_to_the_monitor():
+    # a review: once hanging cables report their catenary's pull, the monitor counted CoGiRo's
+    # paid-out cables taut (20-45 N each) and its loss of constraint never fired. Truth:
+    # MuJoCo's own cable force, 0 for a cable longer than its path
+    from cdpr_twin.sim import build_robot
+    from cdpr_twin.sim.monitor import FaultKind, Monitor, robot_limits
+
+    physics, _, _ = build_robot(MODELS_DIR / "cogiro" / "scene.xml")
+    physics.reset(se3.pose_from_vector([0, 0, 2.0, 0, 0, 0]), settle_time=1.0)
+    monitor = Monitor(physics, robot_limits(physics, 6000.0, 0.04))
+    monitor.reset()
+    physics.add_hook(monitor)
+    rates = np.zeros(8)
+    rates[[0, 1, 4, 5]] = 0.05  # four cables paid out: 10 cm in 2 s
+    physics.advance(2.0, rates)
+    straight = 0.0 - physics.data.actuator_force[physics._actuators]
+    assert np.all(straight[[0, 1, 4, 5]] == 0.0)  # MuJoCo: longer than their paths
+    assert np.all(physics.tensions[[0, 1, 4, 5]] > 1.0)  # they hang, and still pull
+    assert physics.taut.tolist() == (straight > 0).tolist()
+    assert FaultKind.SLACK in [f.kind for f in monitor.faults]

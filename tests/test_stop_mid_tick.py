@@ -83,3 +83,46 @@ def test_a_stop_while_a_tick_is_recorded_leaves_it_in_every_file(tmp_path, monke
     # the tick the stop landed in is whole: in the CSV, the Rerun recording and the summary
     assert rrd_ticks[0] == len(ts.columns["t"]) == summary["ticks_recorded"] == STOP_AT
     assert summary["simulated_time_s"] == ts.columns["t"][-1]
+
+
+def test_an_event_fired_after_the_last_recorded_tick_is_not_reported_fired(tmp_path, monkeypatch):
+    # a review: cable 3 cut at 0.45 s inside the advance a stop cut short (0.44 → 0.48 s): the
+    # summary listed the break while its final tensions were those of an intact cable 3
+    import json
+
+    text = (ROOT / "scenarios" / "paper_open_loop.toml").read_text()
+    text = text.replace('"../models/', f'"{ROOT}/models/')
+    path = tmp_path / "cut.toml"
+    path.write_text(text + '\n[[events]]\nkind = "cable_break"\nat = 0.45\ncable = 3\n')
+    _stop_inside(monkeypatch, physics.Physics, "advance", before=False)
+    out = tmp_path / "out"
+    with pytest.raises(Terminated), sigterm_raises():
+        runner.run(load_scenario(path).with_overrides(camera=False), out)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["simulated_time_s"] == pytest.approx(0.44, abs=1e-9)
+    assert "events" not in summary and summary["final_tensions_n"][2] > 1.0  # intact then
+    [late] = summary["events_not_reached"]
+    assert (late["kind"], late["phase"], late["cable"]) == ("cable_break", "start", 3)
+    assert late["due_s"] == pytest.approx(0.45, abs=1e-9)
+
+
+def test_a_stop_held_by_the_shield_leaves_even_when_the_body_raises_and_a_second_escapes():
+    # a review: a SIGTERM held during a tick whose recording then raised was lost (exit 1, not
+    # 143); and a body that hangs could only be stopped by SIGKILL
+    from cdpr_twin.interrupts import shielded
+
+    with pytest.raises(Terminated) as stop, sigterm_raises(), shielded(escape=True):
+        signal.raise_signal(signal.SIGTERM)  # held
+        raise RuntimeError("a recorder's bug")
+    assert isinstance(stop.value.__context__, RuntimeError)  # the stop came first
+    after = []
+    with pytest.raises(KeyboardInterrupt), shielded(escape=True):
+        signal.raise_signal(signal.SIGINT)  # held
+        signal.raise_signal(signal.SIGINT)  # a second Ctrl-C: at once
+        after.append("ran on")
+    assert after == []
+    with pytest.raises(KeyboardInterrupt), shielded():  # (the default: held until it ends)
+        signal.raise_signal(signal.SIGINT)
+        signal.raise_signal(signal.SIGINT)
+        after.append("ran on")
+    assert after == ["ran on"]

@@ -205,7 +205,7 @@ class Monitor:
             if tau[worst] > limit:
                 seen[kind] = (f"cable {worst + 1} at {tau[worst]:.1f} N > {limit:g} N", worst + 1)
         self._placement(seen)
-        self._constraint(tau, seen)
+        self._constraint(p.taut, seen)
         self._mujoco(seen)
         for kind, (detail, cable) in seen.items():
             if kind not in self._active:
@@ -235,9 +235,9 @@ class Monitor:
                 0,
             )
 
-    def _constraint(self, tau: np.ndarray, seen: dict) -> None:
+    def _constraint(self, taut_cables: np.ndarray, seen: dict) -> None:
         lim, t = self.limits, self.physics.time
-        taut = int(np.count_nonzero(tau > 0.0))
+        taut = int(np.count_nonzero(taut_cables))
         if taut >= lim.min_taut:
             self._slack_since = math.nan
             return

@@ -119,10 +119,8 @@ class Physics:
         self._actuators = as_slice(actuators)
         self._gain = m.actuator_gainprm[self._actuators]  # views when the ids are contiguous
         self._bias = m.actuator_biasprm[self._actuators]
-        if not (
-            np.shares_memory(self._gain, m.actuator_gainprm)
-            and np.shares_memory(self._bias, m.actuator_biasprm)
-        ):
+        shared = np.shares_memory(self._gain, m.actuator_gainprm)
+        if not (shared and np.shares_memory(self._bias, m.actuator_biasprm)):
             raise ModelError(f"{self.source}: the winch actuators must be declared together")
         self.rate_range = self._ctrl_lo, self._ctrl_hi = tuple(m.actuator_ctrlrange[actuators].T)
         self._tag_site = name2id(m, obj.mjOBJ_SITE, TAG_SITE)
@@ -157,6 +155,11 @@ class Physics:
         return self.data.ten_length[self._tendons] - self._entry
 
     @property
+    def taut(self) -> np.ndarray:
+        """(m,) each cable taut: MuJoCo's straight cable pulls (a heavy one may hang: sag.py)."""
+        return Physics.tensions.fget(self) > 0.0
+
+    @property
     def tensions(self) -> np.ndarray:
         """True cable tensions (m,) [N]."""
         return 0.0 - self.data.actuator_force[self._actuators]  # 0.0 -: no "-0.0" when slack
@@ -169,9 +172,8 @@ class Physics:
     @property
     def platform_state(self) -> tuple[np.ndarray, np.ndarray]:
         """Views (do not write) of [x, y, z, qw, qx, qy, qz] and [v (world), ω (platform)]."""
-        return self.data.qpos[self._qpos : self._qpos + 7], self.data.qvel[
-            self._dof : self._dof + 6
-        ]
+        d, q, v = self.data, self._qpos, self._dof
+        return d.qpos[q : q + 7], d.qvel[v : v + 6]
 
     @property
     def has_camera(self) -> bool:
@@ -241,11 +243,7 @@ class Physics:
         self.data.ctrl[self._actuator_ids[i]] *= running[i]
 
     def occlude_tag(self, coverage: float) -> None:
-        """Slide the sheet over the fraction ``coverage`` of the tag's code (0: park it).
-
-        Raises:
-            SimulationError: when the model was built without the sheet.
-        """
+        """Slide the sheet over ``coverage`` of the tag's code (0: park it; needs the sheet)."""
         if self._occluder is None:
             raise SimulationError(f"{self.source} was built without the tag occluder")
         self._occluder.cover(coverage)
