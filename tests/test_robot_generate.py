@@ -306,8 +306,10 @@ def test_the_monitor_section_may_be_left_out_or_say_inf(tmp_path):
     robot = load_robot(_buildable(tmp_path, section, ""))
     assert robot.max_speed == robot.max_angular_speed == float("inf")
     speed = "platform_max_speed_m_s = 1.5"
-    robot = load_robot(_buildable(tmp_path, speed, "platform_max_speed_m_s = inf"))
+    path = _buildable(tmp_path, speed, "platform_max_speed_m_s = inf")
+    robot = load_robot(path)
     assert robot.max_speed == float("inf") and robot.max_angular_speed == 12.0
+    assert main(["model", "build", str(path), "--out", str(tmp_path / "out")]) == 0  # and builds
 
 
 def test_a_home_pose_the_robot_cannot_hold_is_refused_not_written(tmp_path, capsys):
