@@ -324,10 +324,15 @@ class FusedEstimator(Estimator):
         if not dt >= 0:
             raise ValueError(f"fused: measurement time {m.time} s precedes {self._time} s")
         twist = m.twist_platform
-        if not (np.isfinite(m.cable_lengths).all() and np.isfinite(m.tensions).all()):
+        readings = [
+            m.cable_lengths,
+            m.tensions,
+            *(v for v in (twist, m.cable_rates) if v is not None),
+        ]
+        if not all(np.isfinite(v).all() for v in readings):  # (no command yet: no twist, rates)
             return self._held(m, NON_FINITE_INPUT, covariance=self.P[fm.POSE, fm.POSE])
         if dt > 0:
-            moving = twist is not None and bool(np.isfinite(twist).all())
+            moving = twist is not None
             hanging = self._taut(m, self.options.hang_threshold)
             self.predict(twist if moving else np.zeros(6), dt, m.cable_rates if moving else
                          np.zeros(self._m), hanging)  # fmt: skip

@@ -228,7 +228,7 @@ class ModelEstimator(Estimator):
             return self._held(m, NON_FINITE_INPUT)
         tl = tensions.tolist()
         if self.selection != "most_tensioned":
-            return self._update_selected(m, lengths, tensions)
+            return self._update_selected(m, lengths, tensions, watch)
         cables = most_tensioned(tl)  # line 8
         used = tuple(cables)
         if sum(t > self.taut_threshold for t in tl) < N_USED:
@@ -237,7 +237,7 @@ class ModelEstimator(Estimator):
         T, residual, iterations = self.solve(targets, cables, self._T)
         if not (residual <= self.max_residual and math.isfinite(T.sum())):
             return self._held(
-                m, NOT_CONVERGED, cables=used, residual=residual, iterations=iterations
+                m, NOT_CONVERGED, *watch, cables=used, residual=residual, iterations=iterations
             )
         self._T = T
         self._time = m.time
@@ -246,9 +246,9 @@ class ModelEstimator(Estimator):
         )
 
     def _update_selected(
-        self, m: Measurement, lengths: np.ndarray, tensions: np.ndarray
+        self, m: Measurement, lengths: np.ndarray, tensions: np.ndarray, watch: frozenset
     ) -> PoseEstimate:
-        """:meth:`update` for ``best_conditioned`` and ``all_taut``."""
+        """:meth:`update` for ``best_conditioned`` and ``all_taut`` (``watch``: its flags)."""
         taut = tensions > self.taut_threshold
         if taut.sum() < N_USED:
             return self._held(m, FEW_TAUT_CABLES, cables=tuple(np.flatnonzero(taut).tolist()))
@@ -266,11 +266,13 @@ class ModelEstimator(Estimator):
             ok = residual <= self.max_residual
         if not (ok and math.isfinite(T.sum())):
             return self._held(
-                m, NOT_CONVERGED, cables=used, residual=residual, iterations=iterations
+                m, NOT_CONVERGED, *watch, cables=used, residual=residual, iterations=iterations
             )
         self._T = T
         self._time = m.time
-        return PoseEstimate(m.time, T, cables=used, residual=residual, iterations=iterations)
+        return PoseEstimate(
+            m.time, T, flags=watch, cables=used, residual=residual, iterations=iterations
+        )
 
 
 @register
