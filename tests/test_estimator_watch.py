@@ -51,3 +51,19 @@ def test_fused_holds_on_a_non_finite_command_and_goes_on_after_it(at_p1):
     out = est.update(Measurement(0.16, m0.cable_lengths, m0.tensions, still))
     assert out.valid and np.isfinite(out.T_base_platform).all()
     assert np.abs(out.T_base_platform[:3, 3] - paper_pose("p1")[:3, 3]).max() < 1e-3
+
+
+@pytest.mark.parametrize("selection", ["most_tensioned", "best_conditioned", "all_taut"])
+def test_lengths_no_pose_can_give_are_held_not_converged(at_p1, selection):
+    # a review's surviving mutant: nothing failed with the residual check removed. Truth: one
+    # cable 1 m longer than at p1 with the others unchanged is no pose of the robot (its chord
+    # would leave the frame), so no solve can bring the residual down
+    geometry, m0 = at_p1
+    est = make_estimator("model_elastic_pulley", geometry, selection=selection)
+    est.reset(paper_pose("p1"))
+    lengths = m0.cable_lengths.copy()
+    lengths[int(np.argmax(m0.tensions))] += 1.0  # among the used cables in every selection
+    out = est.update(Measurement(0.04, lengths, m0.tensions))
+    assert not out.valid and "not_converged" in out.flags
+    assert out.residual > 1e-3  # [m]: what was left, reported
+    np.testing.assert_array_equal(out.T_base_platform, paper_pose("p1"))  # held
