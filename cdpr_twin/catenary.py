@@ -80,6 +80,11 @@ class Catenary:
         return float(np.max(self.span_v * x / self.span_h - z))
 
 
+def hangs_vertically(gravity) -> bool:
+    """Whether ``gravity`` (3,) [m/s²] points down z (or is zero): a catenary hangs vertically."""
+    return gravity[0] == 0 and gravity[1] == 0 and gravity[2] <= 0
+
+
 def _plus_minus(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(√(1+x²) + x, √(1+x²) − x), each without cancellation."""
     r = np.hypot(1.0, x)

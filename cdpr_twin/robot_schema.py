@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from cdpr_twin.catenary import hangs_vertically
+
 SENSOR_LOCATIONS = ("anchor", "pulley")
 """Where a robot's tension sensors sit on each cable: at the platform's anchor point B_i, or at
 the exit pulley (winch side). With heavy cables they read different tensions."""
@@ -199,6 +201,6 @@ def check_inertia(t: _Table, inertia: np.ndarray) -> None:
 
 def check_gravity(t: _Table, gravity: np.ndarray, sag: bool) -> None:
     """Refuse a gravity off the vertical for cables with mass (their catenary hangs along z)."""
-    if sag and (abs(gravity[0]) + abs(gravity[1]) > 0 or gravity[2] > 0):
+    if sag and not hangs_vertically(gravity):
         raise t.fail("gravity_m_s2", f"must point along -z with cables.sag = true (the cables "
                      f"hang in vertical planes), got {gravity.tolist()}")  # fmt: skip

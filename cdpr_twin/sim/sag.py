@@ -25,7 +25,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from cdpr_twin.catenary import CatenaryError, end_forces, solve_catenary
+from cdpr_twin.catenary import CatenaryError, end_forces, hangs_vertically, solve_catenary
 from cdpr_twin.sim.physics import Physics
 
 
@@ -44,7 +44,7 @@ class SaggingPhysics(Physics):
             raise ValueError(f"linear_density must be > 0 kg/m, got {linear_density}")
         self.linear_density = float(linear_density)
         g = model.opt.gravity
-        if abs(g[0]) + abs(g[1]) > 0 or g[2] > 0:  # the catenary hangs in a vertical plane
+        if not hangs_vertically(g):
             raise ValueError(
                 f"cables with mass need gravity along -z (the catenary hangs vertically), got "
                 f"{g.tolist()} m/s²; set sag = false or point gravity down"
