@@ -7,11 +7,20 @@ heavy is imported (:func:`cdpr_twin.interrupts.handle_stops`): a stop at any tim
 included, exits 130 (Ctrl-C) or 143 (SIGTERM) with one line on stderr and no traceback. The
 first stop decides; once the command has its exit code every later signal is ignored while the
 interpreter exits.
+
+Rerun's own logger (Rust's) prints its warnings and errors, coloured, before the command's one
+line (e.g. a recording on a full disk). It reads ``RUST_LOG`` once, when Rerun is imported; the
+command sets it to ``off`` unless the user set it (``RUST_LOG=warn cdpr-twin run …`` shows
+Rerun's log again).
 """
 
 from __future__ import annotations
 
+import os
 import sys
+
+RERUN_LOG_DEFAULT = "off"
+"""``RUST_LOG`` when the user set none: Rerun's log is quiet (its failures reach us as errors)."""
 
 
 def main() -> int:
@@ -20,6 +29,7 @@ def main() -> int:
     from cdpr_twin.outputs import Terminated
 
     handle_stops()
+    os.environ.setdefault("RUST_LOG", RERUN_LOG_DEFAULT)  # before Rerun's first import
     try:
         from cdpr_twin import cli
 
