@@ -112,9 +112,17 @@ def _handled() -> tuple[int, ...]:
 
 
 def settle() -> None:
-    """From now on every SIGINT and SIGTERM is ignored: the command's exit code is decided."""
+    """From now on every SIGINT and SIGTERM is ignored: the command's exit code is decided.
+
+    Ignored by the system, not by a handler: Python puts back the default action of the signals
+    it handles as the interpreter exits, and that (a second or so of threads and modules ending)
+    a SIGTERM would then end with status 143 after the command said "interrupted". The main
+    thread only.
+    """
     if _Stops.first is None:
         _Stops.first = 0
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
 
 
 @contextlib.contextmanager

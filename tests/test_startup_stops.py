@@ -5,7 +5,8 @@ Before: ``cdpr-twin run paper_open_loop & sleep 0.2; kill -INT $!`` printed a
 before any handler existed. The start-up is made to wait at a chosen import (a
 ``sitecustomize`` on ``PYTHONPATH`` holds the import of one module: it writes a marker file and
 sleeps), so the signal lands there, every time. Truth: the process's exit code, its stderr's
-lines, and the output directory (never made).
+lines, and the output directory (never made). And at the other end: a signal while the
+interpreter ends, after the command has its exit code, changes nothing.
 """
 
 import os
@@ -105,3 +106,45 @@ def test_the_console_script_and_python_m_use_the_entry_point_that_handles_stops_
     assert "from cdpr_twin.entry import main" in COMMAND.read_text()
     main = Path(__file__).resolve().parent.parent / "cdpr_twin" / "__main__.py"
     assert "from cdpr_twin.entry import main" in main.read_text()
+
+
+HOLD_AT_EXIT = """
+import os
+import sys
+import time
+
+
+class _HeldAtExit:
+    def __del__(self):  # collected as the interpreter ends, after its signal handling did
+        open(os.environ["HOLD_MARKER"], "w").close()
+        time.sleep(2.0)
+
+
+sys.modules["_held_at_exit"] = _HeldAtExit()
+"""
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_a_signal_while_the_interpreter_ends_does_not_change_the_exit_code(tmp_path, signum):
+    # before: Python puts back the default action as it ends, and a SIGTERM then ended a
+    # command that had printed its result with 143 (a run that said "interrupted" too)
+    (tmp_path / "hook").mkdir()
+    (tmp_path / "hook" / "sitecustomize.py").write_text(HOLD_AT_EXIT)
+    marker = tmp_path / "held"
+    env = {**os.environ, "PYTHONPATH": str(tmp_path / "hook"), "HOLD_MARKER": str(marker)}
+    proc = subprocess.Popen(
+        [str(COMMAND), "scenarios", "list"],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    deadline = time.monotonic() + 120
+    while not marker.exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert marker.exists(), proc.communicate()
+    proc.send_signal(signum)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 0, err
+    assert "paper_open_loop" in out and err == ""
