@@ -1,7 +1,7 @@
-"""``python -m cdpr_twin`` runs the ``cdpr-twin`` command."""
+"""``python -m cdpr_twin`` runs the ``cdpr-twin`` command (:mod:`cdpr_twin.entry`)."""
 
 import sys
 
-from cdpr_twin.cli import main
+from cdpr_twin.entry import main
 
 sys.exit(main())

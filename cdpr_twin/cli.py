@@ -264,11 +264,15 @@ def main(argv: list[str] | None = None) -> int:
         return code
     except BrokenPipeError as exc:
         return closed_stdout(exc)
-    except (SystemExit, KeyboardInterrupt) as exc:  # a plugin's exit; Ctrl-C while starting
-        stop = isinstance(exc, KeyboardInterrupt)  # (the commands return their exit codes)
-        why = "interrupted" if stop else f"error: sys.exit({exc.code!r}) called"
+    except (SystemExit, KeyboardInterrupt) as exc:  # a plugin's exit; a stop while starting
+        from cdpr_twin.outputs import Terminated  # (the commands return their exit codes)
+
+        if isinstance(exc, SystemExit):
+            why, code = f"error: sys.exit({exc.code!r}) called", 1
+        else:
+            why, code = ("terminated", 143) if isinstance(exc, Terminated) else ("interrupted", 130)
         print(f"cdpr-twin {args.command}: {why}", file=sys.stderr)
-        return 130 if stop else 1
+        return code
 
 
 def _parser() -> argparse.ArgumentParser:

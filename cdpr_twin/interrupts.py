@@ -9,7 +9,12 @@ the signal handler, wherever the main thread is. Two paths lose what it was:
 - a library that checks signals in its own loop (Ray's ``ray.get``/``ray.wait``) re-raises
   the interrupt as a plain ``KeyboardInterrupt``: a SIGTERM would be told as a Ctrl-C.
 
-:func:`interruption` recovers the stop either way (the SIGTERM handler notes its signal), and
+The first stop decides: once a Ctrl-C or SIGTERM has begun to stop a command, any later one,
+of either kind, is ignored while its outputs are completed, so that the exit code (130 or 143)
+agrees with the status its files record (``"interrupted"`` or ``"terminated"``). SIGKILL still
+ends it.
+
+:func:`interruption` recovers the stop either way (the handler notes its signal), and
 :func:`sigterm_raises`, around each command, hands it on as the stop it is.
 """
 
@@ -23,9 +28,22 @@ from collections.abc import Iterator
 
 from cdpr_twin.outputs import Terminated
 
-_SIGTERM = threading.Event()
-"""Set by :func:`sigterm_raises`' handler: a SIGTERM arrived (cleared on entering and leaving
-it)."""
+
+class _Stops:
+    """The stop under way in this process: which signal began it, and how deep the handling is."""
+
+    first: int | None = None
+    """The signal (SIGINT, SIGTERM) that began the stop under way; ``None``: none yet."""
+    depth = 0
+    """How many :func:`sigterm_raises` (or :func:`handle_stops`, for good) are entered."""
+
+
+def _stop(signum: int, frame) -> None:
+    """SIGINT and SIGTERM, while handled: the first raises its stop, later ones are ignored."""
+    if _Stops.first is not None:
+        return  # a stop is under way: it decides the status and the exit code
+    _Stops.first = signum
+    raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
 
 def interruption(exc: BaseException) -> KeyboardInterrupt | None:
@@ -37,26 +55,25 @@ def interruption(exc: BaseException) -> KeyboardInterrupt | None:
     stop = exc if isinstance(exc, KeyboardInterrupt) else None
     if isinstance(exc, SystemError) and isinstance(exc.__cause__, KeyboardInterrupt):
         stop = exc.__cause__
-    if stop is not None and not isinstance(stop, Terminated) and _SIGTERM.is_set():
+    if stop is not None and not isinstance(stop, Terminated) and _Stops.first == signal.SIGTERM:
         return Terminated()
     return stop
 
 
 @contextlib.contextmanager
 def sigterm_raises() -> Iterator[None]:
-    """Within: SIGTERM raises :class:`~cdpr_twin.outputs.Terminated`; restored on leaving.
+    """Within: SIGTERM raises :class:`~cdpr_twin.outputs.Terminated`, Ctrl-C ``KeyboardInterrupt``.
 
-    Once: a second SIGTERM is ignored while the outputs are completed. The main thread only.
-    A Ctrl-C or SIGTERM that surfaced otherwise (:func:`interruption`) leaves as itself.
+    The first of them only (SIGINT left ignored if it is): a later SIGINT or SIGTERM is ignored
+    while the stop completes the outputs (the first decides the status and the exit code).
+    Restored on leaving, and the stop forgotten when the outermost one is left (a later Ctrl-C
+    is a new stop). The main thread only. A Ctrl-C or SIGTERM that surfaced otherwise
+    (:func:`interruption`) leaves as itself.
     """
-
-    def handler(signum, frame) -> None:
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        _SIGTERM.set()
-        raise Terminated()
-
-    _SIGTERM.clear()
-    previous = signal.signal(signal.SIGTERM, handler)
+    if _Stops.depth == 0:
+        _Stops.first = None
+    _Stops.depth += 1
+    previous = {sig: signal.signal(sig, _stop) for sig in _handled()}
     try:
         yield
     except (SystemError, KeyboardInterrupt) as exc:
@@ -64,8 +81,48 @@ def sigterm_raises() -> Iterator[None]:
             raise
         raise stop from None
     finally:
-        signal.signal(signal.SIGTERM, previous)
-        _SIGTERM.clear()  # a later Ctrl-C, outside this command, is a Ctrl-C
+        for sig, handler in previous.items():
+            if handler is not None:  # (None: a handler installed from C, not restorable)
+                signal.signal(sig, handler)
+        _Stops.depth -= 1
+        if _Stops.depth == 0:
+            _Stops.first = None  # a later Ctrl-C, outside this command, is a Ctrl-C
+
+
+def handle_stops() -> None:
+    """For good, in this process (the command's entry point): as :func:`sigterm_raises`.
+
+    Installed before anything heavy is imported, so that a Ctrl-C or SIGTERM during start-up
+    is a stop like any other. The main thread only.
+    """
+    _Stops.depth += 1
+    for sig in _handled():
+        signal.signal(sig, _stop)
+
+
+def _handled() -> tuple[int, ...]:
+    """The signals to handle: SIGTERM, and SIGINT unless it is ignored.
+
+    A shell starts a background job (``cdpr-twin run … &`` in a script) with SIGINT ignored, so
+    that a Ctrl-C meant for the foreground spares it; Python keeps it ignored, and so do we.
+    """
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        return (signal.SIGTERM,)
+    return (signal.SIGINT, signal.SIGTERM)
+
+
+def settle() -> None:
+    """From now on every SIGINT and SIGTERM is ignored: the command's exit code is decided.
+
+    Ignored by the system, not by a handler: Python puts back the default action of the signals
+    it handles as the interpreter exits, and that (a second or so of threads and modules ending)
+    a SIGTERM would then end with status 143 after the command said "interrupted". The main
+    thread only.
+    """
+    if _Stops.first is None:
+        _Stops.first = 0
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
 
 
 @contextlib.contextmanager
@@ -76,12 +133,16 @@ def shielded(escape: bool = False) -> Iterator[None]:
     or SIGTERM during that used to interrupt it, leaving ``*.partial`` files and the lock. A
     signal that came is delivered on leaving, to the handler it was meant for, unless it is of
     the kind of a stop already under way (which absorbs it); also when the body raised (the
-    stop came first: it is the one that leaves). SIGKILL still stops it. In another thread
+    stop came first: it is the one that leaves). Within :func:`sigterm_raises` a signal of the
+    other kind is delivered to its handler, which ignores it: the first stop decides (a pool
+    worker's default SIGTERM, its parent's order to stop, still ends it). SIGKILL still stops
+    it. In another thread
     than the main one (where signals cannot be handled) it does nothing.
 
     Args:
-        escape: a second signal while one is held is not held but handled at once (a body
-            that hangs can still be stopped without SIGKILL).
+        escape: a second signal while one is held is not held: the first one held is handled
+            at once (a body that hangs can still be stopped without SIGKILL; the first decides
+            which stop it is).
     """
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -90,10 +151,10 @@ def shielded(escape: bool = False) -> Iterator[None]:
     previous: dict = {}
 
     def hold(signum, frame) -> None:
-        meant = previous.get(signum)
-        if escape and held and callable(meant):
-            meant(signum, frame)  # raises (Ctrl-C, Terminated) here, in the body
         held.append(signum)
+        first = held[0]
+        if escape and len(held) > 1 and callable(meant := previous.get(first)):
+            meant(first, frame)  # raises (Ctrl-C, Terminated) here, in the body
 
     try:
         for sig in (signal.SIGINT, signal.SIGTERM):

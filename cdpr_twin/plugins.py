@@ -6,6 +6,10 @@ A plugin is a class with a ``name``, a ``kind`` (``"estimator"`` or ``"controlle
 :func:`option` attaches (unit, bounds, file key). Register a plugin with :func:`register`; a
 scenario file can import modules that register more (``plugins = ["my_module", "file.py"]``).
 
+A scenario or campaign that names plugins runs their code: run only files you trust. Each plugin
+file or module a process loads is named once on stderr (``cdpr-twin: loading plugin
+/abs/path/file.py``) before its code runs.
+
 Installed packages add plugins by entry point, found by the same registry when it is first
 read: in the package's ``pyproject.toml``,
 
@@ -26,6 +30,7 @@ load is skipped with a warning, and naming it says why.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import importlib
@@ -35,7 +40,7 @@ import inspect
 import math
 import sys
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, TypeVar
@@ -53,6 +58,7 @@ _ORIGIN: dict[str, dict[str, str]] = {kind: {} for kind in KINDS}
 _BROKEN: dict[str, dict[str, str]] = {kind: {} for kind in KINDS}
 """Entry points that failed to load: why, by kind and name."""
 _BUILTINS_LOADED = False
+_ANNOUNCE = [True]
 
 C = TypeVar("C", bound=type)
 
@@ -284,8 +290,29 @@ def _below_minimum(spec: OptionSpec, value: Any) -> str | None:
     return None
 
 
+@contextlib.contextmanager
+def unannounced() -> Iterator[None]:
+    """Within: plugins are loaded without their line on stderr.
+
+    A campaign's workers load them again: the campaign named them when it read its runs.
+    """
+    said, _ANNOUNCE[0] = _ANNOUNCE[0], False
+    try:
+        yield
+    finally:
+        _ANNOUNCE[0] = said
+
+
+def _announce(what: str) -> None:
+    """Name on stderr a plugin about to be loaded: its code runs (once a process, as it loads)."""
+    if _ANNOUNCE[0]:
+        print(f"cdpr-twin: loading plugin {what}", file=sys.stderr, flush=True)
+
+
 def load_modules(refs: list[str], base_dir: Path) -> None:
     """Import plugin modules: dotted module names, or ``.py`` files relative to ``base_dir``.
+
+    Each one not yet loaded in this process is named on stderr first (its code is about to run).
 
     Raises:
         ImportError: when one cannot be imported (with the reason).
@@ -303,6 +330,7 @@ def load_modules(refs: list[str], base_dir: Path) -> None:
             spec = importlib.util.spec_from_file_location(mod_name, path)
             assert spec is not None and spec.loader is not None
             module = importlib.util.module_from_spec(spec)
+            _announce(str(path))
             sys.modules[mod_name] = module
             try:
                 spec.loader.exec_module(module)
@@ -311,6 +339,8 @@ def load_modules(refs: list[str], base_dir: Path) -> None:
                 _no_exit(exc, f"plugin file {path}")
                 raise
         else:
+            if ref not in sys.modules:
+                _announce(f"module {ref}")
             try:
                 importlib.import_module(ref)
             except SystemExit as exc:

@@ -58,8 +58,13 @@ def _scenario(tmp_path: Path, at_import: bool = False, at_build: bool = False) -
     return path
 
 
+LOADING = "cdpr-twin: loading plugin "
+
+
 def _error_lines(err: str) -> list[str]:
-    return [line for line in err.splitlines() if line.startswith("cdpr-twin")]  # not progress
+    """The command's lines (not progress), but the plugins' names as they load."""
+    lines = [line for line in err.splitlines() if line.startswith("cdpr-twin")]
+    return [line for line in lines if not line.startswith(LOADING)]
 
 
 def _argv(path: Path, out: Path) -> list[str]:
@@ -79,8 +84,11 @@ def test_a_plugins_exit_mid_run_fails_the_run_in_one_line(tmp_path, capsys):
 def test_a_plugins_exit_at_import_refuses_the_scenario(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(_argv(_scenario(tmp_path, at_import=True), out)) == 2  # was: 3, silently
-    (err,) = _error_lines(capsys.readouterr().err)
+    printed = capsys.readouterr().err
+    (err,) = _error_lines(printed)
     assert "called sys.exit(3) while loading" in err
+    # named before it ran (a failed load is not cached: named each time it is tried)
+    assert printed.startswith(f"{LOADING}{tmp_path.parent / 'exiting_at_import.py'}\n")
     assert not out.exists()
 
 

@@ -23,6 +23,7 @@ def run_task(task: Task, runs_dir: str) -> dict:
     Returns:
         The row (:func:`cdpr_twin.campaign.table.flatten`).
     """
+    from cdpr_twin.plugins import unannounced
     from cdpr_twin.runner import run
     from cdpr_twin.scenario import scenario_from_data
 
@@ -30,7 +31,8 @@ def run_task(task: Task, runs_dir: str) -> dict:
     out = None if task.artefacts == "none" else Path(runs_dir) / task.run_id
     start = time.perf_counter()
     try:
-        s = scenario_from_data(task.data, task.source)
+        with unannounced():  # the campaign named its plugins as it read its runs
+            s = scenario_from_data(task.data, task.source)
         result = run(s, out, record_rrd=task.artefacts == "all")
     except (Exception, SystemExit) as exc:  # the campaign goes on: a row with its error
         last = traceback.extract_tb(exc.__traceback__)[-1]
