@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import EARLIER_SUMMARY
 
 from cdpr_twin import plugins
 from cdpr_twin.cli import main
@@ -202,7 +203,7 @@ def test_a_new_study_removes_the_earlier_ones_files_before_any_run(
     out = tmp_path / "study"
     shutil.copytree(done_study, out)
     (out / "runs" / "open_loop_seed9").mkdir()  # an earlier, larger study's run
-    (out / "runs" / "open_loop_seed9" / "summary.json").write_text("{}\n")
+    (out / "runs" / "open_loop_seed9" / "summary.json").write_text(EARLIER_SUMMARY % "completed")
     (out / "runs" / "notes").mkdir()  # not a run of the study's: kept
     (out / "runs" / "notes" / "todo.txt").write_text("keep me\n")
 
