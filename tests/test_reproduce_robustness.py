@@ -99,6 +99,8 @@ def _disk_fills_at(monkeypatch, out: Path, target: str, room: int = 1000) -> Non
     def fake_open(file, mode="r", *args, **kwargs):
         f = real_open(file, mode, *args, **kwargs)
         path = Path(os.fsdecode(file)) if isinstance(file, str | bytes | os.PathLike) else None
+        if isinstance(file, int):  # a descriptor the writer made (os.fdopen): its file's name
+            path = Path(os.readlink(f"/proc/self/fd/{file}"))
         writes = any(c in mode for c in "wax+")
         if writes and path is not None and path.parent == out and path.name.startswith(target):
             return _FullDisk(f, room)
