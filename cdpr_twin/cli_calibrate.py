@@ -66,7 +66,7 @@ def _remove_empty(made: list[Path]) -> None:
 
 def _calibrate(args: argparse.Namespace) -> int:
     from cdpr_twin.calibrate.acquire import check
-    from cdpr_twin.calibrate.output import NAMES
+    from cdpr_twin.calibrate.output import MARKER, NAMES
     from cdpr_twin.outputs import OutputDir, OutputDirError, OutputError, others
     from cdpr_twin.paths import path_kind
     from cdpr_twin.scenario import ScenarioError, load_scenario
@@ -90,7 +90,15 @@ def _calibrate(args: argparse.Namespace) -> int:
             )
         made = _missing(out)
         # a run's, campaign's or study's directory is refused (its files are not ours to clear)
-        owner = OutputDir(out, outputs=(), foreign=others("calibration"), partials=NAMES)
+        owner = OutputDir(
+            out,
+            outputs=(),
+            foreign=others("calibration"),
+            partials=NAMES,
+            owned=NAMES,
+            marker=MARKER,
+            inputs=(s.source, source, s.model.file),
+        )
         owner.claim()  # refuses a directory another calibration is writing
     except (ScenarioError, OutputDirError, OutputError) as exc:
         _remove_empty(made)

@@ -39,7 +39,7 @@ import numpy as np
 
 from cdpr_twin import watchdog
 from cdpr_twin.blueprint import default_blueprint, robot_label, series_colors
-from cdpr_twin.outputs import OutputError, partial_of, writing
+from cdpr_twin.outputs import OutputError, Partial, writing
 from cdpr_twin.se3 import covariance_ellipsoids, quat_xyzw_from_matrix
 from cdpr_twin.types import CameraIntrinsics, Measurement, PoseEstimate
 
@@ -106,24 +106,36 @@ class RerunRecorder:
         self.covariance, self._ended = tuple(covariance), None  # _ended: disconnect returned
         self.rr = rr
         self.path = path
-        self._partial = partial_of(path)
         self.scene, self.estimators, self.jpeg_quality = scene, estimators, jpeg_quality
         # column-wise sending costs ~0.5 ms per entity and call: batch 4 s of a file run, but
         # only 0.4 s when a live viewer watches
         live = spawn or connect is not None
         self.flush_every = flush_every or (10 if live else 100)
         self._buf = self._new_buffer()
+        # created here afresh (never through a link); Rerun, which opens files only by name,
+        # is given the name of this very file (``/proc/self/fd/N``), not ``<path>.partial``
+        self._out = Partial(path)
+        self._partial, self._sink = self._out.partial, self._out.name_of_fd()
+        try:
+            self._start(application_id, recording_id, spawn, connect)
+        except BaseException:
+            self._out.close()
+            raise
+
+    def _start(self, application_id: str, recording_id: str, spawn: bool, connect) -> None:
+        """Open the recording stream and its sinks: the file, and a live viewer if asked."""
+        rr, live = self.rr, spawn or connect is not None
         self.rec = rr.RecordingStream(
             application_id, recording_id=recording_id, send_properties=False
         )
-        blueprint = default_blueprint(robot_label(scene.model_file))
+        blueprint = default_blueprint(robot_label(self.scene.model_file))
         self.spawned = False  # streaming live (a spawned viewer or a server at ``connect``)
         if live:
             try:
                 if spawn:
                     self.rec.spawn(connect=False)
                 self.rec.set_sinks(
-                    rr.FileSink(str(self._partial)),
+                    rr.FileSink(self._sink),
                     rr.GrpcSink(connect),  # None: the spawned viewer's default address
                     default_blueprint=blueprint,
                 )
@@ -135,7 +147,7 @@ class RerunRecorder:
         self._footer = "write_footer" in inspect.signature(self.rec.save).parameters
         if not self.spawned:
             try:
-                self.rec.save(str(self._partial), default_blueprint=blueprint)
+                self.rec.save(self._sink, default_blueprint=blueprint)
             except RuntimeError as exc:  # Rerun's words for an OSError
                 raise OutputError(self._partial, str(exc)) from None
         self._log_static()
@@ -360,7 +372,9 @@ class RerunRecorder:
             if self.spawned:
                 self.rec.flush(timeout_sec=LIVE_FLUSH_TIMEOUT_S)
             else:  # nor a file writer that died mid-flush (Rerun's flush would wait forever)
-                watchdog.flush_while_writing(lambda t: self.rec.flush(timeout_sec=t), self._partial)
+                watchdog.flush_while_writing(
+                    lambda t: self.rec.flush(timeout_sec=t), Path(self._sink)
+                )
         except Exception as exc:
             if not self.spawned:
                 self.abort(stalled=isinstance(exc, watchdog.WriterStalledError))
@@ -368,7 +382,7 @@ class RerunRecorder:
             why = f"the live viewer did not take all of the recording (≤ {LIVE_FLUSH_TIMEOUT_S:g}"
             warnings.warn(f"{why} s: {exc}); the file is whole", RuntimeWarning, stacklevel=2)
         ended = self._disconnect(watchdog.ABANDON_S)  # writes the footer (Rerun ≥ 0.23)
-        with writing(self._partial), self._partial.open("rb") as f:
+        with writing(self._partial), open(self._sink, "rb") as f:
             os.fsync(f.fileno())
             f.seek(max(0, os.fstat(f.fileno()).st_size - 16))
             whole = b"FOOT" in f.read() or (ended and not self._footer)
@@ -378,12 +392,12 @@ class RerunRecorder:
 
     def commit(self) -> None:
         """Give the finished file its final name."""
-        with writing(self.path):
-            os.replace(self._partial, self.path)
+        self._out.commit()
 
     def abort(self, stalled: bool = False) -> None:
         """Stop recording: what was written stays ``<path>.partial`` (``stalled``: writer dead)."""
         self._disconnect(0.0 if stalled else watchdog.ABANDON_S)
+        self._out.close()
 
     def _disconnect(self, wait: float) -> bool:
         """Rerun's disconnect, once, waited for ≤ ``wait`` [s] (a dead writer blocks it forever)."""

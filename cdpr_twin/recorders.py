@@ -6,7 +6,6 @@ The files are closed as one transaction (:meth:`Recorders.close`; the directory'
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -111,6 +110,5 @@ class Recorders:
         for w in writers:
             w.commit()
         fsync_dir(self.out_dir)  # the files' names before the commit marker's
-        with writing(self.out_dir / "summary.json"):
-            os.replace(marker, self.out_dir / "summary.json")
+        marker.commit()
         fsync_dir(self.out_dir)

@@ -318,7 +318,10 @@ def run(
 def _claim(setup: RunSetup, out_dir, record_rrd, spawn, connect) -> tuple:
     """The claimed output directory, the metrics and the recorders (nothing held on failure)."""
     s = setup.scenario
-    owner = OutputDir(out_dir, foreign=others("run"))  # (else emptied or mixed)
+    # another command's directory is refused (else emptied or mixed), and so is a file of an
+    # output's name that no run of ours wrote, or that is this run's own input
+    inputs = (s.source, s.model.file, s.model.nominal)
+    owner = OutputDir(out_dir, foreign=others("run"), inputs=inputs)
     try:
         owner.claim()  # the lock, then an earlier run's files removed
         checkpoints = setup.controller.checkpoints(s.duration)

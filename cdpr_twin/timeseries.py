@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_twin.outputs import partial_of, writing
+from cdpr_twin.outputs import Partial, writing
 from cdpr_twin.se3 import matrix_from_quat_wxyz, pose_distance, quat_wxyz_from_matrix
 from cdpr_twin.types import Command, Measurement, PoseEstimate, Status
 
@@ -111,13 +111,14 @@ class TimeseriesWriter:
         covariance: tuple[str, ...] = (),
     ) -> None:
         self.path = Path(path)
-        self._partial = partial_of(self.path)
+        self._out = Partial(self.path)  # created afresh, never through a link
+        self._partial = self._out.partial
         self.estimators = tuple(estimators)
         self.covariance = tuple(n for n in self.estimators if n in covariance)
         self.n_cables = n_cables
         self.flush_every = flush_every
         with writing(self._partial):
-            self._file = self._partial.open("w", newline="", encoding="utf-8")
+            self._file = self._out.file("w", newline="", encoding="utf-8")
             line = ",".join(header(self.estimators, n_cables, self.covariance))
             self._file.write(line + "\n")
         self._rows: list[tuple] = []
@@ -233,8 +234,7 @@ class TimeseriesWriter:
 
     def commit(self) -> None:
         """Give the finished file its final name."""
-        with writing(self.path):
-            os.replace(self._partial, self.path)
+        self._out.commit()
 
     def abort(self) -> None:
         """Close without completing: what was written stays ``<path>.partial``."""

@@ -103,6 +103,13 @@ def pool_threads() -> list:
     return [t for t in threading.enumerate() if isinstance(t, _ExecutorManagerThread)]
 
 
+EARLIER_SUMMARY = (
+    '{"scenario": "paper_open_loop", "status": "%s", "estimator_names": [], '
+    '"simulated_time_s": 1.0}\n'
+)
+"""An earlier run's ``summary.json`` (``% status``): the keys that mark it as a run of ours."""
+
+
 def paper_pose(name: str) -> np.ndarray:
     return se3.pose_from_vector(PAPER_POSES[name])
 

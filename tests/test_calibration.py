@@ -289,7 +289,8 @@ def test_sigterm_leaves_no_calibration_file_under_a_final_name(tmp_path):
     import subprocess
     import time
 
-    (tmp_path / "calibration.json").write_text("{}")  # an earlier calibration's, now stale
+    earlier = '{"parameters": [], "fit": {}, "identifiability": {}}'
+    (tmp_path / "calibration.json").write_text(earlier)  # an earlier calibration's, now stale
     proc = subprocess.Popen(_calibrate_cmd(tmp_path), stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
     while (tmp_path / "calibration.json").exists() and time.monotonic() < deadline:

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import EARLIER_SUMMARY
 
 from cdpr_twin import plugins
 from cdpr_twin.campaign.spec import set_dotted
@@ -123,7 +124,7 @@ def test_a_stop_before_the_run_claims_its_directory_does_not_claim_an_earlier_ru
 
     out = tmp_path / "out"
     out.mkdir()
-    (out / "summary.json").write_text('{"status": "terminated"}\n')  # an earlier run's
+    (out / "summary.json").write_text(EARLIER_SUMMARY % "terminated")  # an earlier run's
     os.utime(out / "summary.json", (0, 0))
 
     def prepare(scenario):

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import EARLIER_SUMMARY
 
 from cdpr_twin.cli import main
 from cdpr_twin.outputs import LOCK_NAME, OutputDir, OutputDirError
@@ -128,7 +129,7 @@ def test_sigkill_leaves_no_final_name_then_a_fresh_run_takes_the_stale_lock(tmp_
     out = tmp_path / "out"
     out.mkdir()
     for name in FINAL:  # an earlier run's complete outputs
-        (out / name).write_text('{"status": "completed"}\n')
+        (out / name).write_text(EARLIER_SUMMARY % "completed")
     (out / "recording.rrd.partial").write_text("older still")
     proc = _start(_scenario(tmp_path, (200.0, 100.0, 200.0)), out, "--duration", "500")
     _wait_under_way(proc, out, rows=5)
@@ -187,7 +188,7 @@ def test_a_stop_while_the_outputs_open_leaves_nothing(tmp_path, monkeypatch, cap
 
     out = tmp_path / "out"
     out.mkdir()
-    (out / "summary.json").write_text("{}")  # an earlier run's
+    (out / "summary.json").write_text(EARLIER_SUMMARY % "completed")  # an earlier run's
     (out / "notes.txt").write_text("mine")
     monkeypatch.setattr(recorders, "RerunRecorder", interrupted)
     code = main(["run", str(OPEN_LOOP), "--out", str(out), "--no-camera", "--duration", "1"])
@@ -293,14 +294,14 @@ def test_out_not_writable_is_a_one_line_error(tmp_path, monkeypatch, capsys, cau
 )
 def test_a_failed_write_advises_what_its_cause_needs(tmp_path, monkeypatch, capsys, cause, fix):
     """Before: "free some space" whatever the cause (a read-only file system too)."""
-    real_open = Path.open
+    real_open = os.open
 
-    def refusing_open(self, *args, **kwargs):
-        if self.name.endswith(".partial"):
-            raise OSError(cause, os.strerror(cause), str(self))
-        return real_open(self, *args, **kwargs)
+    def refusing_open(path, *args, **kwargs):
+        if str(path).endswith(".partial"):
+            raise OSError(cause, os.strerror(cause), str(path))
+        return real_open(path, *args, **kwargs)
 
-    monkeypatch.setattr(Path, "open", refusing_open)
+    monkeypatch.setattr(os, "open", refusing_open)
     assert main(["scenarios", "copy", "paper_pbvs", str(tmp_path)]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("cdpr-twin scenarios copy: error: cannot")

@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import EARLIER_SUMMARY
 
 from cdpr_twin import plugins
 from cdpr_twin.cli import main
@@ -98,6 +99,8 @@ def _disk_fills_at(monkeypatch, out: Path, target: str, room: int = 1000) -> Non
     def fake_open(file, mode="r", *args, **kwargs):
         f = real_open(file, mode, *args, **kwargs)
         path = Path(os.fsdecode(file)) if isinstance(file, str | bytes | os.PathLike) else None
+        if isinstance(file, int):  # a descriptor the writer made (os.fdopen): its file's name
+            path = Path(os.readlink(f"/proc/self/fd/{file}"))
         writes = any(c in mode for c in "wax+")
         if writes and path is not None and path.parent == out and path.name.startswith(target):
             return _FullDisk(f, room)
@@ -202,7 +205,7 @@ def test_a_new_study_removes_the_earlier_ones_files_before_any_run(
     out = tmp_path / "study"
     shutil.copytree(done_study, out)
     (out / "runs" / "open_loop_seed9").mkdir()  # an earlier, larger study's run
-    (out / "runs" / "open_loop_seed9" / "summary.json").write_text("{}\n")
+    (out / "runs" / "open_loop_seed9" / "summary.json").write_text(EARLIER_SUMMARY % "completed")
     (out / "runs" / "notes").mkdir()  # not a run of the study's: kept
     (out / "runs" / "notes" / "todo.txt").write_text("keep me\n")
 

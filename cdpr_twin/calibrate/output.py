@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from cdpr_twin.calibrate.solver import Calibration
-from cdpr_twin.outputs import MARKERS
+from cdpr_twin.outputs import MARKERS, Marker
 from cdpr_twin.robot import DRUM_SCALE_TOLERANCE
 from cdpr_twin.se3 import quat_wxyz_from_matrix, rot_x
 
@@ -146,6 +146,8 @@ def report(cal: Calibration, extra: dict) -> dict:
 
 NAMES = MARKERS["calibration"]
 """What a calibration writes into its output directory (the report last: it marks completion)."""
+MARKER = Marker("calibration.json", frozenset({"parameters", "fit", "identifiability"}))
+"""A calibration's report (:func:`report`): its commit marker."""
 
 
 def clear(out: Path) -> None:
@@ -173,16 +175,15 @@ def write(
     """
     from cdpr_twin.interrupts import shielded
     from cdpr_twin.json_format import json_text
-    from cdpr_twin.outputs import fsync_dir, partial_of, write_partial, writing
+    from cdpr_twin.outputs import fsync_dir, write_partial, writing
 
     with writing(out):
         out.mkdir(parents=True, exist_ok=True)
     robot, rep = (out / n for n in NAMES)
-    write_partial(robot, calibrated_description(source, cal, drum_radii, beside=out))
-    write_partial(rep, json_text(report(cal, extra)))
+    files = [write_partial(robot, calibrated_description(source, cal, drum_radii, beside=out))]
+    files.append(write_partial(rep, json_text(report(cal, extra))))
     with shielded():  # a signal between the renames would split the pair
-        for path in (robot, rep):  # the report last: it marks completion
-            with writing(path):
-                os.replace(partial_of(path), path)
+        for partial in files:  # the report last: it marks completion
+            partial.commit()
     fsync_dir(out)
     return robot, rep

@@ -24,6 +24,7 @@ from cdpr_twin.campaign.table import RESULTS, ResultTable, load_table
 from cdpr_twin.campaign.worker import run_task
 from cdpr_twin.interrupts import interruption, shielded
 from cdpr_twin.outputs import (
+    Marker,
     OutputDir,
     OutputDirError,
     Terminated,
@@ -35,6 +36,10 @@ from cdpr_twin.sweep import sweep_abandoned
 
 CAMPAIGN_FILES = (RESULTS, "report.md", "*.png", "campaign.json")
 """Patterns of a campaign's own files beside its ``parts/`` and ``runs/``."""
+CAMPAIGN_OWNED = (RESULTS, "report.md", "distribution.png", "effect_*.png", "campaign.json")
+"""What a campaign replaces: in a directory without its ``campaign.json``, someone else's."""
+CAMPAIGN_MARKER = Marker("campaign.json", frozenset({"campaign", "source", "status", "runs"}))
+"""``campaign.json``, written as a campaign starts (``running``) and as it ends."""
 
 __all__ = [
     "CAMPAIGN_FILES",
@@ -80,7 +85,15 @@ def run_campaign(
         ExecutorError: Ray is asked for but cannot start.
     """
     # a single run's or a study's directory is refused (it would be emptied or mixed)
-    owner = OutputDir(out, outputs=(), foreign=others("campaign"), partials=CAMPAIGN_FILES)
+    owner = OutputDir(
+        out,
+        outputs=(),
+        foreign=others("campaign"),
+        partials=CAMPAIGN_FILES,
+        owned=CAMPAIGN_OWNED,
+        marker=CAMPAIGN_MARKER,
+        inputs=(campaign.source,),
+    )
     owner.claim()
     try:
         # parts of ≤ 1/10 of the runs (≤ 20 rows): a kill loses at most that much work

@@ -28,7 +28,7 @@ import numpy as np
 
 from cdpr_twin.campaign.spec import Campaign
 from cdpr_twin.campaign.table import load_table
-from cdpr_twin.outputs import writing
+from cdpr_twin.outputs import save_figure, write_atomic
 
 GROUPS = ("exit points", "anchor points", "E·S", "sheave radii", "camera mount", "tag placement")
 
@@ -107,12 +107,10 @@ def _figure(path: Path, draw) -> None:
     fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=110)
     draw(ax)
     fig.tight_layout()
-    partial = path.with_name(path.name + ".partial")
-    with writing(partial):
-        fig.savefig(partial, format="png")
-    plt.close(fig)
-    with writing(path):
-        partial.replace(path)
+    try:
+        save_figure(fig, path, format="png")
+    finally:
+        plt.close(fig)
 
 
 def _axis_section(columns: dict, key: str, metric: str, label: str, out: Path) -> list[str]:
@@ -305,13 +303,7 @@ def write_report(out: str | Path, campaign: Campaign) -> Path:
     lines += _estimator_section(columns, ok)
     lines += _attribution_section(campaign, rows)
     lines += _failure_section(columns, ok)
-    path = out / "report.md"
-    partial = path.with_name("report.md.partial")
-    with writing(partial):
-        partial.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    with writing(path):
-        partial.replace(path)
-    return path
+    return write_atomic(out / "report.md", "\n".join(lines) + "\n")
 
 
 def estimator_wins(columns: dict, ok: np.ndarray, block: str | None = None) -> dict:

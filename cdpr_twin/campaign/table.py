@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from cdpr_twin.json_format import finite_or_null
-from cdpr_twin.outputs import OutputDirError, OutputError, fsync_dir, partial_of, writing
+from cdpr_twin.outputs import OutputDirError, OutputError, Partial, fsync_dir, writing
 
 PARTS = "parts"
 RESULTS = "results.parquet"
@@ -98,6 +98,11 @@ class ResultTable:
         self._flushed = time.monotonic()
         self.parts = self.out / PARTS
         self._rows: list[dict] = []
+        if self.parts.is_symlink():  # its parts would be written wherever it points
+            raise OutputDirError(
+                f"{self.parts} is a symbolic link; a campaign writes its parts into a directory "
+                "of its own: remove the link, or choose another --out"
+            )
         with writing(self.parts):
             self.parts.mkdir(parents=True, exist_ok=True)
         self._next = 1 + max((int(p.stem.split("-")[1]) for p in self._files()), default=0)
@@ -155,14 +160,12 @@ class ResultTable:
 def _write(table, path: Path) -> None:
     import pyarrow.parquet as pq
 
-    partial = partial_of(path)
-    with writing(partial):
-        with partial.open("wb") as f:
-            pq.write_table(table, f)
-            f.flush()
-            os.fsync(f.fileno())
-    with writing(path):
-        os.replace(partial, path)
+    out = Partial(path)  # created afresh, never through a link; pyarrow writes into it
+    with writing(out.partial), out.file("wb") as f:
+        pq.write_table(table, f)
+        f.flush()
+        os.fsync(f.fileno())
+    out.commit()
     with contextlib.suppress(OutputError):  # (some filesystems cannot fsync a directory)
         fsync_dir(path.parent)
 

@@ -22,11 +22,10 @@ The study directory keeps the promises of a run's directory (:mod:`cdpr_twin.out
 from __future__ import annotations
 
 import contextlib
-import json
 import re
 from pathlib import Path
 
-from cdpr_twin.outputs import OutputDir, OutputDirError, partial_of, writing
+from cdpr_twin.outputs import Marker, OutputDir, OutputDirError, partial_of, writing
 
 FIGURES = ("fig5a", "fig5b", "fig7a", "fig7b", "fig8")
 """The study's figures (``<name>.png``)."""
@@ -74,12 +73,14 @@ def clear_earlier_study(out: Path) -> None:
                 run_dir.rmdir()
 
 
+MARKERS = (
+    Marker(STUDY_MARKER, frozenset({"command", "runs"})),
+    Marker("report.json", frozenset({"runs", "findings"})),
+)
+"""What marks a study's directory as ours: ``study.json`` (from its start), its report.json."""
+
+
 def _is_study(out: Path) -> bool:
     """Whether ``out`` holds a study: its marker, its ``runs.json``, or a study's report.json."""
-    if (out / STUDY_MARKER).is_file() or (out / "runs.json").is_file():
-        return True
-    try:
-        report = json.loads((out / "report.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return False
-    return isinstance(report, dict) and {"runs", "findings"} <= report.keys()
+    runs = out / "runs.json"
+    return (runs.is_file() and not runs.is_symlink()) or any(m.written_by_us(out) for m in MARKERS)
