@@ -174,11 +174,11 @@ def test_a_module_name_that_is_a_file_beside_the_scenario_says_to_add_py(tmp_pat
 def test_register_refuses_what_could_not_run_and_build_checks_the_bounds():
     from cdpr_twin.controllers.base import Controller
 
-    class NoUpdate(Estimator):  # abstract: update() left out
-        name = "no_update"
+    class NoStep(Estimator):  # abstract: neither _step() nor update() written
+        name = "no_step"
 
-    with pytest.raises(TypeError, match=r"NoUpdate: implement update \(abstract in Estimator\)"):
-        plugins.register(NoUpdate)
+    with pytest.raises(TypeError, match=r"NoStep: implement _step \(abstract in Estimator\)"):
+        plugins.register(NoStep)
 
     class DuckTyped:  # the right attributes, not an Estimator
         kind, name, Options = "estimator", "duck_typed", MidpointOptions

@@ -1,5 +1,10 @@
 """The estimators' common interface: reset at a known pose, update from a Measurement.
 
+:meth:`Estimator.update` is a template method: it checks the reset, holds the estimate on a
+measurement whose time is not finite, runs the sensor watches the class declares in
+:attr:`Estimator.watches`, then calls :meth:`Estimator._step`, where each estimator does only
+its own work.
+
 An estimator sees the nominal geometry, measurements and — when it declares them in
 :attr:`Estimator.inputs` — the current estimates of other estimators (a fusing estimator);
 never MuJoCo, never ground truth.
@@ -7,6 +12,7 @@ never MuJoCo, never ground truth.
 
 from __future__ import annotations
 
+import enum
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from types import MappingProxyType
@@ -105,6 +111,21 @@ class EncoderWatch:
         return tuple(int(i) for i in np.flatnonzero(np.abs(total) > self.threshold))
 
 
+class SensorWatch(enum.Flag):
+    """The sensor watches an estimator declares in :attr:`Estimator.watches`.
+
+    :meth:`Estimator.update` runs the declared ones on every measurement with a finite time,
+    before :meth:`Estimator._step`, and passes their flags to it.
+    """
+
+    NONE = 0
+    """No watch: the estimator reads neither encoders nor tensions, or judges them itself."""
+    ENCODERS = enum.auto()
+    """:class:`EncoderWatch`: ``ENCODER_MISMATCH`` while an encoder disagrees with its commands."""
+    TENSIONS = enum.auto()
+    """:class:`TensionWatch`: ``TENSION_STUCK`` while a tension sensor reads a constant."""
+
+
 NO_INPUTS: Mapping[str, PoseEstimate] = MappingProxyType({})
 
 
@@ -112,8 +133,16 @@ class Estimator(ABC):
     """A moving-platform pose estimator (paper §III). All start from a known pose.
 
     Subclasses set ``name`` and ``Options`` (a frozen dataclass whose fields are the
-    estimator's scenario options, see :mod:`cdpr_twin.plugins`) and are registered with
-    :func:`cdpr_twin.plugins.register`.
+    estimator's scenario options, see :mod:`cdpr_twin.plugins`), declare the sensor
+    ``watches`` they want, implement :meth:`_step` and are registered with
+    :func:`cdpr_twin.plugins.register`. :meth:`update` does what every estimator needs before
+    its step: it refuses an estimator never reset, holds the estimate (flag
+    ``non_finite_input``) on a measurement whose time is NaN or infinite, and runs the declared
+    watches.
+
+    An estimator written against the older interface, which overrides :meth:`update` whole and
+    has no :meth:`_step`, still works: it does its own checks, as before. To port one, move the
+    body of its ``update`` after those checks into ``_step`` and declare its ``watches``.
 
     Args:
         geometry: the *nominal* robot geometry the estimator believes in.
@@ -127,6 +156,25 @@ class Estimator(ABC):
     """Whether it reads tag detections (dropped from the passive set when the camera is off)."""
     reports_covariance: ClassVar[bool] = False
     """Whether its estimates carry a covariance (recorded in ``timeseries.csv`` and Rerun)."""
+    watches: ClassVar[SensorWatch] = SensorWatch.NONE
+    """The sensor watches :meth:`update` runs before :meth:`_step` (their flags reach it)."""
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """Refuse a ``watches`` that is no :class:`SensorWatch`; excuse ``update()`` overriders.
+
+        Raises:
+            TypeError: ``watches`` is not a :class:`SensorWatch`.
+        """
+        super().__init_subclass__(**kwargs)
+        if not isinstance(cls.watches, SensorWatch):
+            raise TypeError(
+                f"{cls.__name__}: watches must be a SensorWatch (e.g. SensorWatch.ENCODERS | "
+                f"SensorWatch.TENSIONS, or SensorWatch.NONE), got {cls.watches!r}"
+            )
+        if cls.update is not Estimator.update and getattr(cls._step, "__isabstractmethod__", False):
+            # Written against the older interface: its update() does the whole job, so it
+            # needs no _step. Set here, before ABCMeta lists the abstract methods left.
+            cls._step = _no_step
 
     def __init__(self, geometry: CdprGeometry, options: Any = None) -> None:
         self.geometry = geometry
@@ -148,16 +196,26 @@ class Estimator(ABC):
         self._ready = True
         self._encoders, self._tensions = EncoderWatch(), TensionWatch()
 
-    def _encoder_flags(self, m: Measurement, tensions: bool = False) -> frozenset[str]:
-        """What the sensor watches see in one measurement.
+    def _watch_flags(self, m: Measurement, watches: SensorWatch) -> frozenset[str]:
+        """What the ``watches`` see in one measurement (each watch ingests it).
 
-        ``ENCODER_MISMATCH`` while an encoder disagrees with its commands; with ``tensions``,
-        ``TENSION_STUCK`` while a sensor reads a constant.
+        ``ENCODER_MISMATCH`` while an encoder disagrees with its commands; ``TENSION_STUCK``
+        while a tension sensor reads a constant.
         """
-        flags = {ENCODER_MISMATCH} if self._encoders.check(m) else set()
-        if tensions and self._tensions.check(m.tensions):
+        flags = set()
+        if SensorWatch.ENCODERS in watches and self._encoders.check(m):
+            flags.add(ENCODER_MISMATCH)
+        if SensorWatch.TENSIONS in watches and self._tensions.check(m.tensions):
             flags.add(TENSION_STUCK)
         return frozenset(flags)
+
+    def _encoder_flags(self, m: Measurement, tensions: bool = False) -> frozenset[str]:
+        """The encoder watch's flags (and the tension watch's, with ``tensions``).
+
+        For estimators that override :meth:`update` whole; the others declare ``watches``.
+        """
+        watches = SensorWatch.ENCODERS | (SensorWatch.TENSIONS if tensions else SensorWatch.NONE)
+        return self._watch_flags(m, watches)
 
     @property
     def inputs(self) -> tuple[str, ...]:
@@ -180,19 +238,62 @@ class Estimator(ABC):
         return PoseEstimate(self._time, self._T, valid=False, flags=frozenset({NON_FINITE_INPUT}))
 
     def _held(self, m: Measurement, *flags: str, **extra) -> PoseEstimate:
+        """The last pose at the measurement's time, not valid, with ``flags`` and ``extra``."""
         self._time = m.time
         return PoseEstimate(m.time, self._T, valid=False, flags=frozenset(flags), **extra)
 
-    @abstractmethod
     def update(
         self, measurement: Measurement, inputs: Mapping[str, PoseEstimate] = NO_INPUTS
     ) -> PoseEstimate:
         """Update from one measurement and return the new estimate.
 
+        Checks the reset; holds the last estimate, flagged ``non_finite_input``, when the
+        measurement's time is NaN or infinite (no watch runs, :meth:`_step` is not called);
+        runs the declared :attr:`watches`; then returns :meth:`_step`'s estimate.
+
         Args:
             measurement: the sensors' reading.
             inputs: this tick's estimates of the estimators named by :attr:`inputs`.
+
+        Raises:
+            RuntimeError: :meth:`reset` was never called.
         """
+        self._check_reset()
+        if (held := self._bad_time(measurement)) is not None:
+            return held
+        watch_flags = self._watch_flags(measurement, self.watches)
+        return self._step(measurement, inputs, watch_flags)
+
+    @abstractmethod
+    def _step(
+        self,
+        measurement: Measurement,
+        inputs: Mapping[str, PoseEstimate],
+        watch_flags: frozenset[str],
+    ) -> PoseEstimate:
+        """The estimator's own update, once :meth:`update` has checked reset, time and watches.
+
+        Args:
+            measurement: the sensors' reading; its time is finite.
+            inputs: this tick's estimates of the estimators named by :attr:`inputs`.
+            watch_flags: the flags the declared :attr:`watches` raised on this measurement
+                (empty without watches); the step decides which of its estimates carry them.
+
+        Returns:
+            The new estimate (a held one: see :meth:`_held`).
+        """
+
+
+def _no_step(
+    self: Estimator,
+    measurement: Measurement,
+    inputs: Mapping[str, PoseEstimate],
+    watch_flags: frozenset[str],
+) -> PoseEstimate:
+    """The ``_step`` of an estimator that overrides ``update`` whole: never called by it."""
+    raise NotImplementedError(
+        f"{type(self).__name__} overrides update() whole and has no _step(); call its update()"
+    )
 
 
 def update_order(

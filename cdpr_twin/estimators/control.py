@@ -6,7 +6,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from cdpr_twin.estimators.base import NO_INPUTS, NO_TWIST, NON_FINITE_INPUT, Estimator
+from cdpr_twin.estimators.base import NO_TWIST, NON_FINITE_INPUT, Estimator, SensorWatch
 from cdpr_twin.plugins import register
 from cdpr_twin.se3 import se3_exp
 from cdpr_twin.types import Measurement, PoseEstimate
@@ -20,16 +20,16 @@ class ControlEstimator(Estimator):
     """
 
     name = "control"
+    watches = SensorWatch.ENCODERS
 
-    def update(
-        self, measurement: Measurement, inputs: Mapping[str, PoseEstimate] = NO_INPUTS
+    def _step(
+        self,
+        measurement: Measurement,
+        inputs: Mapping[str, PoseEstimate],
+        watch_flags: frozenset[str],
     ) -> PoseEstimate:
         """Compose the estimate with the exponential of the last commanded twist."""
-        self._check_reset()
         m = measurement
-        if (held := self._bad_time(m)) is not None:
-            return held
-        watch = self._encoder_flags(m)
         dt = m.time - self._time
         if not np.isfinite(dt) or dt < 0:
             raise ValueError(
@@ -45,4 +45,4 @@ class ControlEstimator(Estimator):
             return self._held(m, NON_FINITE_INPUT)
         self._T = self._T @ se3_exp(np.asarray(twist) * dt)
         self._time = m.time
-        return PoseEstimate(m.time, self._T, flags=watch)
+        return PoseEstimate(m.time, self._T, flags=watch_flags)

@@ -28,7 +28,7 @@ import numpy as np
 
 from cdpr_twin.estimators import fused_core as fc
 from cdpr_twin.estimators import fused_models as fm
-from cdpr_twin.estimators.base import NO_INPUTS, NON_FINITE_INPUT, TAG_LOST, Estimator
+from cdpr_twin.estimators.base import NON_FINITE_INPUT, TAG_LOST, Estimator
 from cdpr_twin.estimators.solvers import _cable_tuples
 from cdpr_twin.geometry import CdprGeometry
 from cdpr_twin.plugins import OptionError, option, register
@@ -312,14 +312,14 @@ class FusedEstimator(Estimator):
             self._inject(dx)
         return set()
 
-    def update(
-        self, measurement: Measurement, inputs: Mapping[str, PoseEstimate] = NO_INPUTS
+    def _step(
+        self,
+        measurement: Measurement,
+        inputs: Mapping[str, PoseEstimate],
+        watch_flags: frozenset[str],
     ) -> PoseEstimate:
         """Predict with the last command, then fuse the cables and the tag."""
-        self._check_reset()
         m = measurement
-        if (held := self._bad_time(m)) is not None:
-            return held
         dt = m.time - self._time
         if not dt >= 0:
             raise ValueError(f"fused: measurement time {m.time} s precedes {self._time} s")

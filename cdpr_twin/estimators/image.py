@@ -10,7 +10,6 @@ import numpy as np
 
 from cdpr_twin.estimators.base import (
     NO_CAMERA,
-    NO_INPUTS,
     NON_FINITE_INPUT,
     REANCHORED,
     TAG_LOST,
@@ -75,14 +74,14 @@ class ImageEstimator(Estimator):
         self._T_base_tag = None
         self._had_tag = False
 
-    def update(
-        self, measurement: Measurement, inputs: Mapping[str, PoseEstimate] = NO_INPUTS
+    def _step(
+        self,
+        measurement: Measurement,
+        inputs: Mapping[str, PoseEstimate],
+        watch_flags: frozenset[str],
     ) -> PoseEstimate:
         """Compose the estimate from the reference detection and this one."""
-        self._check_reset()
         m = measurement
-        if (held := self._bad_time(m)) is not None:
-            return held
         if m.tag is None:
             self._had_tag = False
             return self._held(m, TAG_LOST if m.camera_on else NO_CAMERA)

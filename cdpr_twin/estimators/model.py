@@ -25,10 +25,10 @@ from cdpr_twin.estimators import newton
 from cdpr_twin.estimators.base import (
     FEW_TAUT_CABLES,
     ILL_CONDITIONED,
-    NO_INPUTS,
     NON_FINITE_INPUT,
     NOT_CONVERGED,
     Estimator,
+    SensorWatch,
 )
 from cdpr_twin.estimators.selection import (
     N_USED,
@@ -119,6 +119,7 @@ class ModelEstimator(Estimator):
     """
 
     Options = ModelOptions
+    watches = SensorWatch.ENCODERS | SensorWatch.TENSIONS
     elastic: ClassVar[bool] = False
     pulley: ClassVar[bool] = False
 
@@ -214,21 +215,20 @@ class ModelEstimator(Estimator):
             cables = best_conditioned(rows, tensions, taut)
         return cables, condition_number(rows[cables])
 
-    def update(
-        self, measurement: Measurement, inputs: Mapping[str, PoseEstimate] = NO_INPUTS
+    def _step(
+        self,
+        measurement: Measurement,
+        inputs: Mapping[str, PoseEstimate],
+        watch_flags: frozenset[str],
     ) -> PoseEstimate:
         """One pass of Algorithm 1's loop (lines 7-12), with the chosen cable selection."""
-        self._check_reset()
         m = measurement
-        if (held := self._bad_time(m)) is not None:
-            return held
-        watch = self._encoder_flags(m, tensions=True)
         lengths, tensions = m.cable_lengths, m.tensions
         if not math.isfinite(float(lengths.sum() + tensions.sum())):  # NaN/inf propagate
             return self._held(m, NON_FINITE_INPUT)
         tl = tensions.tolist()
         if self.selection != "most_tensioned":
-            return self._update_selected(m, lengths, tensions, watch)
+            return self._update_selected(m, lengths, tensions, watch_flags)
         cables = most_tensioned(tl)  # line 8
         used = tuple(cables)
         if sum(t > self.taut_threshold for t in tl) < N_USED:
@@ -237,18 +237,26 @@ class ModelEstimator(Estimator):
         T, residual, iterations = self.solve(targets, cables, self._T)
         if not (residual <= self.max_residual and math.isfinite(T.sum())):
             return self._held(
-                m, NOT_CONVERGED, *watch, cables=used, residual=residual, iterations=iterations
+                m,
+                NOT_CONVERGED,
+                *watch_flags,
+                cables=used,
+                residual=residual,
+                iterations=iterations,
             )
         self._T = T
         self._time = m.time
         return PoseEstimate(
-            m.time, T, flags=watch, cables=used, residual=residual, iterations=iterations
+            m.time, T, flags=watch_flags, cables=used, residual=residual, iterations=iterations
         )
 
     def _update_selected(
-        self, m: Measurement, lengths: np.ndarray, tensions: np.ndarray, watch: frozenset
+        self, m: Measurement, lengths: np.ndarray, tensions: np.ndarray, watch_flags: frozenset[str]
     ) -> PoseEstimate:
-        """:meth:`update` for ``best_conditioned`` and ``all_taut`` (``watch``: its flags)."""
+        """:meth:`_step` for ``best_conditioned`` and ``all_taut``.
+
+        ``watch_flags``: the flags of the watches, carried by a solved or unconverged estimate.
+        """
         taut = tensions > self.taut_threshold
         if taut.sum() < N_USED:
             return self._held(m, FEW_TAUT_CABLES, cables=tuple(np.flatnonzero(taut).tolist()))
@@ -266,12 +274,17 @@ class ModelEstimator(Estimator):
             ok = residual <= self.max_residual
         if not (ok and math.isfinite(T.sum())):
             return self._held(
-                m, NOT_CONVERGED, *watch, cables=used, residual=residual, iterations=iterations
+                m,
+                NOT_CONVERGED,
+                *watch_flags,
+                cables=used,
+                residual=residual,
+                iterations=iterations,
             )
         self._T = T
         self._time = m.time
         return PoseEstimate(
-            m.time, T, flags=watch, cables=used, residual=residual, iterations=iterations
+            m.time, T, flags=watch_flags, cables=used, residual=residual, iterations=iterations
         )
 
 
