@@ -19,6 +19,7 @@ from typing import Any
 from cdpr_twin import plugins, resources
 from cdpr_twin.deviations import DeviationSpec
 from cdpr_twin.events import EVENT_KINDS, Event
+from cdpr_twin.input_files import shown
 from cdpr_twin.options import (
     OptionReader,
     ScenarioError,
@@ -100,7 +101,7 @@ def read_plugins(top: OptionReader) -> tuple[str, ...]:
     """``plugins``: import them (they register estimators or controllers) and list them."""
     refs = top.raw("plugins", [], "list of module names or .py files")
     if not isinstance(refs, list) or not all(isinstance(x, str) and "\x00" not in x for x in refs):
-        raise top.fail("plugins", f"must be a list of module names or .py files, got {refs!r}")
+        raise top.fail("plugins", f"must be a list of module names or .py files, got {shown(refs)}")
     try:
         plugins.load_modules(refs, top.source.parent)
     except Exception as exc:  # an import error in the user's module: say which and why
@@ -147,7 +148,7 @@ def read_nominal(m: OptionReader, source: Path) -> Path | None:
     path = path if path.is_absolute() else (source.parent / path).resolve()
     kind = path_kind(path, lambda why: m.fail("nominal", why))
     if kind != "file":
-        what = "is a directory" if kind == "dir" else "not found"
+        what = {"dir": "is a directory", "other": "is not a regular file"}.get(kind, "not found")
         raise m.fail("nominal", f"{path} {what}; give a robot.toml (cdpr-twin calibrate)")
     return path
 
@@ -174,7 +175,7 @@ def read_payload_com(m: OptionReader) -> tuple[float, ...]:
     if not ok or not all(
         isinstance(v, number) and not isinstance(v, bool) and math.isfinite(v) for v in com
     ):
-        raise m.fail("payload_com_m", f"must be 3 numbers [x, y, z] in metres, got {com!r}")
+        raise m.fail("payload_com_m", f"must be 3 numbers [x, y, z] in metres, got {shown(com)}")
     return tuple(float(v) for v in com)
 
 
