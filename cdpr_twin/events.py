@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
 from cdpr_twin.plugins import OptionError, option
+from cdpr_twin.realism_limits import MAX_TENSION_READING
 
 
 class StepHook(Protocol):
@@ -210,8 +211,12 @@ class TensionSensorFail(_OnCable):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if math.isinf(self.value):
-            raise OptionError("value", f"must be a finite force or nan, got {self.value}")
+        if math.isinf(self.value) or abs(self.value) > MAX_TENSION_READING:
+            raise OptionError(
+                "value",
+                f"must be nan or a force within ±{MAX_TENSION_READING:g} N (no cable robot's "
+                f"sensor reads more), got {self.value:g}",
+            )
 
     def apply(self, physics: Any, sensors: Any) -> None:
         """Freeze the sensor."""

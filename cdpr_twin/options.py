@@ -88,7 +88,7 @@ class OptionReader:
                 f"must be {'>' if exclusive else '≥'} {minimum}"
                 f"{' ' + unit if unit else ''}, got {shown(v)}",
             )
-        return float(v)
+        return float(v) + 0.0  # a file's -0.0 is zero: +0.0 (numpy refuses a scale of -0.0)
 
     def integer(self, key: str, default: Any = ..., minimum: int | None = None) -> int:
         """An integer, at least ``minimum``."""
@@ -126,11 +126,16 @@ class OptionReader:
             )
         return _frozen_array(pose_from_vector(v))
 
-    def list_of(self, key: str, kind: str) -> list:
-        """A list (of anything; items are checked by the caller)."""
+    def list_of(self, key: str, kind: str, spec: Any = None) -> list:
+        """A list (of anything; items are checked by the caller), at most ``spec.max_items``."""
         v = self.raw(key, kind=f"list of {kind}")
         if not isinstance(v, list):
             raise self.fail(key, f"must be a list of {kind}, got {shown(v)}")
+        most = None if spec is None else spec.max_items
+        if most is not None and len(v) > most:
+            raise self.fail(
+                key, f"must list at most {most} {kind}{spec.max_items_why}, got {len(v)}"
+            )
         return v
 
     def table_of(self, key: str, required: bool = True) -> OptionReader:
@@ -160,7 +165,7 @@ def _read_field(r: OptionReader, f: dataclasses.Field, hint: Any) -> Any:
     origin, args = typing.get_origin(hint), typing.get_args(hint)
     if spec.pose:
         if origin is tuple:
-            items = r.list_of(key, "poses [x, y, z, rx, ry, rz] (m, deg)")
+            items = r.list_of(key, "poses [x, y, z, rx, ry, rz] (m, deg)", spec)
             if not items:
                 raise r.fail(key, "must be a non-empty list of poses [x, y, z, rx, ry, rz]")
             value: Any = tuple(r.pose(f"{key}[{i}]", p) for i, p in enumerate(items))
@@ -179,7 +184,7 @@ def _read_field(r: OptionReader, f: dataclasses.Field, hint: Any) -> Any:
     elif hint is str or origin is Literal:
         value = r.string(key, choices=tuple(args) if origin is Literal else ())
     elif origin is tuple and args[0] is float:
-        items = r.list_of(key, f"numbers{' in ' + spec.unit if spec.unit else ''}")
+        items = r.list_of(key, f"numbers{' in ' + spec.unit if spec.unit else ''}", spec)
         value = tuple(
             r.number(f"{key}[{i}]", value=x, minimum=spec.minimum, exclusive=spec.exclusive,
                      unit=spec.unit)
@@ -187,7 +192,7 @@ def _read_field(r: OptionReader, f: dataclasses.Field, hint: Any) -> Any:
         )  # fmt: skip
         value = tuple(map(math.radians, value)) if spec.unit == "deg" else value
     elif origin is tuple and args[0] is str:
-        items = r.list_of(key, "strings")
+        items = r.list_of(key, "strings", spec)
         if not all(isinstance(x, str) for x in items):
             raise r.fail(key, f"must be a list of strings, got {shown(items)}")
         value = tuple(items)

@@ -28,7 +28,9 @@ from cdpr_twin.options import (
     ScenarioError,
     parse_options,
 )
+from cdpr_twin.plugins import OptionError
 from cdpr_twin.realism import Realism, profile, without_source
+from cdpr_twin.realism_limits import MAX_TENSION_NOISE_STD, TENSION_NOISE_WHY, check_at_most
 from cdpr_twin.robot_schema import MAX_TIMESTEP, MIN_TIMESTEP
 from cdpr_twin.scenario_tables import (
     MonitorConfig,
@@ -377,6 +379,12 @@ def _scenario(top: OptionReader, source: Path) -> Scenario:
         s.boolean("tag_window", False),
     )  # fmt: skip
     s.done()
+    try:
+        check_at_most(
+            "tension_noise_std", sensors.tension_noise_std, MAX_TENSION_NOISE_STD, TENSION_NOISE_WHY
+        )
+    except OptionError as exc:
+        raise s.fail(exc.field, exc.problem) from None
     st = top.table_of("start")
     start = st.pose("pose")
     st.done()
