@@ -59,10 +59,9 @@ def fire_due(hooks: list[StepHook], time: float, dt: float, chunk: int) -> int:
         if next_time <= time + 0.5 * dt:
             hook.fire(time + 0.5 * dt)
             next_time = hook.next_time()
-        if math.isfinite(next_time):
-            steps = math.ceil((next_time - time) / dt - 0.5)
-            if 0 < steps < chunk:
-                chunk = steps
+        ahead = (next_time - time) / dt - 0.5  # (inf, never due, for a time past 1e308 steps)
+        if 0 < ahead <= chunk - 1:  # its step, rounded up, is due before the chunk ends
+            chunk = math.ceil(ahead)
     return chunk
 
 

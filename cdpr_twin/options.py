@@ -21,6 +21,11 @@ from cdpr_twin.input_files import elided, shown
 from cdpr_twin.plugins import OptionError, spec_of
 from cdpr_twin.se3 import pose_from_vector
 
+MAX_POSITION = 1000.0
+"""The largest coordinate of a pose's position in a file [m]: the largest cable robots span
+hundreds of metres; beyond a kilometre the number is a typo (and 1e308 overflows the frame's
+arithmetic)."""
+
 
 class ScenarioError(ValueError):
     """A scenario file is missing, malformed, or has a bad field."""
@@ -123,6 +128,12 @@ class OptionReader:
         if not isinstance(v, list) or len(v) != 6 or not all(_is_number(x) for x in v):
             raise self.fail(
                 key, f"must be a pose [x, y, z, rx, ry, rz] in m and degrees, got {shown(v)}"
+            )
+        if any(abs(x) > MAX_POSITION for x in v[:3]):
+            raise self.fail(
+                key,
+                f"its position must be within ±{MAX_POSITION:g} m (no cable robot's frame is "
+                f"larger), got {shown(v)}",
             )
         return _frozen_array(pose_from_vector(v))
 

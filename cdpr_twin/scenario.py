@@ -312,7 +312,9 @@ def _model(top: OptionReader, source: Path) -> ModelConfig:
     payload = m.number("payload_kg", 0.0, minimum=0, unit="kg"), read_payload_com(m)
     m.done(("file", "nominal"))
     steps = 1.0 / control_rate / timestep  # whole as the run steps it (winch.whole_steps)
-    whole = math.isclose(round(steps) * timestep, 1.0 / control_rate, rel_tol=1e-9, abs_tol=1e-12)
+    whole = math.isfinite(steps) and math.isclose(
+        round(steps) * timestep, 1.0 / control_rate, rel_tol=1e-9, abs_tol=1e-12
+    )
     if not whole or round(steps) < 1:
         raise m.fail(
             "control_rate",

@@ -111,8 +111,10 @@ def _load_spec(path: Path) -> mujoco.MjSpec:
     path = Path(path)
     kind = path_kind(path, ModelError)
     if kind == "dir":
-        raise ModelError(f"model file {path} is a directory; give an MJCF file in it, such as "
-                         "models/acrobot/scene.xml")  # fmt: skip
+        raise ModelError(
+            f"model file {path} is a directory; give an MJCF file in it, such as "
+            "models/acrobot/scene.xml"
+        )
     if kind is None:
         raise ModelError(
             f"model file {path} not found; pass the path of an MJCF file such as "
