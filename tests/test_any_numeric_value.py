@@ -18,7 +18,7 @@ import typing
 import warnings
 from pathlib import Path
 
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from cdpr_twin.cli import main
@@ -82,8 +82,9 @@ NUMBERS = st.one_of(
 
 @st.composite
 def _changes(draw) -> list[tuple[tuple, object]]:
-    """One to three fields, each given a drawn value (a list: a drawn list, or one item)."""
-    out = []
+    """One to three fields, each given a drawn value (a list: a drawn list, or one item), under
+    either realism profile (the ideal one reads [sensors]' noise, the acrobot one its own)."""
+    out = [(("realism", "profile"), draw(st.sampled_from(["ideal", "acrobot"])))]
     for path, kind in draw(st.lists(st.sampled_from(FIELDS), min_size=1, max_size=3)):
         if kind == "numbers" and draw(st.booleans()):
             value = draw(st.lists(NUMBERS, min_size=0, max_size=6))
@@ -145,13 +146,20 @@ def _strict_json(text: str):
 
 
 @settings(
-    max_examples=30,
+    max_examples=100,
     deadline=None,
     derandomize=True,
     database=None,
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
 )
 @given(changes=_changes())
+@example(changes=[(("controller", "waypoints", 2, 0), 1e308)])  # was numpy's overflow warning
+@example(changes=[(("model", "control_rate"), 5e-324)])  # was an OverflowError traceback
+@example(changes=[(("events", 1, "at"), 1e308)])  # was "the run failed: OverflowError"
+@example(  # was ±inf tensions, exit 0
+    changes=[(("realism", "profile"), "ideal"), (("sensors", "tension_noise_std"), 1e308)]
+)
+@example(changes=[(("truth", "exit_point_std"), -0.0)])  # was "model: scale < 0"
 def test_any_number_in_any_numeric_field_is_refused_in_one_line_or_runs_finite(
     changes, tmp_path_factory, capsys
 ):
