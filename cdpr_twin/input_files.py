@@ -59,7 +59,12 @@ def elided(text: str) -> str:
 
 
 def read_bytes(
-    path: Path, what: str, limit: int, error: Callable[[str], Exception], content: bool = True
+    path: Path,
+    what: str,
+    limit: int,
+    error: Callable[[str], Exception],
+    content: bool = True,
+    in_directory: str = "",
 ) -> bytes:
     """The content of a regular file of at most ``limit`` bytes, refused before reading else.
 
@@ -72,6 +77,8 @@ def read_bytes(
         limit: the most bytes it may hold.
         error: makes the caller's exception from a one-line message.
         content: read it; ``False``: only check it (a file a library reads itself), ``b""``.
+        in_directory: the name the file has in a directory given instead ("robot.toml"), for
+            the fix the error says.
 
     Raises:
         Exception: ``error``'s, naming the path: missing, not a regular file, too large,
@@ -82,7 +89,7 @@ def read_bytes(
     except (FileNotFoundError, NotADirectoryError):
         raise error(f"{path}: {what} not found") from None
     except IsADirectoryError:
-        raise error(f"{path}: a directory, not a {what}") from None
+        raise error(_directory(path, what, in_directory)) from None
     except ValueError:  # "embedded null byte"
         raise error(f"{shown(str(path))}: a path cannot hold a NUL character") from None
     except OSError as exc:
@@ -90,7 +97,7 @@ def read_bytes(
     try:
         info = os.fstat(fd)
         if stat.S_ISDIR(info.st_mode):
-            raise error(f"{path}: a directory, not a {what}")
+            raise error(_directory(path, what, in_directory))
         if not stat.S_ISREG(info.st_mode):
             raise error(f"{path} is not a regular file (a device, FIFO or socket); give a {what}")
         if info.st_size > limit:
@@ -109,18 +116,21 @@ def read_bytes(
     return data
 
 
-def read_toml(path: Path, what: str, error: Callable[[str], Exception]) -> dict:
+def read_toml(
+    path: Path, what: str, error: Callable[[str], Exception], in_directory: str = ""
+) -> dict:
     """A TOML input file, parsed and checked (:func:`read_bytes`, :func:`check_shape`).
 
     Args:
         path: the file.
         what: what it is, for messages ("scenario file").
         error: makes the caller's exception from a one-line message.
+        in_directory: the name the file has in a directory given instead (:func:`read_bytes`).
 
     Raises:
         Exception: ``error``'s, naming the path and what is wrong.
     """
-    raw = read_bytes(path, what, MAX_TOML_BYTES, error)
+    raw = read_bytes(path, what, MAX_TOML_BYTES, error, in_directory=in_directory)
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -161,6 +171,11 @@ def check_shape(data: Any, path: Path, error: Callable[[str], Exception]) -> Non
                     f"{MAX_ARRAY_ITEMS} an array may hold; give fewer"
                 )
             stack.extend((v, f"{where}[{i}]", depth + 1) for i, v in enumerate(node))
+
+
+def _directory(path: Path, what: str, in_directory: str) -> str:
+    fix = f"; give its {in_directory}" if in_directory else ""
+    return f"{path}: a directory, not a {what}{fix}"
 
 
 def _too_deep(path: Path, where: str = "") -> str:

@@ -322,7 +322,7 @@ def _scene(scene: _Table, outer_min: np.ndarray, outer_max: np.ndarray) -> dict:
 
 
 def _read(path: Path) -> dict:
-    return read_toml(path, "robot description", RobotError)
+    return read_toml(path, "robot description", RobotError, in_directory="robot.toml")
 
 
 def load_robot(path: str | Path) -> Robot:
