@@ -42,15 +42,15 @@ MAX_PULLEY_RADIUS_STD = 0.01
 """The largest std of a sheave's radius [m] (1 cm): sheaves are machined to ±0.2 mm, and a draw
 off by centimetres is another pulley (ACROBOT's sheaves have a 4.5 mm radius)."""
 MAX_TENSION_NOISE_STD = 1000.0
-"""The largest std of a tension reading's noise or bias [N]: sensors are good to 0.1 % of their
-span (ACROBOT 0.01 N, COGIRO 5 N); 1 kN is noise beyond the span of ACROBOT's sensors tenfold
-and a sixth of COGIRO's (6 kN), where a reading says nothing more."""
+"""The largest std of a tension reading's noise or bias [N]: sensors repeat to 0.1 % of their
+span or better (ACROBOT 0.01 N of 100 N, COGIRO 5 N of 7 kN); 1 kN is ten times the whole span
+of ACROBOT's sensors, a reading that says nothing of the tension."""
 TENSION_NOISE_WHY = " N (beyond the span of ACROBOT's sensors tenfold: a reading says nothing)"
 """Why :data:`MAX_TENSION_NOISE_STD` bounds a tension noise, as a message says it."""
 MAX_TENSION_READING = 1e6
-"""The largest force a failed tension sensor may read [N], either way (1 MN): a hundred times the
-range of the largest shipped robot's sensors (COGIRO's 6 kN); beyond it a reading is no force
-any cable robot meets, and its squares near the float range in the estimators' arithmetic."""
+"""The largest force a failed tension sensor may read [N], either way (1 MN): over 150 times
+the top of the largest shipped robot's range (COGIRO's 6 kN); beyond it a reading is no force
+a cable robot's sensor outputs (1e300 was accepted, and read for the rest of the run)."""
 
 
 def check_relative_std(field: str, std: float, what: str) -> None:
