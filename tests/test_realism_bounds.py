@@ -146,36 +146,77 @@ FAIL = '\n[[events]]\nkind = "tension_sensor_fail"\nat = 0.04\ncable = 2\nvalue 
     ("old", "ok", "bad", "match"),
     [
         # before: ±1e308 and inf tensions written, status "completed"
-        ("tension_noise_std = 0.24", "tension_noise_std = 1000.0", "tension_noise_std = 1e308",
-         r"sensors\.tension_noise_std: must be ≤ 1000 N \(.*\), got 1e\+308"),
+        (
+            "tension_noise_std = 0.24",
+            "tension_noise_std = 1000.0",
+            "tension_noise_std = 1e308",
+            r"sensors\.tension_noise_std: must be ≤ 1000 N \(.*\), got 1e\+308",
+        ),
         # before: an 8-line array in the error ("CdprGeometry.a_base contains NaN or inf: [[…")
-        ("exit_point_std = 0.012", "exit_point_std = 1.0", "exit_point_std = 1e308",
-         r"truth\.exit_point_std: must be ≤ 1 m \(.*\), got 1e\+308"),
-        ("anchor_point_std = 0.004", "anchor_point_std = 1.0", "anchor_point_std = 1.5",
-         r"truth\.anchor_point_std: must be ≤ 1 m"),
-        ("pulley_radius_std = 0.0002", "pulley_radius_std = 0.01", "pulley_radius_std = 0.02",
-         r"truth\.pulley_radius_std: must be ≤ 0\.01 m \(sheaves"),
-        ("es_scale_std = 0.10", "es_scale_std = 0.1", "es_scale_std = 0.2",
-         r"truth\.es_scale_std: must be ≤ 0\.1 \(a relative std"),
+        (
+            "exit_point_std = 0.012",
+            "exit_point_std = 1.0",
+            "exit_point_std = 1e308",
+            r"truth\.exit_point_std: must be ≤ 1 m \(.*\), got 1e\+308",
+        ),
+        (
+            "anchor_point_std = 0.004",
+            "anchor_point_std = 1.0",
+            "anchor_point_std = 1.5",
+            r"truth\.anchor_point_std: must be ≤ 1 m",
+        ),
+        (
+            "pulley_radius_std = 0.0002",
+            "pulley_radius_std = 0.01",
+            "pulley_radius_std = 0.02",
+            r"truth\.pulley_radius_std: must be ≤ 0\.01 m \(sheaves",
+        ),
+        (
+            "es_scale_std = 0.10",
+            "es_scale_std = 0.1",
+            "es_scale_std = 0.2",
+            r"truth\.es_scale_std: must be ≤ 0\.1 \(a relative std",
+        ),
         # before: "model: math domain error"
-        ("camera_rotation_std_deg = 0.3", "camera_rotation_std_deg = 10.0",
-         "camera_rotation_std_deg = 1e308", r"truth\.camera_rotation_std_deg: must be ≤ 10°"),
-        ("tag_position_std = 0.001", "tag_position_std = 1.0", "tag_position_std = 2.0",
-         r"truth\.tag_position_std: must be ≤ 1 m"),
-        ("tag_rotation_std_deg = 0.3", "tag_rotation_std_deg = 10.0",
-         "tag_rotation_std_deg = 10.5", r"truth\.tag_rotation_std_deg: must be ≤ 10°"),
-        ('profile = "acrobot"', 'profile = "acrobot"\n[realism.tension]\nnoise_std = 1000.0',
-         'profile = "acrobot"\n[realism.tension]\nnoise_std = 1e308',
-         r"realism\.tension\.noise_std: must be ≤ 1000 N"),
-        ('profile = "acrobot"', 'profile = "acrobot"\n[realism.tension]\nbias_std = 1000.0',
-         'profile = "acrobot"\n[realism.tension]\nbias_std = 1001.0',
-         r"realism\.tension\.bias_std: must be ≤ 1000 N"),
+        (
+            "camera_rotation_std_deg = 0.3",
+            "camera_rotation_std_deg = 10.0",
+            "camera_rotation_std_deg = 1e308",
+            r"truth\.camera_rotation_std_deg: must be ≤ 10°",
+        ),
+        (
+            "tag_position_std = 0.001",
+            "tag_position_std = 1.0",
+            "tag_position_std = 2.0",
+            r"truth\.tag_position_std: must be ≤ 1 m",
+        ),
+        (
+            "tag_rotation_std_deg = 0.3",
+            "tag_rotation_std_deg = 10.0",
+            "tag_rotation_std_deg = 10.5",
+            r"truth\.tag_rotation_std_deg: must be ≤ 10°",
+        ),
+        (
+            'profile = "acrobot"',
+            'profile = "acrobot"\n[realism.tension]\nnoise_std = 1000.0',
+            'profile = "acrobot"\n[realism.tension]\nnoise_std = 1e308',
+            r"realism\.tension\.noise_std: must be ≤ 1000 N",
+        ),
+        (
+            'profile = "acrobot"',
+            'profile = "acrobot"\n[realism.tension]\nbias_std = 1000.0',
+            'profile = "acrobot"\n[realism.tension]\nbias_std = 1001.0',
+            r"realism\.tension\.bias_std: must be ≤ 1000 N",
+        ),
         # before: accepted, and read 1e300 N for the rest of the run
-        ("[estimators]", FAIL.format("-1e6") + "[estimators]",
-         FAIL.format("1e300") + "[estimators]",
-         r"events\[0\]\.value: must be nan or a force within ±1e\+06 N .*, got 1e\+300"),
+        (
+            "[estimators]",
+            FAIL.format("-1e6") + "[estimators]",
+            FAIL.format("1e300") + "[estimators]",
+            r"events\[0\]\.value: must be nan or a force within ±1e\+06 N .*, got 1e\+300",
+        ),
     ],
-)  # fmt: skip
+)
 def test_noise_calibration_errors_and_fault_readings_beyond_any_robot_are_refused_by_field(
     tmp_path, capsys, old, ok, bad, match
 ):
