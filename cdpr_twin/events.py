@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
 from cdpr_twin.plugins import OptionError, option
+from cdpr_twin.realism_limits import MAX_TENSION_READING
 
 
 class StepHook(Protocol):
@@ -58,10 +59,9 @@ def fire_due(hooks: list[StepHook], time: float, dt: float, chunk: int) -> int:
         if next_time <= time + 0.5 * dt:
             hook.fire(time + 0.5 * dt)
             next_time = hook.next_time()
-        if math.isfinite(next_time):
-            steps = math.ceil((next_time - time) / dt - 0.5)
-            if 0 < steps < chunk:
-                chunk = steps
+        ahead = (next_time - time) / dt - 0.5  # (inf, never due, for a time past 1e308 steps)
+        if 0 < ahead <= chunk - 1:  # its step, rounded up, is due before the chunk ends
+            chunk = math.ceil(ahead)
     return chunk
 
 
@@ -210,8 +210,12 @@ class TensionSensorFail(_OnCable):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if math.isinf(self.value):
-            raise OptionError("value", f"must be a finite force or nan, got {self.value}")
+        if math.isinf(self.value) or abs(self.value) > MAX_TENSION_READING:
+            raise OptionError(
+                "value",
+                f"must be nan or a force within ±{MAX_TENSION_READING:g} N (no cable robot's "
+                f"sensor reads more), got {self.value:g}",
+            )
 
     def apply(self, physics: Any, sensors: Any) -> None:
         """Freeze the sensor."""

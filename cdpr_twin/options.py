@@ -17,8 +17,14 @@ from typing import Any, Literal
 
 import numpy as np
 
+from cdpr_twin.input_files import elided, shown
 from cdpr_twin.plugins import OptionError, spec_of
 from cdpr_twin.se3 import pose_from_vector
+
+MAX_POSITION = 1000.0
+"""The largest coordinate of a pose's position in a file [m]: the largest cable robots span
+hundreds of metres; beyond a kilometre the number is a typo (and 1e308 overflows the frame's
+arithmetic)."""
 
 
 class ScenarioError(ValueError):
@@ -49,8 +55,8 @@ class OptionReader:
         self.used: set[str] = set()
 
     def fail(self, key: str, problem: str) -> ScenarioError:
-        """An error naming the file and ``<table>.<key>``."""
-        name = f"{self.where}.{key}" if self.where else key
+        """An error naming the file and ``<table>.<key>`` (a long key elided)."""
+        name = elided(f"{self.where}.{key}" if self.where else key)
         return ScenarioError(f"{self.source}: {name}: {problem}")
 
     def has(self, key: str) -> bool:
@@ -80,40 +86,40 @@ class OptionReader:
         v = self.raw(key, default, f"number{' ' + unit if unit else ''}") if value is ... else value
         if not (_is_number(v) or (infinite and isinstance(v, float) and v == math.inf)):
             what = "a finite number or inf" if infinite else "a finite number"
-            raise self.fail(key, f"must be {what}{' in ' + unit if unit else ''}, got {v!r}")
+            raise self.fail(key, f"must be {what}{' in ' + unit if unit else ''}, got {shown(v)}")
         if minimum is not None and (v <= minimum if exclusive else v < minimum):
             raise self.fail(
                 key,
                 f"must be {'>' if exclusive else '≥'} {minimum}"
-                f"{' ' + unit if unit else ''}, got {v}",
+                f"{' ' + unit if unit else ''}, got {shown(v)}",
             )
-        return float(v)
+        return float(v) + 0.0  # a file's -0.0 is zero: +0.0 (numpy refuses a scale of -0.0)
 
     def integer(self, key: str, default: Any = ..., minimum: int | None = None) -> int:
         """An integer, at least ``minimum``."""
         v = self.raw(key, default, "integer")
         if isinstance(v, bool) or not isinstance(v, int):
-            raise self.fail(key, f"must be an integer, got {v!r}")
+            raise self.fail(key, f"must be an integer, got {shown(v)}")
         if minimum is not None and v < minimum:
-            raise self.fail(key, f"must be ≥ {minimum}, got {v}")
+            raise self.fail(key, f"must be ≥ {minimum}, got {shown(v)}")
         return int(v)
 
     def string(self, key: str, default: Any = ..., choices: tuple[str, ...] = ()) -> str:
         """A string, one of ``choices`` when given."""
         v = self.raw(key, default, "string")
         if not isinstance(v, str):
-            raise self.fail(key, f"must be a string, got {v!r}")
+            raise self.fail(key, f"must be a string, got {shown(v)}")
         if "\x00" in v:  # TOML's "\u0000": no name, path or choice holds one
-            raise self.fail(key, f"must not hold a NUL character, got {v!r}")
+            raise self.fail(key, f"must not hold a NUL character, got {shown(v)}")
         if choices and v not in choices:
-            raise self.fail(key, f"{v!r} is not one of {', '.join(choices)}")
+            raise self.fail(key, f"{shown(v)} is not one of {', '.join(choices)}")
         return v
 
     def boolean(self, key: str, default: Any = ...) -> bool:
         """True or false."""
         v = self.raw(key, default, "true/false")
         if not isinstance(v, bool):
-            raise self.fail(key, f"must be true or false, got {v!r}")
+            raise self.fail(key, f"must be true or false, got {shown(v)}")
         return v
 
     def pose(self, key: str, value: Any = ...) -> np.ndarray:
@@ -121,22 +127,33 @@ class OptionReader:
         v = self.raw(key, kind="[x, y, z, rx, ry, rz] (m, deg)") if value is ... else value
         if not isinstance(v, list) or len(v) != 6 or not all(_is_number(x) for x in v):
             raise self.fail(
-                key, f"must be a pose [x, y, z, rx, ry, rz] in m and degrees, got {v!r}"
+                key, f"must be a pose [x, y, z, rx, ry, rz] in m and degrees, got {shown(v)}"
+            )
+        if any(abs(x) > MAX_POSITION for x in v[:3]):
+            raise self.fail(
+                key,
+                f"its position must be within ±{MAX_POSITION:g} m (no cable robot's frame is "
+                f"larger), got {shown(v)}",
             )
         return _frozen_array(pose_from_vector(v))
 
-    def list_of(self, key: str, kind: str) -> list:
-        """A list (of anything; items are checked by the caller)."""
+    def list_of(self, key: str, kind: str, spec: Any = None) -> list:
+        """A list (of anything; items are checked by the caller), at most ``spec.max_items``."""
         v = self.raw(key, kind=f"list of {kind}")
         if not isinstance(v, list):
-            raise self.fail(key, f"must be a list of {kind}, got {v!r}")
+            raise self.fail(key, f"must be a list of {kind}, got {shown(v)}")
+        most = None if spec is None else spec.max_items
+        if most is not None and len(v) > most:
+            raise self.fail(
+                key, f"must list at most {most} {kind}{spec.max_items_why}, got {len(v)}"
+            )
         return v
 
     def table_of(self, key: str, required: bool = True) -> OptionReader:
         """A sub-table's reader."""
         v = self.raw(key, ... if required else {}, "table")
         if not isinstance(v, dict):
-            raise self.fail(key, f"must be a table [{key}], got {v!r}")
+            raise self.fail(key, f"must be a table [{key}], got {shown(v)}")
         return OptionReader(self.source, v, f"{self.where}.{key}" if self.where else key)
 
     def done(self, known: tuple[str, ...] = ()) -> None:
@@ -159,7 +176,7 @@ def _read_field(r: OptionReader, f: dataclasses.Field, hint: Any) -> Any:
     origin, args = typing.get_origin(hint), typing.get_args(hint)
     if spec.pose:
         if origin is tuple:
-            items = r.list_of(key, "poses [x, y, z, rx, ry, rz] (m, deg)")
+            items = r.list_of(key, "poses [x, y, z, rx, ry, rz] (m, deg)", spec)
             if not items:
                 raise r.fail(key, "must be a non-empty list of poses [x, y, z, rx, ry, rz]")
             value: Any = tuple(r.pose(f"{key}[{i}]", p) for i, p in enumerate(items))
@@ -178,7 +195,7 @@ def _read_field(r: OptionReader, f: dataclasses.Field, hint: Any) -> Any:
     elif hint is str or origin is Literal:
         value = r.string(key, choices=tuple(args) if origin is Literal else ())
     elif origin is tuple and args[0] is float:
-        items = r.list_of(key, f"numbers{' in ' + spec.unit if spec.unit else ''}")
+        items = r.list_of(key, f"numbers{' in ' + spec.unit if spec.unit else ''}", spec)
         value = tuple(
             r.number(f"{key}[{i}]", value=x, minimum=spec.minimum, exclusive=spec.exclusive,
                      unit=spec.unit)
@@ -186,9 +203,9 @@ def _read_field(r: OptionReader, f: dataclasses.Field, hint: Any) -> Any:
         )  # fmt: skip
         value = tuple(map(math.radians, value)) if spec.unit == "deg" else value
     elif origin is tuple and args[0] is str:
-        items = r.list_of(key, "strings")
+        items = r.list_of(key, "strings", spec)
         if not all(isinstance(x, str) for x in items):
-            raise r.fail(key, f"must be a list of strings, got {items!r}")
+            raise r.fail(key, f"must be a list of strings, got {shown(items)}")
         value = tuple(items)
     else:  # a plugin author's mistake, not the user's
         raise TypeError(f"option {f.name}: type {hint!r} cannot be read from a file")

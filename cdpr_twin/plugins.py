@@ -89,6 +89,8 @@ class OptionSpec:
         pose: the value is a pose ``[x, y, z, rx, ry, rz]`` (m, deg) → (4, 4) transform.
         convert: applied to the parsed value (e.g. a frame change).
         doc: one line for error messages and listings.
+        max_items: the most items a list may hold (lists), checked before any item is read.
+        max_items_why: why, as the error says it after the bound.
     """
 
     key: str = ""
@@ -99,6 +101,8 @@ class OptionSpec:
     pose: bool = False
     convert: Callable[[Any], Any] | None = None
     doc: str = ""
+    max_items: int | None = None
+    max_items_why: str = ""
 
     def file_key(self, field_name: str) -> str:
         """The key of this option in a scenario file."""

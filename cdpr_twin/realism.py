@@ -33,6 +33,8 @@ from cdpr_twin.realism_limits import (
     MAX_HOMING_POSITION_STD,
     MAX_HOMING_ROTATION_STD,
     MAX_LATENCY_TICKS,
+    MAX_TENSION_NOISE_STD,
+    TENSION_NOISE_WHY,
     check_at_most,
     check_relative_std,
 )
@@ -189,6 +191,8 @@ class TensionRealism:
         ):
             raise OptionError("range_max", f"must exceed range_min = {self.range_min} N")
         check_relative_std("gain_error_std", self.gain_error_std, "sensor's gain")
+        for name in ("bias_std", "noise_std"):  # (a nan noise_std: [sensors]', bounded there)
+            check_at_most(name, getattr(self, name), MAX_TENSION_NOISE_STD, TENSION_NOISE_WHY)
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,9 @@
 """The largest realism magnitudes a scenario may ask for, each with the reason it is the limit.
 
 Real robots and cameras stay far inside these: beyond them a draw breaks the physics (a
-non-positive radius), the arithmetic (float32 overflow), the memory, or the detector.
+non-positive radius), the arithmetic (float32 overflow), the memory, or the detector. The
+robot's calibration errors (``[truth]``), the tension sensors' noise (``[sensors]``,
+``[realism.tension]``) and a failed sensor's reading are bounded here too.
 """
 
 from __future__ import annotations
@@ -28,6 +30,27 @@ MAX_HOMING_POSITION_STD = 0.05
 starts somewhere else (set ``start.pose``); CDPRs home within millimetres."""
 MAX_HOMING_ROTATION_STD = math.radians(5.0)
 """The largest homing repeatability [rad] per axis (5°; CDPRs home within tenths of one)."""
+
+MAX_POSITION_ERROR_STD = 1.0
+"""The largest per-axis std of a point's calibration error [m] (exit and anchor points, camera
+mount, tag): assembly and calibration leave millimetres (``paper_open_loop``: 12 mm at the exit
+points); a point a metre off is another robot than its description."""
+MAX_ROTATION_ERROR_STD = math.radians(10.0)
+"""The largest per-axis std of a mount's calibration error [rad] (10°): a hand-eye calibration
+and a tag placed by hand are good to 0.3°; at 10° a 3σ draw turns the camera 30° away."""
+MAX_PULLEY_RADIUS_STD = 0.01
+"""The largest std of a sheave's radius [m] (1 cm): sheaves are machined to ±0.2 mm, and a draw
+off by centimetres is another pulley (ACROBOT's sheaves have a 4.5 mm radius)."""
+MAX_TENSION_NOISE_STD = 1000.0
+"""The largest std of a tension reading's noise or bias [N]: sensors repeat to 0.1 % of their
+span or better (ACROBOT 0.01 N of 100 N, COGIRO 5 N of 7 kN); 1 kN is ten times the whole span
+of ACROBOT's sensors, a reading that says nothing of the tension."""
+TENSION_NOISE_WHY = " N (beyond the span of ACROBOT's sensors tenfold: a reading says nothing)"
+"""Why :data:`MAX_TENSION_NOISE_STD` bounds a tension noise, as a message says it."""
+MAX_TENSION_READING = 1e6
+"""The largest force a failed tension sensor may read [N], either way (1 MN): over 150 times
+the top of the largest shipped robot's range (COGIRO's 6 kN); beyond it a reading is no force
+a cable robot's sensor outputs (1e300 was accepted, and read for the rest of the run)."""
 
 
 def check_relative_std(field: str, std: float, what: str) -> None:

@@ -12,14 +12,13 @@ this module is numpy + tomllib only.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from cdpr_twin.paths import path_kind
+from cdpr_twin.input_files import read_toml
 from cdpr_twin.robot_schema import (
     MAX_TIMESTEP,
     MIN_TIMESTEP,
@@ -323,19 +322,7 @@ def _scene(scene: _Table, outer_min: np.ndarray, outer_max: np.ndarray) -> dict:
 
 
 def _read(path: Path) -> dict:
-    kind = path_kind(path, RobotError)
-    if kind == "dir":
-        raise RobotError(f"{path}: a directory, not a robot description; give its robot.toml")
-    if kind != "file":
-        raise RobotError(f"{path}: robot description not found")
-    try:
-        return tomllib.loads(path.read_text(encoding="utf-8-sig"))
-    except tomllib.TOMLDecodeError as exc:
-        raise RobotError(f"{path}: not valid TOML: {exc}") from None
-    except UnicodeDecodeError as exc:
-        raise RobotError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    except OSError as exc:
-        raise RobotError(f"{path}: cannot read the robot description: {exc.strerror}") from None
+    return read_toml(path, "robot description", RobotError, in_directory="robot.toml")
 
 
 def load_robot(path: str | Path) -> Robot:

@@ -11,7 +11,6 @@ here); errors name the file, the field and the fix. A scenario file is documente
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -23,13 +22,15 @@ import numpy as np
 from cdpr_twin import plugins, resources, scenario_tables
 from cdpr_twin.deviations import DeviationSpec
 from cdpr_twin.events import Event
+from cdpr_twin.input_files import read_toml, shown
 from cdpr_twin.options import (
     OptionReader,
     ScenarioError,
     parse_options,
 )
-from cdpr_twin.paths import path_kind
+from cdpr_twin.plugins import OptionError
 from cdpr_twin.realism import Realism, profile, without_source
+from cdpr_twin.realism_limits import MAX_TENSION_NOISE_STD, TENSION_NOISE_WHY, check_at_most
 from cdpr_twin.robot_schema import MAX_TIMESTEP, MIN_TIMESTEP
 from cdpr_twin.scenario_tables import (
     MonitorConfig,
@@ -43,6 +44,9 @@ from cdpr_twin.scenario_tables import (
     without_camera,
 )
 
+MAX_NAME_BYTES = 255
+"""The longest run name [bytes of UTF-8]: it names the output directory, and no file system
+takes a longer name (NAME_MAX)."""
 MAX_TICKS = 10**9
 """The most control periods a run may last (10⁹: 116 days at 100 Hz); more is a typo."""
 
@@ -284,7 +288,7 @@ def _estimators(r: OptionReader) -> EstimatorConfig:
     _plugin(r, "in_loop", "estimator", in_loop)
     passive = r.raw("passive", [], "list of estimator names")
     if not isinstance(passive, list) or not all(isinstance(p, str) for p in passive):
-        raise r.fail("passive", f"must be a list of estimator names, got {passive!r}")
+        raise r.fail("passive", f"must be a list of estimator names, got {shown(passive)}")
     for name in passive:
         _plugin(r, "passive", "estimator", name)
     options: dict[str, Any] = {}
@@ -308,7 +312,9 @@ def _model(top: OptionReader, source: Path) -> ModelConfig:
     payload = m.number("payload_kg", 0.0, minimum=0, unit="kg"), read_payload_com(m)
     m.done(("file", "nominal"))
     steps = 1.0 / control_rate / timestep  # whole as the run steps it (winch.whole_steps)
-    whole = math.isclose(round(steps) * timestep, 1.0 / control_rate, rel_tol=1e-9, abs_tol=1e-12)
+    whole = math.isfinite(steps) and math.isclose(
+        round(steps) * timestep, 1.0 / control_rate, rel_tol=1e-9, abs_tol=1e-12
+    )
     if not whole or round(steps) < 1:
         raise m.fail(
             "control_rate",
@@ -320,16 +326,7 @@ def _model(top: OptionReader, source: Path) -> ModelConfig:
 
 
 def _read(source: Path) -> OptionReader:
-    if (kind := path_kind(source, ScenarioError)) != "file":
-        why = "a directory, not a scenario file" if kind == "dir" else "scenario file not found"
-        raise ScenarioError(f"{source}: {why}")
-    try:
-        data = tomllib.loads(source.read_text(encoding="utf-8-sig"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ScenarioError(f"{source}: not valid TOML: {exc}") from None
-    except OSError as exc:
-        raise ScenarioError(f"{source}: cannot read the scenario file: {exc.strerror}") from None
-    return OptionReader(source, data, "")
+    return OptionReader(source, read_toml(source, "scenario file", ScenarioError), "")
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -360,13 +357,19 @@ def _scenario(top: OptionReader, source: Path) -> Scenario:
     loaded = read_plugins(top)  # first: the file may name what they register
     name = top.raw("name", source.stem, "string")  # (its NUL: the plain-name rule's words)
     if not isinstance(name, str):
-        raise top.fail("name", f"must be a string, got {name!r}")
+        raise top.fail("name", f"must be a string, got {shown(name)}")
     control = any(ord(c) < 0x20 or c == "\x7f" for c in name)  # NUL, newline, tab, DEL
+    if len(name.encode("utf-8", "surrogatepass")) > MAX_NAME_BYTES:
+        raise top.fail(
+            "name",
+            f"must be at most {MAX_NAME_BYTES} bytes (it names the output directory), got "
+            f"{shown(name)}",
+        )
     if not name or any(c in name for c in "/\\") or name in (".", "..") or control:
         raise top.fail(
             "name",
             f"must be a plain name usable as a directory (no /, \\ or control characters), "
-            f"got {name!r}",
+            f"got {shown(name)}",
         )
     description = top.string("description", "")
     duration = top.number("duration", minimum=0, exclusive=True, unit="s")
@@ -378,6 +381,12 @@ def _scenario(top: OptionReader, source: Path) -> Scenario:
         s.boolean("tag_window", False),
     )  # fmt: skip
     s.done()
+    try:
+        check_at_most(
+            "tension_noise_std", sensors.tension_noise_std, MAX_TENSION_NOISE_STD, TENSION_NOISE_WHY
+        )
+    except OptionError as exc:
+        raise s.fail(exc.field, exc.problem) from None
     st = top.table_of("start")
     start = st.pose("pose")
     st.done()

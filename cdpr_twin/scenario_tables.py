@@ -19,6 +19,7 @@ from typing import Any
 from cdpr_twin import plugins, resources
 from cdpr_twin.deviations import DeviationSpec
 from cdpr_twin.events import EVENT_KINDS, Event
+from cdpr_twin.input_files import shown
 from cdpr_twin.options import (
     OptionReader,
     ScenarioError,
@@ -27,7 +28,15 @@ from cdpr_twin.options import (
     read_options,
 )
 from cdpr_twin.paths import path_kind
+from cdpr_twin.plugins import OptionError
 from cdpr_twin.realism import PARTS, PROFILES, Realism, profile
+from cdpr_twin.realism_limits import (
+    MAX_POSITION_ERROR_STD,
+    MAX_PULLEY_RADIUS_STD,
+    MAX_ROTATION_ERROR_STD,
+    check_at_most,
+    check_relative_std,
+)
 
 
 def _read_only(items: dict) -> MappingProxyType:
@@ -100,7 +109,7 @@ def read_plugins(top: OptionReader) -> tuple[str, ...]:
     """``plugins``: import them (they register estimators or controllers) and list them."""
     refs = top.raw("plugins", [], "list of module names or .py files")
     if not isinstance(refs, list) or not all(isinstance(x, str) and "\x00" not in x for x in refs):
-        raise top.fail("plugins", f"must be a list of module names or .py files, got {refs!r}")
+        raise top.fail("plugins", f"must be a list of module names or .py files, got {shown(refs)}")
     try:
         plugins.load_modules(refs, top.source.parent)
     except Exception as exc:  # an import error in the user's module: say which and why
@@ -108,29 +117,40 @@ def read_plugins(top: OptionReader) -> tuple[str, ...]:
     return tuple(refs)
 
 
+_POINT = " m (a built robot's points are off its description by millimetres)"
+_MOUNT = "° (a calibrated camera mount or a tag placed by hand: tenths of a degree)"
+TRUTH_BOUNDS = {
+    "exit_point_std": ("m", MAX_POSITION_ERROR_STD, _POINT),
+    "anchor_point_std": ("m", MAX_POSITION_ERROR_STD, _POINT),
+    "pulley_radius_std": ("m", MAX_PULLEY_RADIUS_STD, " m (sheaves are machined to ±0.2 mm)"),
+    "camera_position_std": ("m", MAX_POSITION_ERROR_STD, _POINT),
+    "camera_rotation_std_deg": ("deg", math.degrees(MAX_ROTATION_ERROR_STD), _MOUNT),
+    "tag_position_std": ("m", MAX_POSITION_ERROR_STD, _POINT),
+    "tag_rotation_std_deg": ("deg", math.degrees(MAX_ROTATION_ERROR_STD), _MOUNT),
+}
+"""``[truth]``'s stds in the file's units: (unit, bound, why) (:mod:`cdpr_twin.realism_limits`)."""
+
+
 def read_truth(top: OptionReader, source: Path) -> DeviationSpec:
-    """``[truth]``: the robot's calibration errors (standard deviations) and its seed."""
+    """``[truth]``: the robot's calibration errors (standard deviations) and its seed.
+
+    Each std is bounded by how far a built robot can be off its description
+    (:data:`TRUTH_BOUNDS`; ``es_scale_std`` as a relative std), so that a draw is a robot.
+    """
     t = top.table_of("truth", required=False)
+    values = {
+        key: t.number(key, 0.0, minimum=0, unit=unit) for key, (unit, *_) in TRUTH_BOUNDS.items()
+    }
+    values["es_scale_std"] = t.number("es_scale_std", 0.0, minimum=0)
     try:
-        truth = DeviationSpec(
-            exit_point_std=t.number("exit_point_std", 0.0, minimum=0, unit="m"),
-            anchor_point_std=t.number("anchor_point_std", 0.0, minimum=0, unit="m"),
-            es_scale_std=t.number("es_scale_std", 0.0, minimum=0),
-            pulley_radius_std=t.number("pulley_radius_std", 0.0, minimum=0, unit="m"),
-            camera_position_std=t.number("camera_position_std", 0.0, minimum=0, unit="m"),
-            camera_rotation_std=math.radians(
-                t.number("camera_rotation_std_deg", 0.0, minimum=0, unit="deg")
-            ),
-            tag_position_std=t.number("tag_position_std", 0.0, minimum=0, unit="m"),
-            tag_rotation_std=math.radians(
-                t.number("tag_rotation_std_deg", 0.0, minimum=0, unit="deg")
-            ),
-            seed=t.integer("seed", 0, minimum=0),
-        )
-    except ScenarioError:
-        raise  # (names the file and the field already)
-    except ValueError as exc:
-        raise ScenarioError(f"{source}: truth: {exc}") from None
+        for key, (_, bound, why) in TRUTH_BOUNDS.items():
+            check_at_most(key, values[key], bound, why)
+        check_relative_std("es_scale_std", values["es_scale_std"], "cable's E·S")
+    except OptionError as exc:
+        raise t.fail(exc.field, exc.problem) from None
+    for key in ("camera_rotation_std_deg", "tag_rotation_std_deg"):
+        values[key.removesuffix("_deg")] = math.radians(values.pop(key))
+    truth = DeviationSpec(**values, seed=t.integer("seed", 0, minimum=0))
     t.done()
     return truth
 
@@ -147,7 +167,7 @@ def read_nominal(m: OptionReader, source: Path) -> Path | None:
     path = path if path.is_absolute() else (source.parent / path).resolve()
     kind = path_kind(path, lambda why: m.fail("nominal", why))
     if kind != "file":
-        what = "is a directory" if kind == "dir" else "not found"
+        what = {"dir": "is a directory", "other": "is not a regular file"}.get(kind, "not found")
         raise m.fail("nominal", f"{path} {what}; give a robot.toml (cdpr-twin calibrate)")
     return path
 
@@ -174,7 +194,7 @@ def read_payload_com(m: OptionReader) -> tuple[float, ...]:
     if not ok or not all(
         isinstance(v, number) and not isinstance(v, bool) and math.isfinite(v) for v in com
     ):
-        raise m.fail("payload_com_m", f"must be 3 numbers [x, y, z] in metres, got {com!r}")
+        raise m.fail("payload_com_m", f"must be 3 numbers [x, y, z] in metres, got {shown(com)}")
     return tuple(float(v) for v in com)
 
 

@@ -193,3 +193,76 @@ def test_a_vanishing_workspace_spacing_is_an_error_without_warnings():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert "gives inf grid points" in spacing_problem(geom, 1e-300)
+
+
+def _waypoints(tmp_path, n):
+    """The open-loop scenario with its three waypoints repeated to ``n``."""
+    start = OPEN_LOOP.index("waypoints = [")
+    end = OPEN_LOOP.index("durations = [10.0, 5.0, 10.0]")
+    three = [
+        [0.284, -0.197, 0.08, 0, 0, 0],
+        [0.284, -0.197, 0.25, 0, 0, 0],
+        [0.112, -0.032, 0.301, -12, -10, 0],
+    ]
+    poses = (three * n)[:n]
+    text = (
+        OPEN_LOOP[:start]
+        + f"waypoints = {poses}\ndurations = {[2.0] * n}"
+        + OPEN_LOOP[end + len("durations = [10.0, 5.0, 10.0]") :]
+    )
+    return _file(tmp_path, text)
+
+
+def test_more_waypoints_than_a_plan_may_stop_at_are_refused_before_any_is_read(
+    tmp_path, capsys, monkeypatch
+):
+    """Before: 100 000 waypoints spent > 120 s in preflight for a 1 s run. Refused now by
+    their count, one line naming the field, before a pose is parsed or a linear program runs
+    (each is counted, not timed)."""
+    from cdpr_twin import options, workspace
+    from cdpr_twin.cli import main
+    from cdpr_twin.controllers.open_loop import MAX_WAYPOINTS
+
+    parsed, programs = [], []
+    pose = options.pose_from_vector
+    feasible = workspace.is_feasible
+    monkeypatch.setattr(options, "pose_from_vector", lambda v: parsed.append(v) or pose(v))
+    monkeypatch.setattr(
+        workspace, "is_feasible", lambda *a, **k: programs.append(a) or feasible(*a, **k)
+    )
+    path = _waypoints(tmp_path, MAX_WAYPOINTS + 1)
+    out = tmp_path / "out"
+    argv = ["run", str(path), "--duration", "0.2", "--no-camera", "--out", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and not out.exists()
+    assert f"{path}: controller.waypoints: must list at most {MAX_WAYPOINTS} poses" in err
+    assert f"got {MAX_WAYPOINTS + 1}" in err
+    assert len(parsed) == 1 and programs == []  # the start pose only: no waypoint was read
+
+
+def test_preflight_checks_each_waypoint_once(tmp_path, monkeypatch):
+    """The checks before a run grow linearly with the waypoints: one inside-the-frame check and
+    one linear program (wrench feasibility) per waypoint, whatever their number."""
+    from cdpr_twin import geometry
+    from cdpr_twin.controllers import open_loop
+
+    counts = {}
+    feasible = open_loop.is_feasible
+    inside = geometry.CdprGeometry.check_pose_inside
+
+    def counted_feasible(*a, **k):
+        counts["feasible"] = counts.get("feasible", 0) + 1
+        return feasible(*a, **k)
+
+    def counted_inside(self, *a, **k):
+        counts["inside"] = counts.get("inside", 0) + 1
+        return inside(self, *a, **k)
+
+    monkeypatch.setattr(open_loop, "is_feasible", counted_feasible)
+    monkeypatch.setattr(geometry.CdprGeometry, "check_pose_inside", counted_inside)
+    for n in (3, 30, 300):
+        counts.clear()
+        scenario = load_scenario(_waypoints(tmp_path, n)).with_overrides(duration=0.2)
+        check_task(scenario)
+        assert counts == {"feasible": n, "inside": n + 2}, (n, counts)  # + start and goal

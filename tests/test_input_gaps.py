@@ -155,7 +155,7 @@ def test_an_unknown_optional_field_lists_the_fields_it_could_be():
 def test_a_platform_above_its_exit_points_is_said_so():
     source = ROOT / "scenarios" / "paper_open_loop.toml"
     data = tomllib.loads(source.read_text())
-    set_dotted(data, "truth.exit_point_std", 5.0)  # exit points metres off: some below p0
+    set_dotted(data, "truth.exit_point_std", 1.0)  # exit points a metre off: some below p0
     s = scenario_from_data(data, source).with_overrides(camera=False)
     with pytest.raises(ScenarioError, match="is not below the lowest exit point") as error:
         prepare(s)

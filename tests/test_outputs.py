@@ -312,14 +312,14 @@ def test_a_failed_write_advises_what_its_cause_needs(tmp_path, monkeypatch, caps
 def test_unreadable_scenario_is_a_one_line_error(tmp_path, monkeypatch, capsys):
     scenario = tmp_path / "secret.toml"
     scenario.write_text(OPEN_LOOP.read_text())
-    real_read = Path.read_text
+    real_open = os.open
 
-    def refusing_read(self, *args, **kwargs):
-        if self == scenario:
-            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(self))
-        return real_read(self, *args, **kwargs)
+    def refusing_open(path, *args, **kwargs):
+        if Path(path) == scenario:  # (as root, a chmod 000 file is read all the same)
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
+        return real_open(path, *args, **kwargs)
 
-    monkeypatch.setattr(Path, "read_text", refusing_read)
+    monkeypatch.setattr(os, "open", refusing_open)
     code = main(["run", str(scenario), "--out", str(tmp_path / "out"), "--no-camera"])
     err = capsys.readouterr().err
     assert code == 2, err
@@ -415,7 +415,8 @@ def test_a_path_the_os_refuses_is_one_line_naming_it_and_nothing_is_left(
 def test_a_scenario_name_too_long_for_its_directory_leaves_nothing_then_again(
     tmp_path, monkeypatch, capsys
 ):
-    """``runs/<name>`` cannot be made: the first run left ``runs/``, the second failed (exit 1)."""
+    """``runs/<name>`` could not be made: the first run left ``runs/``, the second failed (exit
+    1). The name is refused as the file's field now, before any directory is touched."""
     text = _scenario(tmp_path, (10.0, 5.0, 10.0)).read_text()
     scenario = tmp_path / "long.toml"
     scenario.write_text(text.replace('name = "paper_open_loop"', f'name = "{LONG}"', 1))
@@ -425,7 +426,7 @@ def test_a_scenario_name_too_long_for_its_directory_leaves_nothing_then_again(
             (tmp_path / name).mkdir()
         assert main(["run", str(scenario), "--no-camera", "--duration", "0.2"]) == 2
         line = _one_error_line(capsys.readouterr().err)
-        assert f"runs/{LONG}" in line and "File name too long" in line
+        assert f"{scenario}: name: must be at most 255 bytes" in line and LONG[:50] in line
         left = sorted(p.name for p in tmp_path.iterdir())
         assert left == sorted(["long.toml", "slow_25.toml", *kept])
     assert list((tmp_path / "runs").iterdir()) == []

@@ -132,3 +132,127 @@ def test_a_model_files_own_tension_range_is_the_models_data_not_refused(tmp_path
     path.write_text(path.read_text() + "\n[realism.tension]\nrange_max = 100.0\n")
     assert main(["run", str(path), "--duration", "0.08", "--out", str(tmp_path / "set")]) == 2
     assert "realism.tension.range_max: the readings' range 5…100 N" in capsys.readouterr().err
+
+
+OPEN_LOOP = (
+    (ROOT / "scenarios" / "paper_open_loop.toml")
+    .read_text()
+    .replace('"../models/', f'"{ROOT}/models/')
+)
+FAIL = '\n[[events]]\nkind = "tension_sensor_fail"\nat = 0.04\ncable = 2\nvalue = {}\n'
+
+
+@pytest.mark.parametrize(
+    ("old", "ok", "bad", "match"),
+    [
+        # before: ±1e308 and inf tensions written, status "completed"
+        (
+            "tension_noise_std = 0.24",
+            "tension_noise_std = 1000.0",
+            "tension_noise_std = 1e308",
+            r"sensors\.tension_noise_std: must be ≤ 1000 N \(.*\), got 1e\+308",
+        ),
+        # before: an 8-line array in the error ("CdprGeometry.a_base contains NaN or inf: [[…")
+        (
+            "exit_point_std = 0.012",
+            "exit_point_std = 1.0",
+            "exit_point_std = 1e308",
+            r"truth\.exit_point_std: must be ≤ 1 m \(.*\), got 1e\+308",
+        ),
+        (
+            "anchor_point_std = 0.004",
+            "anchor_point_std = 1.0",
+            "anchor_point_std = 1.5",
+            r"truth\.anchor_point_std: must be ≤ 1 m",
+        ),
+        (
+            "pulley_radius_std = 0.0002",
+            "pulley_radius_std = 0.01",
+            "pulley_radius_std = 0.02",
+            r"truth\.pulley_radius_std: must be ≤ 0\.01 m \(sheaves",
+        ),
+        (
+            "es_scale_std = 0.10",
+            "es_scale_std = 0.1",
+            "es_scale_std = 0.2",
+            r"truth\.es_scale_std: must be ≤ 0\.1 \(a relative std",
+        ),
+        # before: "model: math domain error"
+        (
+            "camera_rotation_std_deg = 0.3",
+            "camera_rotation_std_deg = 10.0",
+            "camera_rotation_std_deg = 1e308",
+            r"truth\.camera_rotation_std_deg: must be ≤ 10°",
+        ),
+        (
+            "tag_position_std = 0.001",
+            "tag_position_std = 1.0",
+            "tag_position_std = 2.0",
+            r"truth\.tag_position_std: must be ≤ 1 m",
+        ),
+        (
+            "tag_rotation_std_deg = 0.3",
+            "tag_rotation_std_deg = 10.0",
+            "tag_rotation_std_deg = 10.5",
+            r"truth\.tag_rotation_std_deg: must be ≤ 10°",
+        ),
+        (
+            'profile = "acrobot"',
+            'profile = "acrobot"\n[realism.tension]\nnoise_std = 1000.0',
+            'profile = "acrobot"\n[realism.tension]\nnoise_std = 1e308',
+            r"realism\.tension\.noise_std: must be ≤ 1000 N",
+        ),
+        (
+            'profile = "acrobot"',
+            'profile = "acrobot"\n[realism.tension]\nbias_std = 1000.0',
+            'profile = "acrobot"\n[realism.tension]\nbias_std = 1001.0',
+            r"realism\.tension\.bias_std: must be ≤ 1000 N",
+        ),
+        # before: accepted, and read 1e300 N for the rest of the run
+        (
+            "[estimators]",
+            FAIL.format("-1e6") + "[estimators]",
+            FAIL.format("1e300") + "[estimators]",
+            r"events\[0\]\.value: must be nan or a force within ±1e\+06 N .*, got 1e\+300",
+        ),
+    ],
+)
+def test_noise_calibration_errors_and_fault_readings_beyond_any_robot_are_refused_by_field(
+    tmp_path, capsys, old, ok, bad, match
+):
+    """The largest accepted value loads; one past it is exit 2 and one line naming the field,
+    its bound and the value, under the ideal profile too (the noise the file gives is used)."""
+    import re
+
+    assert old in OPEN_LOOP
+    fine = tmp_path / "ok.toml"
+    fine.write_text(OPEN_LOOP.replace(old, ok, 1))
+    load_scenario(fine)
+    path = tmp_path / "s.toml"
+    path.write_text(OPEN_LOOP.replace(old, bad, 1))
+    out = tmp_path / "out"
+    argv = ["run", str(path), "--duration", "0.08", "--no-camera", "--out", str(out)]
+    assert main([*argv, "--realism", "ideal"]) == 2
+    err = capsys.readouterr().err
+    assert re.search(f"^cdpr-twin: error: {re.escape(str(path))}: {match}", err), err
+    assert err.count("\n") == 1 and not out.exists()
+
+
+@pytest.mark.parametrize(
+    "line",
+    ["exit_point_std = -0.0", "camera_rotation_std_deg = -0.0", "es_scale_std = -0.0"],
+)
+def test_minus_zero_in_a_truth_std_is_zero(tmp_path, capsys, line):
+    """Before: it passed validation, then failed in numpy ("model: scale < 0")."""
+    key = line.split(" = ")[0]
+    start = OPEN_LOOP.index(f"{key} = ")
+    text = OPEN_LOOP[:start] + line + OPEN_LOOP[OPEN_LOOP.index("\n", start) :]
+    path = tmp_path / "s.toml"
+    path.write_text(text)
+    truth = load_scenario(path).truth
+    field = key.replace("_deg", "")
+    assert getattr(truth, field) == 0.0 and math.copysign(1.0, getattr(truth, field)) == 1.0
+    out = tmp_path / "out"
+    argv = ["run", str(path), "--duration", "0.08", "--no-camera", "--out", str(out)]
+    assert main(argv) == 0, capsys.readouterr().err
+    assert "error" not in capsys.readouterr().err

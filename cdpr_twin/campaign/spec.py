@@ -40,7 +40,6 @@ import copy
 import itertools
 import json
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -49,6 +48,7 @@ import numpy as np
 
 from cdpr_twin import resources
 from cdpr_twin.campaign.keys import as_read, run_id, set_dotted
+from cdpr_twin.input_files import read_toml
 
 DRAWS = ("integers", "uniform", "normal", "choice")
 ARTEFACTS = ("none", "csv", "all")
@@ -195,14 +195,7 @@ class _Block:
 
 
 def _read_toml(path: Path, what: str) -> dict:
-    try:
-        return tomllib.loads(path.read_text(encoding="utf-8-sig"))
-    except FileNotFoundError:
-        raise CampaignError(f"{path}: {what} not found") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise CampaignError(f"{path}: not valid TOML: {exc}") from None
-    except OSError as exc:
-        raise CampaignError(f"{path}: cannot read the {what}: {exc.strerror}") from None
+    return read_toml(path, what, CampaignError)
 
 
 def _block(source: Path, table: dict, index: int, where: str) -> _Block:

@@ -17,6 +17,12 @@ from cdpr_twin.workspace import infeasible_reason, is_feasible
 
 MIN_PERIODS = 5
 """The fewest control periods a segment may last (see :meth:`OpenLoopController.check_period`)."""
+MAX_WAYPOINTS = 1000
+"""The most waypoints a plan may pass through. Each quintic segment starts and ends at rest
+(eq. 26), so 1 000 waypoints are 1 000 stops, far beyond any task of this kind (the paper's has
+3); and before a run each waypoint costs one linear program (its wrench feasibility, ~2 ms),
+which this bound keeps to about 2 s."""
+_WHY = " (each segment stops at its waypoint: a path, not a trajectory's samples)"
 
 
 def quintic(tau: float) -> tuple[float, float]:
@@ -76,8 +82,10 @@ class OpenLoopOptions:
         jacobian_model: cable model of Â (``"straight"``: eq. 6, as in the paper).
     """
 
-    waypoints: tuple[np.ndarray, ...] = option(pose=True)
-    durations: tuple[float, ...] = option(unit="s")
+    waypoints: tuple[np.ndarray, ...] = option(
+        pose=True, max_items=MAX_WAYPOINTS, max_items_why=_WHY
+    )
+    durations: tuple[float, ...] = option(unit="s", max_items=MAX_WAYPOINTS, max_items_why=_WHY)
     jacobian_model: Literal["straight", "pulley"] = option("straight")
 
     def __post_init__(self) -> None:
@@ -85,6 +93,10 @@ class OpenLoopOptions:
         if n == 0:
             raise OptionError(
                 "waypoints", "must be a non-empty list of poses [x, y, z, rx, ry, rz]"
+            )
+        if n > MAX_WAYPOINTS:
+            raise OptionError(
+                "waypoints", f"must list at most {MAX_WAYPOINTS} poses{_WHY}, got {n}"
             )
         if len(self.durations) != n or not all(np.isfinite(d) and d > 0 for d in self.durations):
             raise OptionError(

@@ -9,6 +9,7 @@ of one physical robot).
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import mujoco
@@ -16,6 +17,8 @@ import numpy as np
 
 from cdpr_twin.deviations import TruthDeviations
 from cdpr_twin.geometry import CdprGeometry
+from cdpr_twin.input_files import MAX_MODEL_BYTES, read_bytes
+from cdpr_twin.paths import path_kind
 from cdpr_twin.robot_sensing import RobotSensing
 from cdpr_twin.se3 import matrix_from_quat_wxyz, quat_wxyz_from_matrix, so3_exp, transform
 from cdpr_twin.sim import camera
@@ -106,10 +109,13 @@ def _spec_cable_count(spec: mujoco.MjSpec) -> int:
 
 def _load_spec(path: Path) -> mujoco.MjSpec:
     path = Path(path)
-    if path.is_dir():
-        raise ModelError(f"model file {path} is a directory; give an MJCF file in it, such as "
-                         "models/acrobot/scene.xml")  # fmt: skip
-    if not path.is_file():
+    kind = path_kind(path, ModelError)
+    if kind == "dir":
+        raise ModelError(
+            f"model file {path} is a directory; give an MJCF file in it, such as "
+            "models/acrobot/scene.xml"
+        )
+    if kind is None:
         raise ModelError(
             f"model file {path} not found; pass the path of an MJCF file such as "
             "models/acrobot/scene.xml"
@@ -119,10 +125,21 @@ def _load_spec(path: Path) -> mujoco.MjSpec:
             f"model file {path} is a robot description, not an MJCF model: run "
             f"`cdpr-twin model build {path}` and give the scene.xml it writes"
         )
+    read_bytes(  # before MuJoCo reads it: a FIFO would block it, /dev/zero fill the memory
+        path, "model file", MAX_MODEL_BYTES, lambda why: ModelError(f"model file {why}"), False
+    )
+    warned: list[str] = []  # MuJoCo's parser warns on stderr before it fails: caught here
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(warned.append)
     try:
-        return mujoco.MjSpec.from_file(str(path))
-    except ValueError as exc:
+        spec = mujoco.MjSpec.from_file(str(path))
+    except ValueError as exc:  # its error says what is wrong: its warnings are left out
         raise ModelError(f"model file {path} is malformed: {exc}".strip()) from exc
+    finally:
+        mujoco.set_mju_user_warning(previous)
+    for text in warned:  # a model that loads: what MuJoCo warned of, one line each
+        print(f"MuJoCo warning: {path}: {text}", file=sys.stderr)
+    return spec
 
 
 def _element(getter, name: str, kind: str, path: Path):

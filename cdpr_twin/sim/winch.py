@@ -95,7 +95,8 @@ def loop_response(
     if math.isinf(accel):
         t1, slope = np.zeros_like(err), np.zeros_like(err)
     else:  # slew phase: |u − r| > a·τ, the rate ramps at ±a
-        t1 = np.minimum(np.maximum(np.abs(err) - accel * tau, 0.0) / accel, h)
+        with np.errstate(over="ignore"):  # a tiny a (5e-324): ramps past h, inf, are held to h
+            t1 = np.minimum(np.maximum(np.abs(err) - accel * tau, 0.0) / accel, h)
         slope = sign * accel
     r1 = r0 + slope * t1
     paid = (r0 + 0.5 * slope * t1) * t1
