@@ -29,10 +29,10 @@ from pathlib import Path
 import numpy as np
 
 import cdpr_twin.sim  # noqa: F401  (defaults MUJOCO_GL=egl before mujoco is imported)
-from cdpr_twin import se3
-from cdpr_twin.kinematics import jacobian
-from cdpr_twin.runner import prepare
-from cdpr_twin.scenario import load_scenario
+from cdpr_twin.math import se3
+from cdpr_twin.math.kinematics import jacobian
+from cdpr_twin.run.runner import prepare
+from cdpr_twin.scenario.loading import load_scenario
 from cdpr_twin.types import Command
 
 ROOT = Path(__file__).resolve().parent.parent

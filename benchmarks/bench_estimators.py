@@ -56,13 +56,12 @@ import numpy as np
 import scipy
 from scipy.optimize import least_squares
 
-from cdpr_twin.estimators import make_estimator
 from cdpr_twin.estimators.base import Estimator, PoseEstimate
 from cdpr_twin.estimators.model import ModelEstimator, _cable_tuples, _kernel
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.kinematics import jacobian
-from cdpr_twin.plugins import registry
-from cdpr_twin.se3 import pose_distance, pose_from_vector, quat_wxyz_from_matrix
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.math.kinematics import jacobian
+from cdpr_twin.math.se3 import pose_distance, pose_from_vector, quat_wxyz_from_matrix
+from cdpr_twin.plugins import make_estimator, registry
 from cdpr_twin.sim.twin import Twin
 from cdpr_twin.types import Command, Measurement
 
@@ -285,7 +284,7 @@ def main() -> None:
 def bench_issue_11(measurements, geometry, repeats: int, calibration: bool) -> None:
     """Issue 11's bars: ``fused`` as the paper scenarios configure it (≤ 200 µs per update),
     against the cheapest model-based update of the same replay; one calibration (≤ 60 s)."""
-    from cdpr_twin.scenario import load_scenario
+    from cdpr_twin.scenario.loading import load_scenario
 
     s = load_scenario(ROOT / "scenarios" / "paper_pbvs.toml")
     fused = make_estimator("fused", geometry, **vars(s.estimators.options["fused"]))

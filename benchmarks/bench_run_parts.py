@@ -23,8 +23,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 import cdpr_twin.sim  # noqa: F401  (defaults MUJOCO_GL=egl before mujoco is imported)
-from cdpr_twin import metrics, recorders, runner
-from cdpr_twin.scenario import load_scenario
+from cdpr_twin.recording import sinks as recorders
+from cdpr_twin.run import metrics, runner
+from cdpr_twin.scenario.loading import load_scenario
 from cdpr_twin.sim import physics, sensors
 
 ROOT = Path(__file__).resolve().parent.parent

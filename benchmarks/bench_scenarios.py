@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 import cdpr_twin.sim  # noqa: F401  (defaults MUJOCO_GL=egl before mujoco is imported)
-from cdpr_twin.runner import run
-from cdpr_twin.scenario import load_scenario
+from cdpr_twin.run.runner import run
+from cdpr_twin.scenario.loading import load_scenario
 from cdpr_twin.sim import Twin
 
 ROOT = Path(__file__).resolve().parent.parent

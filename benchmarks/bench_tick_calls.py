@@ -29,8 +29,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import cdpr_twin.sim  # noqa: F401  (defaults MUJOCO_GL=egl before mujoco is imported)
-from cdpr_twin.runner import run
-from cdpr_twin.scenario import load_scenario
+from cdpr_twin.run.runner import run
+from cdpr_twin.scenario.loading import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = str(ROOT / "cdpr_twin")

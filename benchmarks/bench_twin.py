@@ -38,8 +38,8 @@ import mujoco
 import numpy as np
 
 from cdpr_twin import MODELS_DIR
-from cdpr_twin.kinematics import jacobian
-from cdpr_twin.se3 import pose_distance, pose_from_vector
+from cdpr_twin.math.kinematics import jacobian
+from cdpr_twin.math.se3 import pose_distance, pose_from_vector
 from cdpr_twin.sim import Physics, build_model
 from cdpr_twin.sim.sag import SaggingPhysics
 from cdpr_twin.sim.twin import Twin

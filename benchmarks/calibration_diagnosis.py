@@ -34,7 +34,7 @@ from calibration_study import scenario
 
 def true_views(rec) -> np.ndarray:
     """(K, 4, 4) the tag poses the camera would see at the truth, at every recorded pose."""
-    from cdpr_twin.se3 import inverse
+    from cdpr_twin.math.se3 import inverse
 
     tr = rec.truth
     cam = inverse(tr.geometry.T_platform_cam)
@@ -43,7 +43,7 @@ def true_views(rec) -> np.ndarray:
 
 def at_truth(rec) -> None:
     """Part 1: drum scales from the encoders, tag views against the truth."""
-    from cdpr_twin.kinematics import pulley_vectors
+    from cdpr_twin.math.kinematics import pulley_vectors
 
     o, tr = rec.obs, rec.truth
     g, T = tr.geometry, tr.T_base_platform

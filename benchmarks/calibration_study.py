@@ -52,7 +52,7 @@ def scenario(changes: list[str]):
     """``paper_open_loop`` with ``KEY=VALUE`` changes applied (dotted keys, TOML values)."""
     from cdpr_twin import resources
     from cdpr_twin.campaign.spec import set_dotted
-    from cdpr_twin.scenario import scenario_from_data
+    from cdpr_twin.scenario.loading import scenario_from_data
 
     source = resources.scenario_file("paper_open_loop")
     data = tomllib.loads(source.read_text(encoding="utf-8"))
@@ -69,7 +69,7 @@ def one(
 ) -> dict:
     from cdpr_twin.calibrate.output import write
     from cdpr_twin.calibrate.session import calibrate, truth_check, weighting_report
-    from cdpr_twin.runner import run
+    from cdpr_twin.run.runner import run
     from cdpr_twin.sim import build_robot
 
     s = scenario(list(changes))
@@ -127,8 +127,8 @@ def one(
 
 def holds_p1(s, calibrated: Path) -> dict:
     """Whether each model (the twin's truth too) holds p1 with the robot's tension range."""
+    from cdpr_twin.math.workspace import is_feasible
     from cdpr_twin.sim import build_robot
-    from cdpr_twin.workspace import is_feasible
 
     p1 = s.controller.options.waypoints[0]
     physics, nominal, _ = build_robot(s.model.file, s.truth)
@@ -151,7 +151,7 @@ def floor_lowered(description: Path, floor: float) -> Path:
 
 def _p1_error(run, s, name: str) -> tuple[float, str | None]:
     """The run's error at p1 [mm], or nan and why it did not get there."""
-    from cdpr_twin.scenario import ScenarioError
+    from cdpr_twin.scenario.loading import ScenarioError
 
     try:
         summary = run(s, None).summary
@@ -250,7 +250,7 @@ def main() -> None:
             med[f"exit_{k}tag_known_mm"] = statistics.median(
                 r["tag_known_exit_median_mm"][k] for r in rows
             )
-    from cdpr_twin.json_format import finite_or_null
+    from cdpr_twin.files.json_format import finite_or_null
 
     print("medians over robots:", json.dumps({k: round(v, 2) for k, v in med.items()}))
     Path(out).mkdir(parents=True, exist_ok=True)

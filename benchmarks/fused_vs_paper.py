@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_twin.runner import run
-from cdpr_twin.scenario import load_scenario
-from cdpr_twin.timeseries import load_timeseries
+from cdpr_twin.recording.timeseries import load_timeseries
+from cdpr_twin.run.runner import run
+from cdpr_twin.scenario.loading import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 

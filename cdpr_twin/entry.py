@@ -3,7 +3,7 @@
 Importing the command (numpy, MuJoCo, Rerun, OpenCV…) takes a second or more. A Ctrl-C or
 SIGTERM in that time used to print a ``KeyboardInterrupt`` traceback from whichever import it
 landed in. Here, with the standard library only, SIGINT and SIGTERM are handled before anything
-heavy is imported (:func:`cdpr_twin.interrupts.handle_stops`): a stop at any time, start-up
+heavy is imported (:func:`cdpr_twin.run.interrupts.handle_stops`): a stop at any time, start-up
 included, exits 130 (Ctrl-C) or 143 (SIGTERM) with one line on stderr and no traceback. The
 first stop decides; once the command has its exit code every later signal is ignored while the
 interpreter exits.
@@ -25,8 +25,8 @@ RERUN_LOG_DEFAULT = "off"
 
 def main() -> int:
     """Run the ``cdpr-twin`` command; its exit code."""
-    from cdpr_twin.interrupts import handle_stops, interruption, settle
-    from cdpr_twin.outputs import Terminated
+    from cdpr_twin.files.transaction import Terminated
+    from cdpr_twin.run.interrupts import handle_stops, interruption, settle
 
     handle_stops()
     os.environ.setdefault("RUST_LOG", RERUN_LOG_DEFAULT)  # before Rerun's first import

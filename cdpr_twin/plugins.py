@@ -2,7 +2,8 @@
 
 A plugin is a class with a ``name``, a ``kind`` (``"estimator"`` or ``"controller"``) and an
 ``Options`` frozen dataclass whose fields, with their defaults, *are* its scenario-file schema:
-:mod:`cdpr_twin.scenario` parses them generically from each field's type and the metadata that
+:mod:`cdpr_twin.scenario.loading` parses them generically from each field's type and the metadata
+that
 :func:`option` attaches (unit, bounds, file key). Register a plugin with :func:`register`; a
 scenario file can import modules that register more (``plugins = ["my_module", "file.py"]``).
 
@@ -40,98 +41,71 @@ import inspect
 import math
 import sys
 import warnings
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, TypeVar
 
-from cdpr_twin.paths import path_kind
+from cdpr_twin.files.paths import path_kind
+from cdpr_twin.options import NoOptions, OptionError, OptionSpec, option, spec_of
 
 KINDS = ("estimator", "controller")
 RESERVED_NAMES = frozenset({"t", "true", "plan", "tag", "status", "tension", "length", "rate"})
 """Column prefixes of ``timeseries.csv`` that no plugin may take as its name."""
 ENTRY_POINT_GROUPS = {"estimator": "cdpr_twin.estimators", "controller": "cdpr_twin.controllers"}
 """The entry-point group of each kind of plugin."""
-_REGISTRY: dict[str, dict[str, type]] = {kind: {} for kind in KINDS}
+BUILTINS: dict[str, tuple[tuple[str, str], ...]] = {
+    "estimator": (
+        # the paper's six (Est. 1 … Est. 6), in its order, then those beyond it
+        ("control", "cdpr_twin.estimators.control:ControlEstimator"),
+        ("image", "cdpr_twin.estimators.image:ImageEstimator"),
+        ("model_simple", "cdpr_twin.estimators.model:SimpleModelEstimator"),
+        ("model_elastic", "cdpr_twin.estimators.model:ElasticModelEstimator"),
+        ("model_pulley", "cdpr_twin.estimators.model:PulleyModelEstimator"),
+        ("model_elastic_pulley", "cdpr_twin.estimators.model:ElasticPulleyModelEstimator"),
+        ("fused", "cdpr_twin.estimators.fused:FusedEstimator"),
+        ("model_catenary", "cdpr_twin.estimators.catenary:CatenaryModelEstimator"),
+    ),
+    "controller": (
+        ("open_loop", "cdpr_twin.controllers.open_loop:OpenLoopController"),
+        ("pbvs", "cdpr_twin.controllers.pbvs:PbvsController"),
+    ),
+}
+"""The built-in plugins, by kind: name → ``"module:Class"``, in listing order. A class is
+imported when it is first looked up (its module, and what it needs, only then)."""
+_REGISTRY: dict[str, dict[str, type | str]] = {kind: dict(BUILTINS[kind]) for kind in KINDS}
+"""The registered plugins by kind and name: a class, or a built-in's ``"module:Class"`` until
+it is first looked up."""
 _ORIGIN: dict[str, dict[str, str]] = {kind: {} for kind in KINDS}
 """Where entry-point plugins came from (``"<name> from <distribution>"``), by kind and name."""
 _BROKEN: dict[str, dict[str, str]] = {kind: {} for kind in KINDS}
 """Entry points that failed to load: why, by kind and name."""
-_BUILTINS_LOADED = False
+_ENTRY_POINTS_LOADED = False
 _ANNOUNCE = [True]
 
 C = TypeVar("C", bound=type)
 
-
-class OptionError(ValueError):
-    """An option value is invalid.
-
-    Attributes:
-        field: the option (as named in the Options dataclass) at fault.
-    """
-
-    def __init__(self, field: str, problem: str) -> None:
-        super().__init__(f"{field}: {problem}")
-        self.field = field
-        self.problem = problem
-
-
-@dataclasses.dataclass(frozen=True)
-class OptionSpec:
-    """How one option is written in a scenario file.
-
-    Attributes:
-        key: the key in the file (default: the field name, plus ``_deg`` for angles).
-        unit: unit in the file (``"deg"`` is converted to radians; others are SI already).
-        minimum: lowest allowed value (numbers).
-        exclusive: the minimum itself is not allowed.
-        infinite: ``inf`` is allowed (written ``inf`` in TOML: "no limit", "instant").
-        pose: the value is a pose ``[x, y, z, rx, ry, rz]`` (m, deg) → (4, 4) transform.
-        convert: applied to the parsed value (e.g. a frame change).
-        doc: one line for error messages and listings.
-        max_items: the most items a list may hold (lists), checked before any item is read.
-        max_items_why: why, as the error says it after the bound.
-    """
-
-    key: str = ""
-    unit: str = ""
-    minimum: float | None = None
-    exclusive: bool = False
-    infinite: bool = False
-    pose: bool = False
-    convert: Callable[[Any], Any] | None = None
-    doc: str = ""
-    max_items: int | None = None
-    max_items_why: str = ""
-
-    def file_key(self, field_name: str) -> str:
-        """The key of this option in a scenario file."""
-        if self.key:
-            return self.key
-        return f"{field_name}_deg" if self.unit == "deg" else field_name
-
-
-def option(default: Any = dataclasses.MISSING, **spec: Any) -> Any:
-    """A dataclass field carrying its :class:`OptionSpec` (``unit=``, ``minimum=``…).
-
-    Args:
-        default: the default in SI units (radians for ``unit="deg"``); omit for a required option.
-        **spec: the :class:`OptionSpec` fields.
-    """
-    meta = {"option": OptionSpec(**spec)}
-    if isinstance(default, (list, dict, set)):
-        raise TypeError("option defaults must be immutable (use a tuple)")
-    return dataclasses.field(default=default, metadata=meta)
-
-
-def spec_of(field: dataclasses.Field) -> OptionSpec:
-    """The :class:`OptionSpec` of an Options field (a default one when none was given)."""
-    return field.metadata.get("option", OptionSpec())
-
-
-@dataclasses.dataclass(frozen=True)
-class NoOptions:
-    """Options of a plugin that has none."""
+__all__ = [
+    "BUILTINS",
+    "NoOptions",
+    "OptionError",
+    "OptionSpec",
+    "PluginWarning",
+    "build",
+    "installed",
+    "load_modules",
+    "lookup",
+    "make_controller",
+    "make_estimator",
+    "names",
+    "option",
+    "register",
+    "registry",
+    "spec_of",
+    "unannounced",
+]
+"""Plugin authors import :func:`option`, :class:`NoOptions`, :class:`OptionError` from here as
+well (their home is the leaf module :mod:`cdpr_twin.options`)."""
 
 
 class PluginWarning(UserWarning):
@@ -150,6 +124,23 @@ def register(cls: C) -> C:
     kind, name = getattr(cls, "kind", ""), getattr(cls, "name", "")
     if kind not in KINDS or not name:
         raise TypeError(f"{cls.__name__}: set class attributes kind (one of {KINDS}) and name")
+    _check(cls, kind)
+    known = _REGISTRY[kind].get(name)
+    here = f"{cls.__module__}:{cls.__qualname__}"
+    if known is not None and here != (known if isinstance(known, str) else _ref(known)):
+        where = known.split(":")[0] if isinstance(known, str) else known.__module__
+        raise ValueError(f"{_a(kind)} named {name!r} is already registered ({where})")
+    _REGISTRY[kind][name] = cls
+    return cls
+
+
+def _ref(cls: type) -> str:
+    """``"module:Class"`` of a class."""
+    return f"{cls.__module__}:{cls.__qualname__}"
+
+
+def _check(cls: type, kind: str) -> None:
+    """Refuse a class that cannot be a plugin of ``kind`` (see :func:`register`)."""
     base = _base(kind)
     if not (isinstance(cls, type) and issubclass(cls, base)):
         raise TypeError(f"{cls!r}: {_a(kind)} must subclass {base.__module__}.{base.__name__}")
@@ -159,19 +150,25 @@ def register(cls: C) -> C:
     options = getattr(cls, "Options", None)
     if not (dataclasses.is_dataclass(options) and options.__dataclass_params__.frozen):
         raise TypeError(f"{cls.__name__}: Options must be a frozen dataclass")
+    name = cls.name
     if name in RESERVED_NAMES or not name.isidentifier():
         raise ValueError(
             f"{cls.__name__}: {name!r} cannot name {_a(kind)} (a column prefix of run files, or "
             f"not an identifier); reserved: {', '.join(sorted(RESERVED_NAMES))}"
         )
-    known = _REGISTRY[kind].get(name)
-    if known is not None and (known.__module__, known.__qualname__) != (
-        cls.__module__,
-        cls.__qualname__,
-    ):
-        raise ValueError(f"{_a(kind)} named {name!r} is already registered ({known.__module__})")
-    _REGISTRY[kind][name] = cls
-    return cls
+
+
+def _resolve(kind: str, name: str) -> type:
+    """The class registered under ``name``, a built-in's imported now if it was not yet."""
+    entry = _REGISTRY[kind][name]
+    if isinstance(entry, str):
+        module, _, attr = entry.partition(":")
+        cls = getattr(importlib.import_module(module), attr)
+        if getattr(cls, "name", None) != name or getattr(cls, "kind", None) != kind:
+            raise TypeError(f"{entry} is not the {kind} named {name!r}")
+        _check(cls, kind)
+        _REGISTRY[kind][name] = entry = cls
+    return entry
 
 
 def _a(kind: str) -> str:
@@ -190,12 +187,11 @@ def _base(kind: str) -> type:
     return Controller
 
 
-def _load_builtins() -> None:
-    global _BUILTINS_LOADED
-    if not _BUILTINS_LOADED:
-        _BUILTINS_LOADED = True
-        importlib.import_module("cdpr_twin.estimators")
-        importlib.import_module("cdpr_twin.controllers")
+def _load_entry_points() -> None:
+    """Register the installed packages' plugins (their entry points), once a process."""
+    global _ENTRY_POINTS_LOADED
+    if not _ENTRY_POINTS_LOADED:
+        _ENTRY_POINTS_LOADED = True
         for kind in KINDS:
             for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUPS[kind]):
                 _load_entry_point(kind, ep)
@@ -234,14 +230,14 @@ def installed(kind: str) -> str:
 
 
 def registry(kind: str) -> Mapping[str, type]:
-    """The registered classes of one kind, by name (a read-only live view)."""
-    _load_builtins()
-    return MappingProxyType(_REGISTRY[kind])
+    """The registered classes of one kind, by name, every built-in imported (a copy)."""
+    return MappingProxyType({name: _resolve(kind, name) for name in names(kind)})
 
 
 def names(kind: str) -> tuple[str, ...]:
-    """Registered names of one kind, in registration order."""
-    return tuple(registry(kind))
+    """Registered names of one kind, in registration order (nothing is imported for them)."""
+    _load_entry_points()
+    return tuple(_REGISTRY[kind])
 
 
 def lookup(kind: str, name: str) -> type:
@@ -250,15 +246,14 @@ def lookup(kind: str, name: str) -> type:
     Raises:
         ValueError: for an unknown name, listing the known ones.
     """
-    try:
-        return registry(kind)[name]
-    except KeyError:
+    if name not in names(kind):
         if name in _BROKEN[kind]:
             raise ValueError(f"{kind} {name!r}: {_BROKEN[kind][name]}") from None
         raise ValueError(
             f"unknown {kind} {name!r}; choose one of {installed(kind)} (installed; more come from "
             f"packages' {ENTRY_POINT_GROUPS[kind]!r} entry points or a scenario's plugins list)"
         ) from None
+    return _resolve(kind, name)
 
 
 def build(kind: str, name: str, geometry: Any, **options: Any) -> Any:
@@ -281,6 +276,30 @@ def build(kind: str, name: str, geometry: Any, **options: Any) -> Any:
         if (problem := _below_minimum(spec_of(f), getattr(opts, f.name))) is not None:
             raise ValueError(f"{name}: {f.name}: {problem}")
     return cls(geometry, opts)
+
+
+def make_estimator(name: str, geometry: Any, **options: Any) -> Any:
+    """Build a registered estimator by name (:func:`build`).
+
+    Args:
+        name: a registered estimator name (:func:`names`).
+        geometry: the nominal :class:`~cdpr_twin.math.geometry.CdprGeometry`.
+        **options: fields of the estimator's ``Options`` (e.g. ``reference="first"`` for
+            ``image``, ``backend="scipy"`` for ``model_*``).
+
+    Raises:
+        ValueError: for an unknown name or option.
+    """
+    return build("estimator", name, geometry, **options)
+
+
+def make_controller(name: str, geometry: Any, **options: Any) -> Any:
+    """Build a registered controller by name with keyword options (SI units; :func:`build`).
+
+    Raises:
+        ValueError: for an unknown name or bad options.
+    """
+    return build("controller", name, geometry, **options)
 
 
 def _below_minimum(spec: OptionSpec, value: Any) -> str | None:

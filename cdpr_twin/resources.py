@@ -81,7 +81,7 @@ def robot_model(ref: str | Path | None = None) -> Path:
     """
     if ref is None:
         return robot_scene("acrobot")
-    from cdpr_twin.paths import path_kind
+    from cdpr_twin.files.paths import path_kind
 
     if is_name(ref) and path_kind(Path(ref), ResourceError) != "file":
         return robot_scene(str(ref))
@@ -103,7 +103,7 @@ def scenario_file(ref: str | Path) -> Path:
     Raises:
         ResourceError: for a bare name that is neither a file nor a shipped scenario.
     """
-    from cdpr_twin.paths import path_kind
+    from cdpr_twin.files.paths import path_kind
 
     path = Path(ref)
     if not is_name(ref) or path_kind(path, ResourceError) == "file":
@@ -129,10 +129,11 @@ def copy_scenario(name: str, dest: str | Path) -> Path:
 
     Raises:
         ResourceError: for an unknown name, an existing file, or an unusable directory.
-        cdpr_twin.outputs.OutputError: the copy cannot be written (disk full); nothing is left.
+        cdpr_twin.files.transaction.OutputError: the copy cannot be written (disk full); nothing is
+            left.
     """
-    from cdpr_twin.outputs import write_whole
-    from cdpr_twin.paths import path_kind
+    from cdpr_twin.files.paths import path_kind
+    from cdpr_twin.files.transaction import write_whole
 
     source = _shipped_scenario(name)
     target = Path(dest) / source.name

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cdpr_twin.se3 import rot_x, transform
+from cdpr_twin.math.se3 import rot_x, transform
 
 T_TAGPUPIL_TAGVISP = transform(rot_x(np.pi), np.zeros(3))
 """ViSP's tag frame (z out of the tag, y up; the paper's ᶜp_o) in pupil-apriltags' tag frame

@@ -9,7 +9,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # before any test module imports mujo
 import numpy as np
 import pytest
 
-from cdpr_twin import se3
+from cdpr_twin.math import se3
 
 # ACROBOT's exit and anchor points (DESIGN §4), typed here independently of the model file
 A_BASE = [

@@ -14,14 +14,14 @@ import mujoco
 import numpy as np
 import pytest
 
-from cdpr_twin import kinematics, se3
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.robot import load_robot
-from cdpr_twin.runner import run
-from cdpr_twin.scenario import load_scenario
+from cdpr_twin.math import kinematics, se3
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.recording.timeseries import Timeseries
+from cdpr_twin.robot.description import load_robot
+from cdpr_twin.run.runner import run
+from cdpr_twin.scenario.loading import load_scenario
 from cdpr_twin.sim import Twin
 from cdpr_twin.sim.generate import build_files
-from cdpr_twin.timeseries import Timeseries
 
 ROBOTS = Path(__file__).parent / "fixtures" / "robots"
 CASES = {

@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 
 from cdpr_twin.cli import main
 from cdpr_twin.plugins import spec_of
-from cdpr_twin.realism import PARTS
+from cdpr_twin.robot.realism import PARTS
 
 ROOT = Path(__file__).resolve().parent.parent
 EVENTS = [  # fault events, so that their numbers are drawn too

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from conftest import paper_pose
 
-from cdpr_twin import se3
+from cdpr_twin.math import se3
+from cdpr_twin.math.statics import InfeasibleTensionError
 from cdpr_twin.sim import ModelError, SimulationError, Twin
-from cdpr_twin.statics import InfeasibleTensionError
 
 
 def test_missing_model_file(tmp_path):
@@ -67,7 +67,7 @@ def test_non_rigid_pose_is_refused(twin):
     T[:3, :3] *= 1.5
     with pytest.raises(ValueError, match="not a rigid transform"):
         twin.reset(T)
-    from cdpr_twin.estimators import make_estimator
+    from cdpr_twin.plugins import make_estimator
 
     with pytest.raises(ValueError, match="not a rigid transform"):
         make_estimator("control", twin.nominal_geometry).reset(T)
@@ -84,7 +84,7 @@ def test_non_finite_or_negative_duration(twin, duration):
     ("option", "value"), [("taut_threshold", np.nan), ("max_residual", -1.0), ("tension0", np.inf)]
 )
 def test_model_estimator_options_are_validated(twin, option, value):
-    from cdpr_twin.estimators import make_estimator
+    from cdpr_twin.plugins import make_estimator
 
     with pytest.raises(ValueError, match=option):
         make_estimator("model_simple", twin.nominal_geometry, **{option: value})
@@ -97,7 +97,7 @@ def test_huge_finite_tensions_are_rejected_updates_not_a_crash(selection):
     ending the run); it stops instead, and the update is flagged, the last pose held."""
     from dataclasses import replace
 
-    from cdpr_twin.estimators import make_estimator
+    from cdpr_twin.plugins import make_estimator
     from cdpr_twin.sim import Twin
     from cdpr_twin.types import Command
 

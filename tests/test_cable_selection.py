@@ -15,15 +15,15 @@ import numpy as np
 import pytest
 from conftest import paper_pose
 
-from cdpr_twin import se3
-from cdpr_twin.estimators import make_estimator
 from cdpr_twin.estimators.base import FEW_TAUT_CABLES, ILL_CONDITIONED
 from cdpr_twin.estimators.selection import best_conditioned, condition_number
-from cdpr_twin.kinematics import jacobian
-from cdpr_twin.runner import run
-from cdpr_twin.scenario import load_scenario
+from cdpr_twin.math import se3
+from cdpr_twin.math.kinematics import jacobian
+from cdpr_twin.plugins import make_estimator
+from cdpr_twin.recording.timeseries import load_timeseries
+from cdpr_twin.run.runner import run
+from cdpr_twin.scenario.loading import load_scenario
 from cdpr_twin.sim import build_robot
-from cdpr_twin.timeseries import load_timeseries
 from cdpr_twin.types import Measurement
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parent.parent
 def test_out_on_the_nominal_descriptions_folder_is_refused_and_nothing_is_touched(
     tmp_path, capsys, monkeypatch
 ):
-    from cdpr_twin import cli_calibrate
+    from cdpr_twin.cli import calibrate as cli_calibrate
 
     folder = tmp_path / "cal"
     shutil.copytree(ROOT / "docs" / "calibration" / "robot_19", folder)

@@ -13,13 +13,15 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from cdpr_twin import resources, se3, vision
+from cdpr_twin import resources
 from cdpr_twin.calibrate import NoiseModel, Observations, Priors, Problem, solve
 from cdpr_twin.calibrate.excitation import excitation_poses
-from cdpr_twin.kinematics import cable_lengths
-from cdpr_twin.robot import load_robot
+from cdpr_twin.math import se3
+from cdpr_twin.math.kinematics import cable_lengths
+from cdpr_twin.math.workspace import geometry_of
+from cdpr_twin.robot.description import load_robot
 from cdpr_twin.types import CameraIntrinsics
-from cdpr_twin.workspace import geometry_of
+from cdpr_twin.vision import detection as vision
 
 ROBOT = resources.models_dir() / "acrobot" / "robot.toml"
 NOISE = NoiseModel(length_std=15e-6, tag_rotation_std=math.radians(0.5))
@@ -217,8 +219,8 @@ def test_rank_report_finds_the_platform_frame_left_free():
 def test_calibrates_robot_19_and_its_open_loop_run_improves(tmp_path):
     from cdpr_twin.calibrate.output import write
     from cdpr_twin.calibrate.session import calibrate, truth_check
-    from cdpr_twin.runner import run
-    from cdpr_twin.scenario import load_scenario
+    from cdpr_twin.run.runner import run
+    from cdpr_twin.scenario.loading import load_scenario
     from cdpr_twin.sim import build_robot
 
     s = load_scenario("paper_open_loop")  # robot 19, acrobot realism profile
@@ -251,7 +253,7 @@ def test_calibrates_robot_19_and_its_open_loop_run_improves(tmp_path):
 def test_the_recording_does_not_depend_on_the_worker_count():
     # truth: the same tour recorded in one process and in two (its segments side by side)
     from cdpr_twin.calibrate.acquire import record
-    from cdpr_twin.scenario import load_scenario
+    from cdpr_twin.scenario.loading import load_scenario
 
     s = load_scenario("paper_open_loop")
     g, T_tag, K, size = _nominal()
@@ -306,8 +308,8 @@ def test_sigterm_leaves_no_calibration_file_under_a_final_name(tmp_path):
 def test_a_failed_report_write_leaves_no_description_under_its_final_name(tmp_path, monkeypatch):
     """A full disk at the report left ``calibrated_robot.toml`` final without its report (a
     scenario could use a calibration whose command failed); now both stay partial."""
-    from cdpr_twin import outputs
     from cdpr_twin.calibrate import output
+    from cdpr_twin.files import transaction as outputs
 
     real = outputs.write_partial
 
@@ -331,9 +333,9 @@ def test_a_failed_report_write_leaves_no_description_under_its_final_name(tmp_pa
 def _leveled_frame_robot(n_poses: int = 60, seed: int = 11):
     """A drawn robot whose whole base side (exit points, tag) sits tilted and shifted against
     gravity, its readings at n poses: tensions from the true statics (the tension distribution
-    of :mod:`cdpr_twin.statics`, gravity along −z) read by sensors with offsets and gain
+    of :mod:`cdpr_twin.math.statics`, gravity along −z) read by sensors with offsets and gain
     errors, and first the homed robot's, exactly at the start pose."""
-    from cdpr_twin.statics import InfeasibleTensionError, tension_distribution
+    from cdpr_twin.math.statics import InfeasibleTensionError, tension_distribution
 
     rng = np.random.default_rng(seed)
     g, T_tag, K, size = _nominal()

@@ -17,7 +17,7 @@ import pytest
 from cdpr_twin.calibrate import drive
 from cdpr_twin.calibrate.excitation import excitation_poses, tour
 from cdpr_twin.calibrate.normal_equations import levenberg_marquardt
-from cdpr_twin.scenario import load_scenario
+from cdpr_twin.scenario.loading import load_scenario
 
 
 def _robot(s):
@@ -61,8 +61,8 @@ def test_an_internal_force_step_changes_the_tensions_without_moving_the_platform
     # truth: the simulated robot's tensions and pose; the step is planned on the nominal model
     from scipy.linalg import null_space
 
-    from cdpr_twin.kinematics import cable_lengths, jacobian
-    from cdpr_twin.se3 import pose_distance
+    from cdpr_twin.math.kinematics import cable_lengths, jacobian
+    from cdpr_twin.math.se3 import pose_distance
     from cdpr_twin.sim import build_robot
 
     s = load_scenario("paper_open_loop")  # robot 19: exit points 12 mm off the nominal ones
@@ -95,10 +95,10 @@ def test_internal_forces_reach_the_least_total_tension_or_else_the_greatest_leas
     from scipy.linalg import null_space
     from scipy.optimize import linprog
 
-    from cdpr_twin.kinematics import gravity_wrench, jacobian
+    from cdpr_twin.math.kinematics import gravity_wrench, jacobian
+    from cdpr_twin.math.statics import tension_distribution
+    from cdpr_twin.math.workspace import is_feasible
     from cdpr_twin.sim import build_robot
-    from cdpr_twin.statics import tension_distribution
-    from cdpr_twin.workspace import is_feasible
 
     s = load_scenario("paper_open_loop")
     g = build_robot(s.model.file)[1].geometry
@@ -141,7 +141,7 @@ def _greedy(poses, start):
 
 
 def test_the_tour_visits_the_nearest_pose_next():
-    from cdpr_twin.se3 import pose_from_vector
+    from cdpr_twin.math.se3 import pose_from_vector
 
     rng = np.random.default_rng(7)
     poses = [

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from conftest import paper_pose
 
-from cdpr_twin import se3, vision
+from cdpr_twin.math import se3
+from cdpr_twin.vision import detection as vision
 
 
 # The bars are 2 mm / 0.5° at p1 and 1 cm / 2° at p0; the twin's rendering and the

@@ -13,11 +13,12 @@ import numpy as np
 import pytest
 from conftest import paper_pose
 
-from cdpr_twin import se3, vision
-from cdpr_twin.realism import CameraRealism, Realism
+from cdpr_twin.math import se3
+from cdpr_twin.robot.realism import CameraRealism, Realism
 from cdpr_twin.sim import imaging
 from cdpr_twin.sim.onboard_camera import OnboardCamera
 from cdpr_twin.sim.sensors import Sensors
+from cdpr_twin.vision import detection as vision
 
 LENS = (-0.2, 0.08, 0.002, -0.002)  # the research's proposal for a 60° VFOV lens
 TAG = vision.tag_corners_object(0.04)

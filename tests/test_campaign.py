@@ -16,7 +16,7 @@ import pytest
 
 from cdpr_twin.campaign import CampaignError, load_campaign, load_table, run_campaign
 from cdpr_twin.cli import main
-from cdpr_twin.timeseries import Timeseries
+from cdpr_twin.recording.timeseries import Timeseries
 
 ROOT = Path(__file__).resolve().parent.parent
 SMALL = f"""
@@ -343,7 +343,7 @@ def _canonical(value):
 def test_the_paper_study_campaign_is_what_reproduce_runs():
     """campaigns/paper_study.toml and ``reproduce``'s plan: the same runs, scenario for scenario
     (each campaign task's resolved scenario equals the plan's file with its run's overrides)."""
-    from cdpr_twin.scenario import scenario_from_data
+    from cdpr_twin.scenario.loading import scenario_from_data
     from cdpr_twin.study.plan import plan, spec_scenario
 
     tasks = load_campaign(Path(__file__).parent.parent / "campaigns" / "paper_study.toml").tasks

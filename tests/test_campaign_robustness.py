@@ -19,8 +19,8 @@ from conftest import group_alive, outlived_by_its_group, pool_threads
 
 from cdpr_twin.campaign import load_campaign, load_table, run_campaign
 from cdpr_twin.cli import main
-from cdpr_twin.metrics import NON_FINITE_ESTIMATE, DeviationTrack
-from cdpr_twin.outputs import OutputDirError
+from cdpr_twin.files.transaction import OutputDirError
+from cdpr_twin.run.metrics import NON_FINITE_ESTIMATE, DeviationTrack
 from cdpr_twin.types import PoseEstimate
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -273,7 +273,7 @@ def test_a_resume_that_cannot_write_its_table_leaves_no_stale_table(tmp_path, mo
     the runs before it under their final names; now they go when new runs start, and the next
     --resume writes them from the parts."""
     from cdpr_twin.campaign import table as table_mod
-    from cdpr_twin.outputs import OutputError
+    from cdpr_twin.files.transaction import OutputError
 
     out = tmp_path / "out"
     two = load_campaign(_campaign(tmp_path, "grow", 0.2, camera=False, seeds=(1, 2)))

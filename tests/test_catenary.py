@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from cdpr_twin.catenary import CatenaryError, end_forces, solve_catenary
+from cdpr_twin.math.catenary import CatenaryError, end_forces, solve_catenary
 from cdpr_twin.sim.cable_chain import chain_end_forces
 
 RHO, ES = 0.064, 68.5e9 * math.pi * 0.002**2  # CoGiRo's Ø 4 mm steel cable

@@ -9,8 +9,9 @@ The straight elastic relation of model_elastic_pulley then misses the sag; the c
 import numpy as np
 import pytest
 
-from cdpr_twin import MODELS_DIR, se3
-from cdpr_twin.estimators import make_estimator
+from cdpr_twin import MODELS_DIR
+from cdpr_twin.math import se3
+from cdpr_twin.plugins import make_estimator
 from cdpr_twin.sim import Twin
 from cdpr_twin.sim.generate import build_files
 

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from cdpr_twin import MODELS_DIR
-from cdpr_twin.options import ScenarioError
-from cdpr_twin.runner import run
-from cdpr_twin.scenario import load_scenario, scenario_from_data
+from cdpr_twin.run.runner import run
+from cdpr_twin.scenario.loading import load_scenario, scenario_from_data
+from cdpr_twin.scenario.toml_reading import ScenarioError
 
 SCENARIO = MODELS_DIR.parent / "scenarios" / "cogiro_open_loop.toml"
 
@@ -58,7 +58,7 @@ def test_the_payload_is_carried_and_refused_above_the_rating():
 
 def _about_origin(model, body):
     """A body's inertia matrix about its frame's origin, from MuJoCo's compiled principal form."""
-    from cdpr_twin.se3 import matrix_from_quat_wxyz
+    from cdpr_twin.math.se3 import matrix_from_quat_wxyz
 
     R = matrix_from_quat_wxyz(model.body_iquat[body])
     c, m = model.body_ipos[body], model.body_mass[body]

@@ -3,7 +3,7 @@
 import numpy as np
 from conftest import paper_pose
 
-from cdpr_twin import kinematics as kin
+from cdpr_twin.math import kinematics as kin
 from cdpr_twin.sim import DeviationSpec, Twin
 
 

@@ -3,7 +3,8 @@
 import numpy as np
 from conftest import paper_pose
 
-from cdpr_twin import DEFAULT_SCENE, se3
+from cdpr_twin import DEFAULT_SCENE
+from cdpr_twin.math import se3
 from cdpr_twin.sim import DeviationSpec, Twin, build_model, read_geometry
 
 SPEC = DeviationSpec(
@@ -69,7 +70,7 @@ def test_deviations_change_the_twin_only():
         t.reset(paper_pose("p1"))
         assert t.settle_error[0] < 1e-6
         # and its true cable lengths differ from what the nominal model predicts
-        from cdpr_twin.kinematics import cable_lengths
+        from cdpr_twin.math.kinematics import cable_lengths
 
         nominal_l = cable_lengths(t.nominal_geometry, paper_pose("p1"), "pulley")
         assert np.max(np.abs(nominal_l - t.cable_lengths)) > 1e-3
@@ -77,7 +78,7 @@ def test_deviations_change_the_twin_only():
 
 def test_mounting_errors_are_applied_in_the_frames_they_are_stated_in():
     """camera_offset is [δp, δθ] in F_p, tag_offset in F_b: a concrete value, not only its norm."""
-    from cdpr_twin.deviations import TruthDeviations
+    from cdpr_twin.robot.deviations import TruthDeviations
 
     dev = TruthDeviations.zero(8)
     dev = TruthDeviations(

@@ -15,8 +15,8 @@ from conftest import EXACT_OPEN_LOOP
 from cdpr_twin import MODELS_DIR
 from cdpr_twin.calibrate.output import toml_text
 from cdpr_twin.campaign.spec import set_dotted
-from cdpr_twin.runner import prepare, run
-from cdpr_twin.scenario import scenario_from_data
+from cdpr_twin.run.runner import prepare, run
+from cdpr_twin.scenario.loading import scenario_from_data
 
 ROOT = Path(__file__).resolve().parent.parent
 SOURCE = ROOT / "scenarios" / "paper_open_loop.toml"
@@ -107,7 +107,7 @@ def test_a_calibration_scales_the_radii_it_read_with_not_the_file_it_copies(tmp_
     ids=["metres", "booleans", "seven", "negative"],
 )
 def test_a_drum_scale_that_is_not_one_per_drum_near_1_is_refused(tmp_path, scale, match):
-    from cdpr_twin.robot import RobotError, load_robot
+    from cdpr_twin.robot.description import RobotError, load_robot
 
     with pytest.raises(RobotError, match=match):
         load_robot(_description(tmp_path, drum_radius_scale=scale))
@@ -123,7 +123,7 @@ def test_the_physics_refuses_drum_radii_that_are_not_one_positive_number_per_dru
 
 
 def test_a_description_without_drum_scales_leaves_the_drives_at_the_robots_radius(tmp_path):
-    from cdpr_twin.realism import WinchRealism
+    from cdpr_twin.robot.realism import WinchRealism
     from cdpr_twin.sim import ModelError, build_robot
 
     winch = WinchRealism(drum_radius=0.03)  # a scenario's override of the robot's 20 mm

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import paper_pose
 
-from cdpr_twin.estimators import make_estimator
+from cdpr_twin.plugins import make_estimator
 from cdpr_twin.sim import Twin
 from cdpr_twin.types import Command, Measurement
 

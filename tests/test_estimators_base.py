@@ -12,7 +12,7 @@ import pytest
 
 from cdpr_twin import plugins
 from cdpr_twin.estimators.base import NO_INPUTS, Estimator, SensorWatch
-from cdpr_twin.geometry import CdprGeometry
+from cdpr_twin.math.geometry import CdprGeometry
 from cdpr_twin.types import Command, Measurement, PoseEstimate
 
 # a stand-in robot: Step never reads its geometry

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from conftest import paper_pose
 
-from cdpr_twin import kinematics as kin
-from cdpr_twin import se3
-from cdpr_twin.estimators import make_estimator
 from cdpr_twin.estimators.base import NO_CAMERA, NO_TWIST, NON_FINITE_INPUT, REANCHORED, TAG_LOST
+from cdpr_twin.math import kinematics as kin
+from cdpr_twin.math import se3
+from cdpr_twin.plugins import make_estimator
 from cdpr_twin.types import Command, Measurement
 
 DT = 0.04  # 25 Hz
@@ -121,8 +121,8 @@ def test_image_composition_with_an_asymmetric_camera_mounting():
     exact detections of a motionless tag give back the true motion to round-off."""
     from conftest import A_BASE, B_PLATFORM
 
-    from cdpr_twin.geometry import CdprGeometry
-    from cdpr_twin.vision import TagDetection
+    from cdpr_twin.math.geometry import CdprGeometry
+    from cdpr_twin.vision.detection import TagDetection
 
     T_pc = se3.transform(se3.so3_exp([0.3, -0.2, 2.9]), [0.02, -0.01, -0.04])
     geom = CdprGeometry(

@@ -6,12 +6,12 @@ from conftest import paper_pose, random_workspace_poses
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cdpr_twin import kinematics as kin
-from cdpr_twin import se3
-from cdpr_twin.estimators import make_estimator
 from cdpr_twin.estimators.base import FEW_TAUT_CABLES, NON_FINITE_INPUT
 from cdpr_twin.estimators.model import solve_fast, solve_scipy
-from cdpr_twin.statics import InfeasibleTensionError, tension_distribution
+from cdpr_twin.math import kinematics as kin
+from cdpr_twin.math import se3
+from cdpr_twin.math.statics import InfeasibleTensionError, tension_distribution
+from cdpr_twin.plugins import make_estimator
 from cdpr_twin.types import Measurement
 
 MODELS = ["model_simple", "model_elastic", "model_pulley", "model_elastic_pulley"]
@@ -215,7 +215,7 @@ def test_bad_inputs_are_flagged_and_the_estimate_held(twin, name):
 
 
 def test_unknown_estimator_and_options():
-    from cdpr_twin.geometry import CdprGeometry
+    from cdpr_twin.math.geometry import CdprGeometry
 
     g = CdprGeometry(np.eye(8, 3), np.eye(8, 3), 0.0, 1.0, 1.0, np.zeros(3))
     with pytest.raises(ValueError, match="choose one of control, image"):

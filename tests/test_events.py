@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from conftest import paper_pose
 
-from cdpr_twin.events import CableBreak, EventSchedule
-from cdpr_twin.runner import run
-from cdpr_twin.scenario import ScenarioError, load_scenario
+from cdpr_twin.recording.timeseries import Timeseries
+from cdpr_twin.run.runner import run
+from cdpr_twin.scenario.loading import ScenarioError, load_scenario
 from cdpr_twin.sim import build_robot
-from cdpr_twin.timeseries import Timeseries
+from cdpr_twin.sim.events import CableBreak, EventSchedule
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
 OPEN_LOOP = (ROOT / "scenarios" / "paper_open_loop.toml").read_text()
@@ -106,7 +106,7 @@ def test_bad_events_are_errors_naming_the_field(tmp_path, event, field):
     text = OPEN_LOOP.replace('"../models/', f'"{ROOT}/models/') + f"\n[[events]]\n{event}\n"
     path.write_text(text)
     with pytest.raises(ScenarioError, match=field.replace("[", r"\[").replace("]", r"\]")):
-        from cdpr_twin.runner import prepare
+        from cdpr_twin.run.runner import prepare
 
         prepare(load_scenario(path).with_overrides(camera=False)).close()
 

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 from conftest import paper_pose
 
-from cdpr_twin import kinematics as kin
-from cdpr_twin import se3
 from cdpr_twin.campaign import CampaignError, load_campaign
 from cdpr_twin.controllers.open_loop import MIN_PERIODS, OpenLoopController, OpenLoopOptions
+from cdpr_twin.math import kinematics as kin
+from cdpr_twin.math import se3
 from cdpr_twin.plugins import OptionError, lookup
-from cdpr_twin.preflight import check_task
-from cdpr_twin.scenario import ScenarioError, load_scenario
+from cdpr_twin.scenario.loading import ScenarioError, load_scenario
+from cdpr_twin.scenario.preflight import check_task
 from cdpr_twin.sim import camera
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -119,8 +119,8 @@ def test_magnitudes_that_break_the_physics_or_the_arithmetic_are_refused(
 
 
 def test_the_relative_std_bound_keeps_negative_draws_beyond_10_sigma():
-    from cdpr_twin.realism import WinchRealism
-    from cdpr_twin.realism_limits import MAX_RELATIVE_STD
+    from cdpr_twin.robot.realism import WinchRealism
+    from cdpr_twin.robot.realism_limits import MAX_RELATIVE_STD
 
     WinchRealism(drum_radius_error_std=MAX_RELATIVE_STD)
     with pytest.raises(OptionError, match=r"once in 20\.9 robots"):  # P(z < −1/0.6) = 0.0478
@@ -186,8 +186,8 @@ def test_what_model_build_refuses_names_the_description_and_field(
 def test_a_vanishing_workspace_spacing_is_an_error_without_warnings():
     import warnings
 
+    from cdpr_twin.math.workspace import spacing_problem
     from cdpr_twin.sim import Twin
-    from cdpr_twin.workspace import spacing_problem
 
     geom = Twin(camera=False).nominal_geometry
     with warnings.catch_warnings():
@@ -219,9 +219,10 @@ def test_more_waypoints_than_a_plan_may_stop_at_are_refused_before_any_is_read(
     """Before: 100 000 waypoints spent > 120 s in preflight for a 1 s run. Refused now by
     their count, one line naming the field, before a pose is parsed or a linear program runs
     (each is counted, not timed)."""
-    from cdpr_twin import options, workspace
     from cdpr_twin.cli import main
     from cdpr_twin.controllers.open_loop import MAX_WAYPOINTS
+    from cdpr_twin.math import workspace
+    from cdpr_twin.scenario import toml_reading as options
 
     parsed, programs = [], []
     pose = options.pose_from_vector
@@ -244,8 +245,8 @@ def test_more_waypoints_than_a_plan_may_stop_at_are_refused_before_any_is_read(
 def test_preflight_checks_each_waypoint_once(tmp_path, monkeypatch):
     """The checks before a run grow linearly with the waypoints: one inside-the-frame check and
     one linear program (wrench feasibility) per waypoint, whatever their number."""
-    from cdpr_twin import geometry
     from cdpr_twin.controllers import open_loop
+    from cdpr_twin.math import geometry
 
     counts = {}
     feasible = open_loop.is_feasible

@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 from conftest import paper_pose
 
-from cdpr_twin import runner
 from cdpr_twin.cli import main
-from cdpr_twin.events import EncoderGlitch, TensionSensorFail, WinchStall
-from cdpr_twin.runner import run
-from cdpr_twin.scenario import ScenarioError, load_scenario
-from cdpr_twin.timeseries import Timeseries
+from cdpr_twin.recording.timeseries import Timeseries
+from cdpr_twin.run import runner
+from cdpr_twin.run.runner import run
+from cdpr_twin.scenario.loading import ScenarioError, load_scenario
+from cdpr_twin.sim.events import EncoderGlitch, TensionSensorFail, WinchStall
 
 ROOT = Path(__file__).resolve().parent.parent
 OPEN_LOOP = ROOT / "scenarios" / "paper_open_loop.toml"
@@ -224,11 +224,11 @@ def test_event_descriptions_name_what_happened():
 def _equilibrium(geom, rest, broken: int | None, T_guess: np.ndarray) -> np.ndarray:
     """The pose where the cables' elastic forces (τ = E·S/l0·(L − l0), never pushing; none from
     the broken one) balance gravity: Aᵀτ = w_g with the kinematics' pulley lengths and
-    Jacobian (cdpr_twin.kinematics, not MuJoCo)."""
+    Jacobian (cdpr_twin.math.kinematics, not MuJoCo)."""
     from scipy.optimize import least_squares
 
-    from cdpr_twin.kinematics import cable_lengths, gravity_wrench, jacobian
-    from cdpr_twin.se3 import pose_from_vector, vector_from_pose
+    from cdpr_twin.math.kinematics import cable_lengths, gravity_wrench, jacobian
+    from cdpr_twin.math.se3 import pose_from_vector, vector_from_pose
 
     def wrench_balance(x):
         T = pose_from_vector(x)
@@ -243,7 +243,7 @@ def _equilibrium(geom, rest, broken: int | None, T_guess: np.ndarray) -> np.ndar
 
 
 def test_after_a_cable_break_the_platform_rests_where_seven_cables_statics_put_it(monkeypatch):
-    from cdpr_twin.se3 import pose_distance
+    from cdpr_twin.math.se3 import pose_distance
 
     seen: dict = {"cables": []}
     original_monitor, original_estimate = runner._monitor, runner.RunSetup.estimate

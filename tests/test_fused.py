@@ -15,14 +15,14 @@ import numpy as np
 import pytest
 from conftest import paper_pose
 
-from cdpr_twin import se3
-from cdpr_twin.estimators import make_estimator
 from cdpr_twin.estimators.base import TAG_LOST
 from cdpr_twin.estimators.fused import CABLE_OUTLIER, PREDICTED, SLACK_CABLES, TAG_OUTLIER
-from cdpr_twin.runner import run
-from cdpr_twin.scenario import load_scenario
+from cdpr_twin.math import se3
+from cdpr_twin.plugins import make_estimator
+from cdpr_twin.recording.timeseries import load_timeseries
+from cdpr_twin.run.runner import run
+from cdpr_twin.scenario.loading import load_scenario
 from cdpr_twin.study.nees import monte_carlo
-from cdpr_twin.timeseries import load_timeseries
 from cdpr_twin.types import Command, Measurement, TagDetection
 
 ROOT = Path(__file__).resolve().parent.parent

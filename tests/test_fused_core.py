@@ -2,8 +2,8 @@
 
 :mod:`cdpr_twin.estimators.fused_core` and :mod:`~cdpr_twin.estimators.fused_kernels` redo,
 compiled, the per-update arithmetic whose reference is
-:mod:`cdpr_twin.estimators.fused_models`, :mod:`cdpr_twin.se3` and
-:func:`cdpr_twin.kinematics.lengths_and_jacobian` (NumPy). Each compiled stage is held here to
+:mod:`cdpr_twin.estimators.fused_models`, :mod:`cdpr_twin.math.se3` and
+:func:`cdpr_twin.math.kinematics.lengths_and_jacobian` (NumPy). Each compiled stage is held here to
 that reference on random and on ACROBOT's inputs, to round-off (the products are summed in
 another order): the SE(3) maps, the pulley kernel (and its Jacobian against finite
 differences), the Joseph update with considered states, the detection's noise and calibration
@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 from conftest import paper_pose
 
-from cdpr_twin import se3
 from cdpr_twin.estimators import fused_core as fc
 from cdpr_twin.estimators import fused_kernels as fk
 from cdpr_twin.estimators import fused_models as fm
-from cdpr_twin.kinematics import lengths_and_jacobian
+from cdpr_twin.math import se3
+from cdpr_twin.math.kinematics import lengths_and_jacobian
 
 
 def close(a, b, rel=1e-12) -> bool:
@@ -321,8 +321,8 @@ def test_a_run_uses_the_signatures_the_filter_compiled_when_built(tmp_path):
     """Each stage has one compiled signature, the warm-up's (at construction): a run's inputs
     (read-only measurement arrays, the geometry's frozen mount) reach it as the same types, so
     nothing is compiled in the middle of a run."""
-    from cdpr_twin.runner import run
-    from cdpr_twin.scenario import load_scenario
+    from cdpr_twin.run.runner import run
+    from cdpr_twin.scenario.loading import load_scenario
 
     ROOT = Path(__file__).resolve().parent.parent
     s = load_scenario(ROOT / "scenarios" / "paper_pbvs.toml").with_overrides(duration=0.5)

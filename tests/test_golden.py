@@ -48,8 +48,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cdpr_twin.runner import run
-from cdpr_twin.scenario import load_scenario
+from cdpr_twin.run.runner import run
+from cdpr_twin.scenario.loading import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 GOLDEN = Path(__file__).resolve().parent / "fixtures" / "golden"

@@ -10,7 +10,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from cdpr_twin.gym import ENV_IDS, CdprEnv, ReachPose
-from cdpr_twin.se3 import pose_distance, so3_exp, so3_log
+from cdpr_twin.math.se3 import pose_distance, so3_exp, so3_log
 
 OBSERVATION_KEYS = {"cable_lengths", "tensions", "tag_detected", "tag_pose", "pose_estimate"}
 
@@ -136,7 +136,7 @@ def test_the_servo_task_is_achieved_at_p1_on_the_nominal_robot():
     # the scene places the tag so that the nominal camera sees the paper's goal view ᶜp_o1 at p1
     from cdpr_twin.gym import ServoToTag, Truth
     from cdpr_twin.gym.tasks import P1
-    from cdpr_twin.se3 import pose_from_vector
+    from cdpr_twin.math.se3 import pose_from_vector
     from cdpr_twin.sim import Twin
 
     with Twin(robot="acrobot", camera=False, tension_noise_std=0.0) as twin:

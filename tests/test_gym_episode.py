@@ -14,7 +14,7 @@ from cdpr_twin import plugins
 from cdpr_twin.estimators.base import NO_INPUTS, Estimator
 from cdpr_twin.gym import CdprEnv, pose6
 from cdpr_twin.gym.tasks import ReachPose
-from cdpr_twin.scenario import ScenarioError
+from cdpr_twin.scenario.loading import ScenarioError
 from cdpr_twin.types import PoseEstimate
 
 

@@ -1,6 +1,6 @@
 """The homing floor of open-loop accuracy: a robot whose geometry is known exactly still misses
 p1 by its start error carried through the move, δ₁ = A(p1)⁺ A(p0) δ₀
-(:func:`cdpr_twin.kinematics.start_error_transfer`), checked here against the simulated robot;
+(:func:`cdpr_twin.math.kinematics.start_error_transfer`), checked here against the simulated robot;
 with the ``acrobot`` profile's homing repeatability that floor is above the 1 mm goal of issue
 11's calibration, whatever the calibration."""
 
@@ -11,11 +11,11 @@ import numpy as np
 from conftest import EXACT_OPEN_LOOP
 
 from cdpr_twin.campaign.spec import set_dotted
-from cdpr_twin.kinematics import start_error_transfer
-from cdpr_twin.realism import profile
-from cdpr_twin.runner import run
-from cdpr_twin.scenario import scenario_from_data
-from cdpr_twin.se3 import pose_from_vector, so3_log
+from cdpr_twin.math.kinematics import start_error_transfer
+from cdpr_twin.math.se3 import pose_from_vector, so3_log
+from cdpr_twin.robot.realism import profile
+from cdpr_twin.run.runner import run
+from cdpr_twin.scenario.loading import scenario_from_data
 from cdpr_twin.sim import nominal_robot
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import pytest
 
-from cdpr_twin import input_files
 from cdpr_twin.cli import main
-from cdpr_twin.input_files import MAX_ARRAY_ITEMS, MAX_NESTING, MAX_TOML_BYTES
+from cdpr_twin.files import inputs as input_files
+from cdpr_twin.files.inputs import MAX_ARRAY_ITEMS, MAX_NESTING, MAX_TOML_BYTES
 
 ROOT = Path(__file__).resolve().parent.parent
 OPEN_LOOP = (

@@ -17,12 +17,12 @@ from cdpr_twin import plugins
 from cdpr_twin.campaign.spec import set_dotted
 from cdpr_twin.campaign.table import flatten, load_table, read_parquet
 from cdpr_twin.cli import main
-from cdpr_twin.cli_tools import live_url
+from cdpr_twin.cli.tools import live_url
 from cdpr_twin.estimators.base import NO_INPUTS, Estimator
-from cdpr_twin.metrics import NON_FINITE_ESTIMATE
-from cdpr_twin.outputs import OutputDirError
-from cdpr_twin.runner import prepare, run
-from cdpr_twin.scenario import ScenarioError, load_scenario, scenario_from_data
+from cdpr_twin.files.transaction import OutputDirError
+from cdpr_twin.run.metrics import NON_FINITE_ESTIMATE
+from cdpr_twin.run.runner import prepare, run
+from cdpr_twin.scenario.loading import ScenarioError, load_scenario, scenario_from_data
 from cdpr_twin.types import PoseEstimate
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -50,7 +50,7 @@ def test_the_papers_goal_is_accepted():
 def test_a_pbvs_goal_view_that_cuts_the_tag_is_refused_by_runs_and_campaigns(tmp_path):
     # truth: the pinhole projection of the tag's corners, by hand: at 9 cm, 4.5 cm off the
     # optical axis, the 4 cm tag's far edge sits at y = 0.065 m, v = cy + fy·0.065/0.09 > 480
-    from cdpr_twin.preflight import check_task
+    from cdpr_twin.scenario.preflight import check_task
     from cdpr_twin.sim import nominal_robot
 
     K = nominal_robot("acrobot").intrinsics
@@ -94,7 +94,7 @@ def test_a_damaged_part_of_a_campaign_table_is_a_one_line_error(tmp_path):
 def test_a_second_ctrl_c_while_a_stopped_run_saves_cannot_leave_it_half_saved(
     tmp_path, monkeypatch
 ):
-    from cdpr_twin import recorders
+    from cdpr_twin.recording import sinks as recorders
 
     close = recorders.Recorders.close
 
@@ -118,9 +118,9 @@ def test_a_second_ctrl_c_while_a_stopped_run_saves_cannot_leave_it_half_saved(
 def test_a_stop_before_the_run_claims_its_directory_does_not_claim_an_earlier_runs_files(
     tmp_path, monkeypatch, capsys
 ):
-    from cdpr_twin import runner
     from cdpr_twin.cli import main
-    from cdpr_twin.outputs import Terminated
+    from cdpr_twin.files.transaction import Terminated
+    from cdpr_twin.run import runner
 
     out = tmp_path / "out"
     out.mkdir()
@@ -165,7 +165,7 @@ def test_a_platform_above_its_exit_points_is_said_so():
 def test_a_signal_during_a_completed_runs_save_is_delivered_once_the_files_are_whole(
     tmp_path, monkeypatch
 ):
-    from cdpr_twin import recorders
+    from cdpr_twin.recording import sinks as recorders
 
     close = recorders.Recorders.close
 
@@ -220,7 +220,7 @@ def test_a_command_refuses_another_commands_directory(tmp_path, capsys, marker, 
 
 
 def test_a_run_says_when_its_duration_is_rounded_or_its_viewer_cannot_open(monkeypatch):
-    from cdpr_twin.cli_tools import run_notes
+    from cdpr_twin.cli.tools import run_notes
 
     s = load_scenario("paper_open_loop")
     assert run_notes(s.with_overrides(duration=1.04), spawn=False) == []
@@ -235,8 +235,8 @@ def test_a_run_says_when_its_duration_is_rounded_or_its_viewer_cannot_open(monke
 
 
 def test_a_sigterm_as_the_run_ends_says_its_outputs_are_complete(tmp_path, monkeypatch, capsys):
-    from cdpr_twin import recorders
     from cdpr_twin.cli import main
+    from cdpr_twin.recording import sinks as recorders
 
     close = recorders.Recorders.close
 
@@ -255,8 +255,8 @@ def test_a_sigterm_as_the_run_ends_says_its_outputs_are_complete(tmp_path, monke
 
 
 def test_a_held_signal_of_another_kind_than_the_stop_under_way_is_delivered():
-    from cdpr_twin.interrupts import shielded, sigterm_raises
-    from cdpr_twin.outputs import Terminated
+    from cdpr_twin.files.transaction import Terminated
+    from cdpr_twin.run.interrupts import shielded, sigterm_raises
 
     with sigterm_raises(), pytest.raises(Terminated):  # a pool worker told to stop while it
         try:  # saves a run stopped by Ctrl-C: the SIGTERM must still end it
@@ -361,8 +361,8 @@ def test_a_campaign_names_a_shipped_scenario_as_run_does(tmp_path):
 def test_ctrl_c_while_a_command_starts_is_one_line_not_a_traceback(monkeypatch, capsys):
     """Ctrl-C before a command's own handling (its imports, reading the scenario) printed a
     KeyboardInterrupt traceback."""
-    from cdpr_twin import scenario
     from cdpr_twin.cli import main
+    from cdpr_twin.scenario import loading as scenario
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
@@ -416,7 +416,7 @@ def test_a_file_saved_with_a_byte_order_mark_reads_as_without_it(tmp_path):
 
     from cdpr_twin import resources
     from cdpr_twin.campaign import load_campaign
-    from cdpr_twin.robot import load_robot
+    from cdpr_twin.robot.description import load_robot
 
     def marked(source: Path, to: Path, text: str | None = None) -> Path:
         to.parent.mkdir(exist_ok=True)
@@ -441,7 +441,7 @@ def test_a_file_saved_with_a_byte_order_mark_reads_as_without_it(tmp_path):
 
 def test_a_directory_given_for_a_description_is_called_a_directory(tmp_path):
     # before: "not found" for a directory that is there (model.nominal, a robot description)
-    from cdpr_twin.robot import RobotError, load_robot
+    from cdpr_twin.robot.description import RobotError, load_robot
 
     with pytest.raises(ScenarioError, match=r": model\.nominal: .* is a directory; give a robot"):
         _pbvs(**{"model.nominal": str(tmp_path)})

@@ -9,10 +9,10 @@ import signal
 
 import pytest
 
-from cdpr_twin import runner
-from cdpr_twin.interrupts import interruption
-from cdpr_twin.outputs import Terminated
-from cdpr_twin.scenario import load_scenario
+from cdpr_twin.files.transaction import Terminated
+from cdpr_twin.run import runner
+from cdpr_twin.run.interrupts import interruption
+from cdpr_twin.scenario.loading import load_scenario
 
 
 def _through_compiled_code(stop: KeyboardInterrupt) -> SystemError:
@@ -51,7 +51,7 @@ def test_only_an_interrupt_behind_a_system_error_counts():
 
 def test_a_command_gets_the_stop_not_the_system_error_that_carried_it():
     # truth: the exception raised inside, and CPython's own SystemError left alone
-    from cdpr_twin.interrupts import sigterm_raises
+    from cdpr_twin.run.interrupts import sigterm_raises
 
     with pytest.raises(Terminated), sigterm_raises():
         raise _through_compiled_code(Terminated())
@@ -64,7 +64,8 @@ def test_a_command_gets_the_stop_not_the_system_error_that_carried_it():
 def test_calibrate_stopped_inside_compiled_code_exits_terminated(tmp_path, monkeypatch, capsys):
     # truth: the exit code and line a SIGTERM gets in `cdpr-twin calibrate` anywhere else (143,
     # "terminated"), and nothing left behind in the directory it made
-    from cdpr_twin import cli, cli_calibrate
+    from cdpr_twin import cli
+    from cdpr_twin.cli import calibrate as cli_calibrate
 
     def solve(*args):
         raise _through_compiled_code(Terminated())
@@ -81,7 +82,7 @@ def test_a_sigterm_re_raised_as_a_plain_ctrl_c_is_still_a_sigterm_and_only_withi
     # library (Ray's signal check) re-raising our Terminated as its base class
     import signal
 
-    from cdpr_twin.interrupts import sigterm_raises
+    from cdpr_twin.run.interrupts import sigterm_raises
 
     def library_call():
         try:
@@ -113,7 +114,8 @@ def test_a_second_signal_of_the_other_kind_does_not_change_the_exit_code(
     # before: SIGINT then SIGTERM 0.05-0.3 s later gave "status": "interrupted" and exit 143.
     # Here the first lands at the 5th physics advance and the second from a hook in the stop's
     # own handling, every time. Truth: summary.json, read back, and the exit code
-    from cdpr_twin import cli, tally
+    from cdpr_twin import cli
+    from cdpr_twin.run import summary as tally
     from cdpr_twin.sim import physics
 
     advance, calls = physics.Physics.advance, [0]
@@ -149,7 +151,7 @@ def test_a_second_signal_of_the_other_kind_does_not_change_the_exit_code(
 )
 def test_a_tick_held_by_two_signals_escapes_as_the_first(first, second, code, status):
     # truth: the signals actually delivered, in their order; before, the second one decided
-    from cdpr_twin.interrupts import shielded, sigterm_raises
+    from cdpr_twin.run.interrupts import shielded, sigterm_raises
 
     with pytest.raises(KeyboardInterrupt) as stop, sigterm_raises(), shielded(escape=True):
         signal.raise_signal(first)  # held: the tick is being recorded

@@ -1,4 +1,4 @@
-"""Pure-math tests of cdpr_twin.kinematics and cdpr_twin.statics on ACROBOT's geometry.
+"""Pure-math tests of cdpr_twin.math.kinematics and cdpr_twin.math.statics on ACROBOT's geometry.
 
 The geometry is built directly from the paper's numbers (no MuJoCo), and every result is
 checked against an independent truth: finite differences, the straight-cable limit, circle
@@ -18,8 +18,8 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from scipy.linalg import null_space
 
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.kinematics import (
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.math.kinematics import (
     anchor_points_base,
     cable_lengths,
     cable_vectors,
@@ -29,8 +29,8 @@ from cdpr_twin.kinematics import (
     pulley_state,
     rest_lengths,
 )
-from cdpr_twin.se3 import pose_from_vector, se3_exp, so3_exp, transform
-from cdpr_twin.statics import InfeasibleTensionError, tension_distribution
+from cdpr_twin.math.se3 import pose_from_vector, se3_exp, so3_exp, transform
+from cdpr_twin.math.statics import InfeasibleTensionError, tension_distribution
 
 PULLEY_RADIUS = 0.0045
 ES = 111e9 * math.pi * 0.001**2  # E = 111 GPa, S = π (1 mm)²

@@ -15,7 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from cdpr_twin import record
+from cdpr_twin.recording import rerun as record
 
 RERUN = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
 

@@ -4,7 +4,8 @@ import mujoco
 import numpy as np
 from conftest import A_BASE, B_PLATFORM, paper_pose
 
-from cdpr_twin import DEFAULT_SCENE, se3
+from cdpr_twin import DEFAULT_SCENE
+from cdpr_twin.math import se3
 from cdpr_twin.sim import build_model, read_geometry
 
 

@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 from conftest import random_workspace_poses
 
-from cdpr_twin import kinematics as kin
-from cdpr_twin import se3
-from cdpr_twin.estimators import make_estimator, newton
+from cdpr_twin.estimators import newton
 from cdpr_twin.estimators.solvers import _cable_tuples, _newton
+from cdpr_twin.math import kinematics as kin
+from cdpr_twin.math import se3
+from cdpr_twin.plugins import make_estimator
 from cdpr_twin.types import Measurement
 
 

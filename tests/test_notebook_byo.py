@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from cdpr_twin.estimators import PAPER_ESTIMATORS
-from cdpr_twin.timeseries import Timeseries
+from cdpr_twin.recording.timeseries import Timeseries
 
 ROOT = Path(__file__).resolve().parent.parent
 NOTEBOOK = ROOT / "notebooks" / "bring_your_own_estimator.ipynb"

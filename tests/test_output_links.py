@@ -17,7 +17,7 @@ import pytest
 from conftest import EARLIER_SUMMARY
 
 from cdpr_twin.cli import main
-from cdpr_twin.outputs import OutputDir, OutputError, write_atomic
+from cdpr_twin.files.transaction import OutputDir, OutputError, write_atomic
 
 ROOT = Path(__file__).resolve().parent.parent
 OPEN_LOOP = ROOT / "scenarios" / "paper_open_loop.toml"
@@ -321,7 +321,7 @@ def test_write_atomic_replaces_a_link_at_the_final_name(tmp_path, victim):
 
 
 def test_a_partial_replaced_while_written_is_not_renamed(tmp_path, victim):
-    from cdpr_twin.outputs import Partial
+    from cdpr_twin.files.transaction import Partial
 
     out = Partial(tmp_path / "x.json")
     os.unlink(out.partial)

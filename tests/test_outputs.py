@@ -17,8 +17,8 @@ import pytest
 from conftest import EARLIER_SUMMARY
 
 from cdpr_twin.cli import main
-from cdpr_twin.outputs import LOCK_NAME, OutputDir, OutputDirError
-from cdpr_twin.timeseries import TimeseriesWriter
+from cdpr_twin.files.transaction import LOCK_NAME, OutputDir, OutputDirError
+from cdpr_twin.recording.timeseries import TimeseriesWriter
 
 ROOT = Path(__file__).resolve().parent.parent
 OPEN_LOOP = ROOT / "scenarios" / "paper_open_loop.toml"
@@ -180,7 +180,7 @@ def test_a_full_disk_is_a_one_line_error_and_no_final_name(tmp_path, monkeypatch
 def test_a_stop_while_the_outputs_open_leaves_nothing(tmp_path, monkeypatch, capsys):
     """Ctrl-C after the CSV was begun, while the Rerun file opens: no header-only partial, no
     lock, the earlier run's outputs gone as the claim said; a user's file is kept."""
-    from cdpr_twin import recorders
+    from cdpr_twin.recording import sinks as recorders
 
     def interrupted(*args, **kwargs):
         assert (out / "timeseries.csv.partial").exists()  # the CSV was begun
@@ -202,8 +202,8 @@ def test_a_stop_while_the_files_open_leaves_no_directory_the_run_created(
 ):
     """SIGTERM while the Rerun file opens, in an --out that did not exist: before, the empty
     directory and its new parents stayed behind."""
-    from cdpr_twin import recorders
-    from cdpr_twin.outputs import Terminated
+    from cdpr_twin.files.transaction import Terminated
+    from cdpr_twin.recording import sinks as recorders
 
     def terminated(*args, **kwargs):
         raise Terminated()
@@ -352,7 +352,7 @@ def test_lock_of_a_live_owner_is_kept_and_a_dead_owners_is_taken(tmp_path):
 def test_a_claim_removes_its_owners_partial_files_not_the_users(tmp_path, partials, ours):
     # before: every *.partial in --out went, a user's unfinished "thesis.tex.partial" too
     from cdpr_twin.campaign import CAMPAIGN_FILES
-    from cdpr_twin.outputs import OutputDir
+    from cdpr_twin.files.transaction import OutputDir
 
     partials = CAMPAIGN_FILES if partials == "campaign" else partials
 

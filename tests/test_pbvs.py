@@ -6,14 +6,14 @@ from conftest import A_BASE, B_PLATFORM
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cdpr_twin import se3
-from cdpr_twin.controllers import make_controller
 from cdpr_twin.controllers.pbvs import interaction_matrix
 from cdpr_twin.estimators.base import PoseEstimate
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.kinematics import jacobian
+from cdpr_twin.math import se3
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.math.kinematics import jacobian
+from cdpr_twin.plugins import make_controller
 from cdpr_twin.types import Measurement
-from cdpr_twin.vision import TagDetection
+from cdpr_twin.vision.detection import TagDetection
 
 # A camera mounting that is not its own inverse (the nominal one, diag(−1, 1, −1), is).
 T_PLATFORM_CAM = se3.transform(se3.so3_exp([0.3, -0.2, 2.9]), [0.02, -0.01, -0.04])

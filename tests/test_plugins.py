@@ -14,12 +14,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cdpr_twin import plugins, se3
+from cdpr_twin import plugins
 from cdpr_twin.estimators.base import NO_INPUTS, Estimator
+from cdpr_twin.math import se3
 from cdpr_twin.plugins import OptionError, option
-from cdpr_twin.runner import run
-from cdpr_twin.scenario import ScenarioError, load_scenario
-from cdpr_twin.timeseries import Timeseries
+from cdpr_twin.recording.timeseries import Timeseries
+from cdpr_twin.run.runner import run
+from cdpr_twin.scenario.loading import ScenarioError, load_scenario
 from cdpr_twin.types import Measurement, PoseEstimate
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -91,7 +92,7 @@ def test_a_fusing_estimator_from_outside_the_package_runs_in_a_scenario(tmp_path
 
 
 def test_inputs_that_do_not_run_or_bad_options_are_scenario_errors(tmp_path):
-    from cdpr_twin.runner import prepare
+    from cdpr_twin.run.runner import prepare
 
     path = _with_midpoint("paper_open_loop.toml", tmp_path)
     text = path.read_text()

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cdpr_twin import realism as rl
 from cdpr_twin.cli import main
-from cdpr_twin.scenario import ScenarioError, load_scenario
+from cdpr_twin.robot import realism as rl
+from cdpr_twin.scenario.loading import ScenarioError, load_scenario
 from cdpr_twin.types import CameraIntrinsics
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -100,7 +100,7 @@ def test_what_only_the_built_robot_can_check_names_the_realism_field(
 def test_the_detector_refuses_intrinsics_it_cannot_fit_a_pose_with():
     """A principal point far outside the image crashed pupil-apriltags' pose fit (SIGSEGV at
     cx = 1e6 px); a non-positive focal length has no pinhole. Both are refused up front."""
-    from cdpr_twin.vision import TagDetector
+    from cdpr_twin.vision.detection import TagDetector
 
     K = CameraIntrinsics(640, 480, 600.0, 600.0, 320.0, 240.0)
     TagDetector(K)

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cdpr_twin.results import PAPER_ESTIMATORS
 from cdpr_twin.study import reproduce
+from cdpr_twin.study.results import PAPER_ESTIMATORS
 
 ROOT = Path(__file__).resolve().parent.parent
 P1 = np.array([0.284, -0.197, 0.08])

@@ -25,7 +25,7 @@ from conftest import EARLIER_SUMMARY
 from cdpr_twin import plugins
 from cdpr_twin.cli import main
 from cdpr_twin.estimators.base import NO_INPUTS, Estimator
-from cdpr_twin.outputs import OutputDir, partial_of
+from cdpr_twin.files.transaction import OutputDir, partial_of
 from cdpr_twin.types import PoseEstimate
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -15,7 +15,7 @@ from pathlib import Path
 DRIVER = """
 import sys
 
-from cdpr_twin import record
+from cdpr_twin.recording import rerun as record
 
 real = record.Partial.name_of_fd
 

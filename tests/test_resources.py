@@ -9,8 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from cdpr_twin import cli, cli_tools, resources
-from cdpr_twin.scenario import ScenarioError, load_scenario
+from cdpr_twin import cli, resources
+from cdpr_twin.cli import tools as cli_tools
+from cdpr_twin.scenario.loading import ScenarioError, load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 SHIPPED = tuple(sorted(p.stem for p in (ROOT / "scenarios").glob("*.toml")))

@@ -16,7 +16,7 @@ from conftest import A_BASE, B_PLATFORM, random_workspace_poses
 
 from cdpr_twin import MODELS_DIR
 from cdpr_twin.cli import main
-from cdpr_twin.robot import RobotError, load_robot
+from cdpr_twin.robot.description import RobotError, load_robot
 from cdpr_twin.sim import Physics
 from cdpr_twin.sim.generate import build_files, model_texts
 

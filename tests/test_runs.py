@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cdpr_twin.deviations import DeviationSpec
 from cdpr_twin.estimators import PAPER_ESTIMATORS
-from cdpr_twin.runner import run
-from cdpr_twin.scenario import load_scenario
+from cdpr_twin.robot.deviations import DeviationSpec
+from cdpr_twin.run.runner import run
+from cdpr_twin.scenario.loading import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = sorted((ROOT / "scenarios").glob("*.toml"))

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 from conftest import PAPER_POSES
 
-from cdpr_twin import DEFAULT_SCENE, MODELS_DIR, se3
+from cdpr_twin import DEFAULT_SCENE, MODELS_DIR
+from cdpr_twin.math import se3
 from cdpr_twin.sim import Physics, build_model, build_robot
 from cdpr_twin.sim.generate import build_files
 from cdpr_twin.sim.model import swivel_body
@@ -134,7 +135,7 @@ def test_the_tension_sensors_read_the_pulley_side_on_cogiro(cogiro_at_rest):
 
 def _irvine_tension(p, i: int, ls: float) -> float:
     """The tension at B_i of the span of unstretched length ``ls`` (Irvine 1981, eqs. 2.19-2.20,
-    lower end at the origin), solved with scipy's fsolve: independent of cdpr_twin.catenary."""
+    lower end at the origin), solved with scipy's fsolve: independent of cdpr_twin.math.catenary."""
     from scipy.optimize import fsolve
 
     top, bottom = _spans(p)

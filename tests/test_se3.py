@@ -1,4 +1,5 @@
-"""Tests of cdpr_twin.se3 against independent truths (hand values, scipy, matrix exponential)."""
+"""Tests of cdpr_twin.math.se3 against independent truths (hand values, scipy, matrix
+exponential)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from hypothesis import strategies as st
 from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
-from cdpr_twin.se3 import (
+from cdpr_twin.math.se3 import (
     adjoint,
     euler_xyz_from_matrix,
     inverse,

@@ -4,7 +4,7 @@ one (the branch masks of Shepperd's method), including the branch cases near θ 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cdpr_twin import se3
+from cdpr_twin.math import se3
 
 
 def _rotations():

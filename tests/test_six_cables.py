@@ -12,11 +12,11 @@ import mujoco
 import numpy as np
 import pytest
 
-from cdpr_twin import se3
-from cdpr_twin.runner import run
-from cdpr_twin.scenario import load_scenario
+from cdpr_twin.math import se3
+from cdpr_twin.recording.timeseries import Timeseries
+from cdpr_twin.run.runner import run
+from cdpr_twin.scenario.loading import load_scenario
 from cdpr_twin.sim import Twin, build_robot
-from cdpr_twin.timeseries import Timeseries
 
 MASS = 3.5
 START = [0.0, 0.0, 0.4, 0.0, 0.0, 0.0]

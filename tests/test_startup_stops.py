@@ -74,8 +74,8 @@ def _stopped_at(tmp_path: Path, module: str, signum: int, argv: list[str]):
     [
         ("cdpr_twin.cli", "cdpr-twin: interrupted while starting"),  # before any heavy import
         ("numpy.linalg", "cdpr-twin: interrupted while starting"),  # inside numpy's import
-        ("cdpr_twin.cli_campaign", "cdpr-twin: interrupted while starting"),
-        ("cdpr_twin.runner", "cdpr-twin run: interrupted"),  # the command's own imports
+        ("cdpr_twin.cli.campaign", "cdpr-twin: interrupted while starting"),
+        ("cdpr_twin.run.runner", "cdpr-twin run: interrupted"),  # the command's own imports
         ("mujoco", "cdpr-twin: interrupted before this run saved any output in {out}"),
     ],
 )
@@ -90,7 +90,7 @@ def test_ctrl_c_during_start_up_exits_130_in_one_line(tmp_path, module, said):
     assert not out.exists()
 
 
-@pytest.mark.parametrize("module", ["numpy.linalg", "cdpr_twin.runner"])
+@pytest.mark.parametrize("module", ["numpy.linalg", "cdpr_twin.run.runner"])
 def test_sigterm_during_start_up_exits_143_in_one_line(tmp_path, module):
     out = tmp_path / "out"
     argv = [sys.executable, "-m", "cdpr_twin", "run", "paper_open_loop", "--out", str(out)]

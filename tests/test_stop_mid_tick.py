@@ -14,12 +14,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cdpr_twin import record, runner, se3
-from cdpr_twin.interrupts import sigterm_raises
-from cdpr_twin.outputs import Terminated
-from cdpr_twin.scenario import load_scenario
+from cdpr_twin.files.transaction import Terminated
+from cdpr_twin.math import se3
+from cdpr_twin.recording import rerun as record
+from cdpr_twin.recording.timeseries import load_timeseries
+from cdpr_twin.run import runner
+from cdpr_twin.run.interrupts import sigterm_raises
+from cdpr_twin.scenario.loading import load_scenario
 from cdpr_twin.sim import physics
-from cdpr_twin.timeseries import load_timeseries
 
 ROOT = Path(__file__).resolve().parent.parent
 STOP_AT = 12
@@ -109,7 +111,7 @@ def test_an_event_fired_after_the_last_recorded_tick_is_not_reported_fired(tmp_p
 def test_a_stop_held_by_the_shield_leaves_even_when_the_body_raises_and_a_second_escapes():
     # a review: a SIGTERM held during a tick whose recording then raised was lost (exit 1, not
     # 143); and a body that hangs could only be stopped by SIGKILL
-    from cdpr_twin.interrupts import shielded
+    from cdpr_twin.run.interrupts import shielded
 
     with pytest.raises(Terminated) as stop, sigterm_raises(), shielded(escape=True):
         signal.raise_signal(signal.SIGTERM)  # held

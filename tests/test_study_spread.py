@@ -5,8 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cdpr_twin.realism import RUN_SOURCES
-from cdpr_twin.scenario import ScenarioError, load_scenario
+from cdpr_twin.robot.realism import RUN_SOURCES
+from cdpr_twin.scenario.loading import ScenarioError, load_scenario
 from cdpr_twin.study.plan import extra_runs, plan
 from cdpr_twin.study.spread import spread
 

@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 from conftest import paper_pose
 
-from cdpr_twin import se3, vision
-from cdpr_twin.realism import profile
+from cdpr_twin.math import se3
+from cdpr_twin.robot.realism import profile
 from cdpr_twin.sim.onboard_camera import OnboardCamera
+from cdpr_twin.vision import detection as vision
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +88,7 @@ def test_a_tag_outside_the_window_is_found_in_the_whole_frame(frames):
 def test_the_refinement_on_a_window_is_bit_identical_to_the_whole_frame(frames, monkeypatch):
     """refine_quad samples a float32 copy of a window around the corners only; its profiles
     (bilinear, border replication at the image's own edges) must be those of the whole frame."""
-    from cdpr_twin import quad
+    from cdpr_twin.vision import corners as quad
 
     images, K, dist, size = frames
     det = vision.TagDetector(K, size, distortion=dist, quad_sigma=0.8)

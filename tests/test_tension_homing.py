@@ -13,13 +13,12 @@ import numpy as np
 import pytest
 from conftest import A_BASE, B_PLATFORM
 
-from cdpr_twin.controllers import make_controller
 from cdpr_twin.controllers.pbvs import P1
-from cdpr_twin.deviations import DeviationSpec
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.metrics import pose_error
-from cdpr_twin.procedure import true_start_pose
-from cdpr_twin.realism import (
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.math.se3 import pose_error, pose_from_vector, so3_log
+from cdpr_twin.plugins import make_controller
+from cdpr_twin.robot.deviations import DeviationSpec
+from cdpr_twin.robot.realism import (
     CameraRealism,
     HomingRealism,
     TensionRealism,
@@ -27,10 +26,10 @@ from cdpr_twin.realism import (
     robot_rng,
     run_rng,
 )
-from cdpr_twin.runner import prepare, run, start
-from cdpr_twin.scenario import ScenarioError, load_scenario
-from cdpr_twin.scenario_tables import MonitorConfig
-from cdpr_twin.se3 import pose_from_vector, so3_log
+from cdpr_twin.run.homing_and_teaching import true_start_pose
+from cdpr_twin.run.runner import prepare, run, start
+from cdpr_twin.scenario.loading import ScenarioError, load_scenario
+from cdpr_twin.scenario.tables import MonitorConfig
 from cdpr_twin.sim.tension import TensionSensors
 from cdpr_twin.types import Measurement, TagDetection
 

@@ -5,8 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cdpr_twin.se3 import pose_from_vector
-from cdpr_twin.timeseries import Timeseries, TimeseriesWriter, header, load_timeseries
+from cdpr_twin.math.se3 import pose_from_vector
+from cdpr_twin.recording.timeseries import Timeseries, TimeseriesWriter, header, load_timeseries
 from cdpr_twin.types import Command, Measurement, PoseEstimate, Status, TagDetection
 
 NAMES = ("control", "image", "model_simple", "fused")

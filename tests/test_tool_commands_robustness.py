@@ -12,7 +12,7 @@ import pytest
 
 from cdpr_twin import cli
 from cdpr_twin.calibrate.solver import CalibrationError
-from cdpr_twin.robot import load_robot
+from cdpr_twin.robot.description import load_robot
 from cdpr_twin.sim.generate import model_texts
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -162,7 +162,7 @@ def no_sampling(monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("the workspace was sampled before the input was checked")
 
-    monkeypatch.setattr("cdpr_twin.workspace.sample_workspace", refuse)
+    monkeypatch.setattr("cdpr_twin.math.workspace.sample_workspace", refuse)
 
 
 @pytest.mark.parametrize(

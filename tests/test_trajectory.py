@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from conftest import paper_pose
 
-from cdpr_twin import kinematics as kin
-from cdpr_twin import se3
-from cdpr_twin.controllers import make_controller
 from cdpr_twin.controllers.open_loop import quintic
 from cdpr_twin.estimators.base import PoseEstimate
+from cdpr_twin.math import kinematics as kin
+from cdpr_twin.math import se3
+from cdpr_twin.plugins import make_controller
 
 
 def _controller(twin):

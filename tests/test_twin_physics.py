@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 from conftest import paper_pose, random_workspace_poses
 
-from cdpr_twin import kinematics as kin
-from cdpr_twin import se3
+from cdpr_twin.math import kinematics as kin
+from cdpr_twin.math import se3
 
 
 def _mujoco_pull_directions(twin):
     """Unit vectors from each B_i toward the point where its cable leaves the sheave, taken
-    from MuJoCo's wrap path (independent of cdpr_twin.kinematics)."""
+    from MuJoCo's wrap path (independent of cdpr_twin.math.kinematics)."""
     m, d = twin.model, twin.data
     out = []
     xpos = np.asarray(d.wrap_xpos).reshape(-1, 3)

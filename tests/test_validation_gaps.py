@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from conftest import paper_pose
 
-from cdpr_twin.estimators import make_estimator
 from cdpr_twin.estimators.base import NON_FINITE_INPUT
-from cdpr_twin.scenario import ScenarioError, load_scenario
+from cdpr_twin.plugins import make_estimator
+from cdpr_twin.scenario.loading import ScenarioError, load_scenario
 from cdpr_twin.sim import SimulationError, Twin
 from cdpr_twin.types import Measurement
 

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import rerun as rr
 
-from cdpr_twin.blueprint import robot_label
-from cdpr_twin.runner import run
-from cdpr_twin.scenario import load_scenario
+from cdpr_twin.recording.blueprint import robot_label
+from cdpr_twin.run.runner import run
+from cdpr_twin.scenario.loading import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -1,4 +1,4 @@
-"""The wait for a writer thread that may have died (:mod:`cdpr_twin.watchdog`)."""
+"""The wait for a writer thread that may have died (:mod:`cdpr_twin.recording.watchdog`)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from cdpr_twin.watchdog import WriterStalledError, call_with_deadline, flush_while_writing
+from cdpr_twin.recording.watchdog import WriterStalledError, call_with_deadline, flush_while_writing
 
 
 def _timing_out(timeout_s: float) -> None:

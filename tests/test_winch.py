@@ -14,10 +14,10 @@ import pytest
 from conftest import paper_pose
 
 from cdpr_twin import MODELS_DIR
-from cdpr_twin import kinematics as kin
-from cdpr_twin.deviations import DeviationSpec
-from cdpr_twin.realism import Realism, WinchRealism, profile, robot_rng
-from cdpr_twin.robot import load_robot
+from cdpr_twin.math import kinematics as kin
+from cdpr_twin.robot.description import load_robot
+from cdpr_twin.robot.deviations import DeviationSpec
+from cdpr_twin.robot.realism import Realism, WinchRealism, profile, robot_rng
 from cdpr_twin.sim import Sensors, build_robot
 from cdpr_twin.sim.winch import draw_drum_radii
 

@@ -12,11 +12,12 @@ import numpy as np
 import pytest
 from conftest import PAPER_POSES
 
-from cdpr_twin import DEFAULT_SCENE, MODELS_DIR, se3
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.robot import load_robot
+from cdpr_twin import DEFAULT_SCENE, MODELS_DIR
+from cdpr_twin.math import se3
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.math.workspace import check_waypoints, geometry_of, is_feasible, sample_workspace
+from cdpr_twin.robot.description import load_robot
 from cdpr_twin.sim import Twin, build_model, read_geometry
-from cdpr_twin.workspace import check_waypoints, geometry_of, is_feasible, sample_workspace
 
 A, H, MASS = 0.5, 1.0, 2.0
 

@@ -37,9 +37,9 @@ from cdpr_twin.calibrate import drive
 from cdpr_twin.calibrate.excitation import tag_in_view
 from cdpr_twin.calibrate.problem import Detector, Observations
 from cdpr_twin.campaign.executor import abandon, exit_with
-from cdpr_twin.procedure import homing
-from cdpr_twin.scenario import Scenario, ScenarioError
-from cdpr_twin.se3 import so3_exp, so3_log, transform
+from cdpr_twin.math.se3 import so3_exp, so3_log, transform
+from cdpr_twin.run.homing_and_teaching import homing
+from cdpr_twin.scenario.loading import Scenario, ScenarioError
 
 SETTLE = 0.6
 """Rest before reading at each pose [s] (the platform's swing decays in ≈ 0.3 s)."""
@@ -62,7 +62,7 @@ class Truth:
 
     Attributes:
         T_base_platform: (K, 4, 4) true poses at the readings.
-        geometry: the simulated robot's true :class:`~cdpr_twin.geometry.CdprGeometry`.
+        geometry: the simulated robot's true :class:`~cdpr_twin.math.geometry.CdprGeometry`.
         T_base_tag: (4, 4) the true tag pose.
         drum_scale: (m,) true drum radius / the radius its drive and encoder were set to − 1.
         intrinsics_error: (8,) the detector's intrinsics minus the true ones (fx, fy, cx, cy

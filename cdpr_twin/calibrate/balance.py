@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from cdpr_twin.calibrate.layout import Layout
-from cdpr_twin.kinematics import pulley_vectors
+from cdpr_twin.math.kinematics import pulley_vectors
 
 TERMS = (("exit", 3), ("anchor", 3), ("tension_bias", 1), ("tension_gain", 1))
 """A cable's parameters that its balance term depends on, and how many of each."""

@@ -11,8 +11,8 @@ from scipy.linalg import null_space
 from scipy.optimize import linprog
 
 from cdpr_twin.controllers.open_loop import Segment
-from cdpr_twin.kinematics import cable_lengths, jacobian
-from cdpr_twin.se3 import so3_log
+from cdpr_twin.math.kinematics import cable_lengths, jacobian
+from cdpr_twin.math.se3 import so3_log
 
 SPEED = 0.16
 """Cruise speed of the moves between poses [m/s] (0.2 m/rad for rotations); the swing it

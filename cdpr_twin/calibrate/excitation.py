@@ -15,11 +15,11 @@ import math
 import numpy as np
 from scipy.stats import qmc
 
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.se3 import inverse, matrix_from_euler_xyz, pose_distance, transform
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.math.se3 import inverse, matrix_from_euler_xyz, pose_distance, transform
+from cdpr_twin.math.workspace import inside_frame, is_feasible
 from cdpr_twin.types import CameraIntrinsics
-from cdpr_twin.vision import inside_image, tag_pixels
-from cdpr_twin.workspace import inside_frame, is_feasible
+from cdpr_twin.vision.detection import inside_image, tag_pixels
 
 
 def tag_in_view(

@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from cdpr_twin.calibrate.solver import Calibration
-from cdpr_twin.outputs import MARKERS, Marker
-from cdpr_twin.robot import DRUM_SCALE_TOLERANCE
-from cdpr_twin.se3 import quat_wxyz_from_matrix, rot_x
+from cdpr_twin.files.transaction import MARKERS, Marker
+from cdpr_twin.math.se3 import quat_wxyz_from_matrix, rot_x
+from cdpr_twin.robot.description import DRUM_SCALE_TOLERANCE
 
 R_CV_MJCAM = rot_x(np.pi)
 """OpenCV camera frame ↔ MuJoCo camera frame (a rotation by π about x, its own inverse)."""
@@ -152,7 +152,7 @@ MARKER = Marker("calibration.json", frozenset({"parameters", "fit", "identifiabi
 
 def clear(out: Path) -> None:
     """Remove an earlier calibration's files (and half-written ones) from ``out``."""
-    from cdpr_twin.outputs import partial_of, writing
+    from cdpr_twin.files.transaction import partial_of, writing
 
     for path in [out / n for n in NAMES] + [partial_of(out / n) for n in NAMES]:
         with writing(path):
@@ -171,11 +171,11 @@ def write(
     need no space): a full disk leaves both partial, never a description without its report.
 
     Raises:
-        cdpr_twin.outputs.OutputError: a file cannot be written (naming it).
+        cdpr_twin.files.transaction.OutputError: a file cannot be written (naming it).
     """
-    from cdpr_twin.interrupts import shielded
-    from cdpr_twin.json_format import json_text
-    from cdpr_twin.outputs import fsync_dir, write_partial, writing
+    from cdpr_twin.files.json_format import json_text
+    from cdpr_twin.files.transaction import fsync_dir, write_partial, writing
+    from cdpr_twin.run.interrupts import shielded
 
     with writing(out):
         out.mkdir(parents=True, exist_ok=True)

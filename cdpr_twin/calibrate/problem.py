@@ -68,9 +68,9 @@ from cdpr_twin.calibrate.views import (
     view_columns,
     view_jacobian,
 )
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.kinematics import pulley_vectors
-from cdpr_twin.se3 import inverse, se3_exp
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.math.kinematics import pulley_vectors
+from cdpr_twin.math.se3 import inverse, se3_exp
 
 DEFAULT_NOISE = NoiseModel()
 """The noise model a :class:`Problem` is weighted with when none is given."""

@@ -19,8 +19,8 @@ from cdpr_twin.calibrate.excitation import excitation_poses
 from cdpr_twin.calibrate.problem import Priors, Problem
 from cdpr_twin.calibrate.solver import Calibration, CalibrationError, solve_weighted
 from cdpr_twin.calibrate.variance import NoiseModel, Weighting
-from cdpr_twin.scenario import Scenario
-from cdpr_twin.se3 import pose_distance, so3_log
+from cdpr_twin.math.se3 import pose_distance, so3_log
+from cdpr_twin.scenario.loading import Scenario
 
 NOISE = NoiseModel(tag_std_per_m=6e-3, tag_rotation_std=math.radians(1.0))
 """The noise the solver starts from, upper bounds for the twin's ``acrobot`` profile: the tag's

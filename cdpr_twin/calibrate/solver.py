@@ -299,7 +299,7 @@ def _result(problem: Problem, res, wall: float, rank_tol: float) -> Calibration:
 
 def _tag_rms(problem: Problem, model: Model) -> np.ndarray:
     """RMS tag position [m] and rotation [rad] residuals at the solution. Returns (2,)."""
-    from cdpr_twin.se3 import pose_distance
+    from cdpr_twin.math.se3 import pose_distance
 
     pred = problem.predicted_tags(model)  # the prediction the solver fitted
     dt, dr = pose_distance(pred, problem.obs.T_cam_tag[problem.seen])

@@ -22,8 +22,8 @@ from cdpr_twin.campaign.report import report_files
 from cdpr_twin.campaign.spec import Campaign, CampaignError, Task, load_campaign
 from cdpr_twin.campaign.table import RESULTS, ResultTable, load_table
 from cdpr_twin.campaign.worker import run_task
-from cdpr_twin.interrupts import interruption, shielded
-from cdpr_twin.outputs import (
+from cdpr_twin.files.cleanup import sweep_abandoned
+from cdpr_twin.files.transaction import (
     Marker,
     OutputDir,
     OutputDirError,
@@ -32,7 +32,7 @@ from cdpr_twin.outputs import (
     write_json_atomic,
     writing,
 )
-from cdpr_twin.sweep import sweep_abandoned
+from cdpr_twin.run.interrupts import interruption, shielded
 
 CAMPAIGN_FILES = (RESULTS, "report.md", "*.png", "campaign.json")
 """Patterns of a campaign's own files beside its ``parts/`` and ``runs/``."""

@@ -21,7 +21,7 @@ from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any
 
-from cdpr_twin.outputs import Terminated
+from cdpr_twin.files.transaction import Terminated
 
 
 class ExecutorError(RuntimeError):

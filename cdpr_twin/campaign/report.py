@@ -28,7 +28,7 @@ import numpy as np
 
 from cdpr_twin.campaign.spec import Campaign
 from cdpr_twin.campaign.table import load_table
-from cdpr_twin.outputs import save_figure, write_atomic
+from cdpr_twin.files.transaction import save_figure, write_atomic
 
 GROUPS = ("exit points", "anchor points", "E·S", "sheave radii", "camera mount", "tag placement")
 
@@ -54,9 +54,10 @@ def deviation_matrix(tasks: dict, rows: list[dict]) -> np.ndarray:
     """Each run's drawn calibration errors, one row per run: (n, 8m + 12).
 
     Columns: exit points (3m), anchor points (3m), E·S scale − 1 (m), sheave radii (m), camera
-    mount (6), tag placement (6), as :class:`~cdpr_twin.deviations.TruthDeviations` holds them.
+    mount (6), tag placement (6), as :class:`~cdpr_twin.robot.deviations.TruthDeviations` holds
+    them.
     """
-    from cdpr_twin.scenario import scenario_from_data
+    from cdpr_twin.scenario.loading import scenario_from_data
 
     out = []
     for row in rows:

@@ -48,7 +48,7 @@ import numpy as np
 
 from cdpr_twin import resources
 from cdpr_twin.campaign.keys import as_read, run_id, set_dotted
-from cdpr_twin.input_files import read_toml
+from cdpr_twin.files.inputs import read_toml
 
 DRAWS = ("integers", "uniform", "normal", "choice")
 ARTEFACTS = ("none", "csv", "all")
@@ -287,8 +287,8 @@ def _swap_in_loop(data: dict, base: dict) -> None:
 
 
 def _tasks(source: Path, block: _Block, seed: int, where: str) -> list[Task]:
-    from cdpr_twin.preflight import check_task
-    from cdpr_twin.scenario import ScenarioError, scenario_from_data
+    from cdpr_twin.scenario.loading import ScenarioError, scenario_from_data
+    from cdpr_twin.scenario.preflight import check_task
 
     out, nominals, checked = [], {}, set()
     points = itertools.product(*(a["values"] for a in block.grid))

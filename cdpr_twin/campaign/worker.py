@@ -24,8 +24,8 @@ def run_task(task: Task, runs_dir: str) -> dict:
         The row (:func:`cdpr_twin.campaign.table.flatten`).
     """
     from cdpr_twin.plugins import unannounced
-    from cdpr_twin.runner import run
-    from cdpr_twin.scenario import scenario_from_data
+    from cdpr_twin.run.runner import run
+    from cdpr_twin.scenario.loading import scenario_from_data
 
     fields = {k: v for k, v in asdict(task).items() if k in ("run_id", "block", "name", "params")}
     out = None if task.artefacts == "none" else Path(runs_dir) / task.run_id

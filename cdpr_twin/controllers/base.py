@@ -18,8 +18,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.plugins import NoOptions
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.options import NoOptions
 from cdpr_twin.types import Command, Measurement, PoseEstimate, Status, TagDetection
 
 
@@ -69,14 +69,14 @@ class Controller(ABC):
         """Check the task against the nominal robot before a run starts.
 
         Raises:
-            cdpr_twin.plugins.OptionError: naming the option at fault.
+            cdpr_twin.options.OptionError: naming the option at fault.
         """
 
     def check_period(self, period: float) -> None:  # noqa: B027  (optional hook)
         """Check the task against the control period [s] it will run at, before a run starts.
 
         Raises:
-            cdpr_twin.plugins.OptionError: naming the option at fault.
+            cdpr_twin.options.OptionError: naming the option at fault.
         """
 
     def teach(self, show: Callable[[np.ndarray], Measurement]) -> None:  # noqa: B027
@@ -90,7 +90,7 @@ class Controller(ABC):
                 it settle, and returns what the sensors measure there.
 
         Raises:
-            cdpr_twin.plugins.OptionError: naming the option at fault (e.g. the tag is not seen
+            cdpr_twin.options.OptionError: naming the option at fault (e.g. the tag is not seen
                 at the pose shown).
         """
 

@@ -8,12 +8,12 @@ from typing import Literal
 import numpy as np
 
 from cdpr_twin.controllers.base import Controller
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.kinematics import jacobian
-from cdpr_twin.plugins import OptionError, option, register
-from cdpr_twin.se3 import so3_exp, so3_log, transform, vector_from_pose
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.math.kinematics import jacobian
+from cdpr_twin.math.se3 import so3_exp, so3_log, transform, vector_from_pose
+from cdpr_twin.math.workspace import infeasible_reason, is_feasible
+from cdpr_twin.options import OptionError, option
 from cdpr_twin.types import Command, Measurement, PoseEstimate, Status
-from cdpr_twin.workspace import infeasible_reason, is_feasible
 
 MIN_PERIODS = 5
 """The fewest control periods a segment may last (see :meth:`OpenLoopController.check_period`)."""
@@ -110,7 +110,6 @@ class OpenLoopOptions:
             )
 
 
-@register
 class OpenLoopController(Controller):
     """Follow straight quintic segments through waypoints with l̇ = Â ᵇv_p (eq. 30).
 
@@ -137,7 +136,7 @@ class OpenLoopController(Controller):
         self._starts = np.zeros(0)
 
     def check(self) -> None:
-        """Every waypoint inside the frame and wrench-feasible (:mod:`cdpr_twin.workspace`).
+        """Every waypoint inside the frame and wrench-feasible (:mod:`cdpr_twin.math.workspace`).
 
         Wrench-feasible: holdable with tensions within the robot's limits
         (``cable_tension_range`` in the model; 2…75 N without it).

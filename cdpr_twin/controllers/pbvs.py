@@ -11,20 +11,20 @@ from typing import Any, Literal
 import numpy as np
 
 from cdpr_twin.controllers.base import Controller, RunEnd
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.kinematics import jacobian
-from cdpr_twin.metrics import pose_error
-from cdpr_twin.plugins import OptionError, OptionSpec, option, register
-from cdpr_twin.se3 import (
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.math.kinematics import jacobian
+from cdpr_twin.math.se3 import (
     adjoint,
     check_rigid,
     inverse,
     pose_distance,
+    pose_error,
     pose_from_vector,
     skew,
     so3_log,
     vector_from_pose,
 )
+from cdpr_twin.options import OptionError, OptionSpec, option
 from cdpr_twin.types import T_TAGPUPIL_TAGVISP, Command, Measurement, PoseEstimate, Status
 
 
@@ -144,7 +144,6 @@ class PbvsOptions:
             raise OptionError("teach_pose", str(exc)) from None
 
 
-@register
 class PbvsController(Controller):
     """ᶜv_c = −λ L̂⁺ e (eq. 2), ᵖv_p = Â_d ᶜv_c (eq. 3-4), l̇ = Â ᵖv_p (eq. 5-6).
 

@@ -20,9 +20,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.plugins import NoOptions
-from cdpr_twin.se3 import check_rigid
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.math.se3 import check_rigid
+from cdpr_twin.options import NoOptions
 from cdpr_twin.types import Measurement, PoseEstimate
 
 TAG_LOST = "tag_lost"

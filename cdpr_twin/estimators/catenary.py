@@ -20,7 +20,6 @@ from __future__ import annotations
 import numpy as np
 
 from cdpr_twin.estimators.model import ElasticPulleyModelEstimator
-from cdpr_twin.plugins import register
 
 
 def weight_above(geom, T_base_platform: np.ndarray) -> np.ndarray:
@@ -34,7 +33,7 @@ def sag_excess(geom, T_base_platform: np.ndarray, tensions: np.ndarray) -> np.nd
     """Arc − chord of each cable's sagging span (shallow elastic catenary). (m,) [m].
 
     Args:
-        geom: the nominal :class:`~cdpr_twin.geometry.CdprGeometry` (its linear_density).
+        geom: the nominal :class:`~cdpr_twin.math.geometry.CdprGeometry` (its linear_density).
         T_base_platform: (4, 4) platform pose.
         tensions: (m,) measured tensions [N] (non-positive ones count as no sag).
     """
@@ -49,7 +48,6 @@ def sag_excess(geom, T_base_platform: np.ndarray, tensions: np.ndarray) -> np.nd
     return np.where(tau > 0, w * w * h2 * c / (24.0 * safe * safe), 0.0)
 
 
-@register
 class CatenaryModelEstimator(ElasticPulleyModelEstimator):
     """Est. 7: pulleys, stretch and the sag of heavy cables (eq. 25 with a catenary)."""
 

@@ -7,12 +7,10 @@ from collections.abc import Mapping
 import numpy as np
 
 from cdpr_twin.estimators.base import NO_TWIST, NON_FINITE_INPUT, Estimator, SensorWatch
-from cdpr_twin.plugins import register
-from cdpr_twin.se3 import se3_exp
+from cdpr_twin.math.se3 import se3_exp
 from cdpr_twin.types import Measurement, PoseEstimate
 
 
-@register
 class ControlEstimator(Estimator):
     """ᵇT_p(t) = ᵇT_p(t − Δt) · exp(ᵖv_p Δt), with ᵖv_p the twist commanded over the last tick.
 

@@ -30,8 +30,8 @@ from cdpr_twin.estimators import fused_core as fc
 from cdpr_twin.estimators import fused_models as fm
 from cdpr_twin.estimators.base import NON_FINITE_INPUT, TAG_LOST, Estimator
 from cdpr_twin.estimators.solvers import _cable_tuples
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.plugins import OptionError, option, register
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.options import OptionError, option
 from cdpr_twin.types import Measurement, PoseEstimate
 
 SLACK_CABLES = "slack_cables"
@@ -143,7 +143,6 @@ class FusedOptions:
             raise OptionError("gate_probability", "must be below 1")
 
 
-@register
 class FusedEstimator(Estimator):
     """Est. 7: error-state EKF on SE(3) fusing the commanded twist, cable lengths and the tag.
 

@@ -5,7 +5,7 @@ NumPy's per-call overhead (about a microsecond a call, a few hundred calls an up
 the arithmetic: 420–465 µs an update as the paper scenarios configure it. Here each stage —
 prediction, cable update, tag update — is one compiled call on the filter's arrays. The
 equations are those of :mod:`cdpr_twin.estimators.fused_models` (the reference formulations,
-NumPy) and :mod:`cdpr_twin.se3`; ``tests/test_fused_core.py`` holds every function here to
+NumPy) and :mod:`cdpr_twin.math.se3`; ``tests/test_fused_core.py`` holds every function here to
 them (round-off apart: the products are summed in another order).
 
 The functions are compiled on first use and cached on disk (Numba's ``cache=True``, in

@@ -1,6 +1,7 @@
 """Compiled building blocks of the fused filter: SE(3) maps, the pulley kernel, a detection's noise.
 
-Numba versions of :mod:`cdpr_twin.se3`, :func:`cdpr_twin.kinematics.lengths_and_jacobian` and
+Numba versions of :mod:`cdpr_twin.math.se3`, :func:`cdpr_twin.math.kinematics.lengths_and_jacobian`
+and
 :func:`cdpr_twin.estimators.fused_models.tag_covariance` /
 :func:`~cdpr_twin.estimators.fused_models.tag_calibration_jacobian` (the references, NumPy),
 for :mod:`cdpr_twin.estimators.fused_core`; ``tests/test_fused_core.py`` holds each to its
@@ -14,8 +15,8 @@ import math
 import numpy as np
 from numba import njit
 
-from cdpr_twin.se3 import _SERIES, _SMALL
-from cdpr_twin.se3 import exp_coefficients as exp_coefficients_py
+from cdpr_twin.math.se3 import _SERIES, _SMALL
+from cdpr_twin.math.se3 import exp_coefficients as exp_coefficients_py
 
 jit = njit(cache=True, nogil=True)
 """Compile, cache on disk, release the GIL."""

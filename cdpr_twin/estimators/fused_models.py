@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cdpr_twin.se3 import adjoint, inverse, se3_log
+from cdpr_twin.math.se3 import adjoint, inverse, se3_log
 
 POSE, START = slice(0, 6), slice(6, 12)
 
@@ -274,7 +274,7 @@ def tag_residual(
         ``(r, H_pose, z_hat)``: (6,) log(ẑ⁻¹ z) in the tag frame, (6, 6) ∂r/∂δ and the
         (4, 4) predicted detection ẑ.
     """
-    from cdpr_twin.se3 import se3_exp
+    from cdpr_twin.math.se3 import se3_exp
 
     T_lag = T_base_platform @ se3_exp(-lag_twist)
     M = inverse(T_lag) @ T_base_tag  # ᵖT_o at the frame's time

@@ -15,9 +15,9 @@ from cdpr_twin.estimators.base import (
     TAG_LOST,
     Estimator,
 )
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.plugins import OptionError, option, register
-from cdpr_twin.se3 import inverse
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.math.se3 import inverse
+from cdpr_twin.options import OptionError, option
 from cdpr_twin.types import Measurement, PoseEstimate
 
 
@@ -37,7 +37,6 @@ class ImageOptions:
             raise OptionError("reference", f"must be 'previous' or 'first', got {self.reference!r}")
 
 
-@register
 class ImageEstimator(Estimator):
     """ᵇT_p(t) = ᵇT_p(t0) ᵖT_c ᶜT_o(t0) ᶜT_o(t)⁻¹ ᵖT_c⁻¹ (eq. 12), the tag being motionless.
 

@@ -49,10 +49,10 @@ from cdpr_twin.estimators.solvers import (
     solve_fast,
     solve_scipy,
 )
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.kinematics import elastic_elongation, lengths_and_jacobian
-from cdpr_twin.plugins import OptionError, option, register
-from cdpr_twin.se3 import matrix_from_quat_wxyz, quat_wxyz_from_matrix, transform
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.math.kinematics import elastic_elongation, lengths_and_jacobian
+from cdpr_twin.math.se3 import matrix_from_quat_wxyz, quat_wxyz_from_matrix, transform
+from cdpr_twin.options import OptionError, option
 from cdpr_twin.types import Measurement, PoseEstimate
 
 __all__ = ["ModelEstimator", "ModelOptions", "solve_fast", "solve_scipy"]
@@ -288,14 +288,12 @@ class ModelEstimator(Estimator):
         )
 
 
-@register
 class SimpleModelEstimator(ModelEstimator):
     """Est. 3: massless, inextensible, straight cables from A_i to B_i."""
 
     name = "model_simple"
 
 
-@register
 class ElasticModelEstimator(ModelEstimator):
     """Est. 4: straight cables, lengths corrected for elastic stretch (eq. 13-14)."""
 
@@ -303,7 +301,6 @@ class ElasticModelEstimator(ModelEstimator):
     elastic = True
 
 
-@register
 class PulleyModelEstimator(ModelEstimator):
     """Est. 5: inextensible cables over swivelling pulleys (eq. 15-24)."""
 
@@ -311,7 +308,6 @@ class PulleyModelEstimator(ModelEstimator):
     pulley = True
 
 
-@register
 class ElasticPulleyModelEstimator(ModelEstimator):
     """Est. 6: pulleys and stretch together (eq. 25)."""
 

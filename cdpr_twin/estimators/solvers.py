@@ -21,8 +21,13 @@ import numpy as np
 from scipy.linalg.lapack import dgesv
 from scipy.optimize import least_squares
 
-from cdpr_twin.kinematics import lengths_and_jacobian
-from cdpr_twin.se3 import exp_coefficients, matrix_from_quat_wxyz, quat_wxyz_from_matrix, transform
+from cdpr_twin.math.kinematics import lengths_and_jacobian
+from cdpr_twin.math.se3 import (
+    exp_coefficients,
+    matrix_from_quat_wxyz,
+    quat_wxyz_from_matrix,
+    transform,
+)
 
 Backend = Literal["fast", "scipy"]
 N_USED = 6
@@ -38,7 +43,7 @@ def _kernel(
 ) -> tuple[list[float], list[list[float]]]:
     """Lengths and platform-frame Jacobian rows of a few cables, in scalar arithmetic.
 
-    The same equations as :func:`cdpr_twin.kinematics.lengths_and_jacobian` (eq. 6-7, 15-24),
+    The same equations as :func:`cdpr_twin.math.kinematics.lengths_and_jacobian` (eq. 6-7, 15-24),
     written with ``math`` on floats: for six cables this is several times faster than numpy on
     (6, 3) arrays, whose per-call overhead dominates at that size.
 
@@ -89,7 +94,7 @@ def exp_terms(
     """exp(d) of a twist d = [v, ω] as 12 floats: its rotation row-major (9), then V·v (3).
 
     dR = I + a[ω]× + b[ω]×², V = I + b[ω]× + c[ω]×², with [ω]×² = ωωᵀ − θ² I and (a, b, c) the
-    coefficients of :func:`cdpr_twin.se3.exp_coefficients` for θ² = ``th2``. Plain float
+    coefficients of :func:`cdpr_twin.math.se3.exp_coefficients` for θ² = ``th2``. Plain float
     arithmetic: :mod:`cdpr_twin.estimators.newton` compiles this same function.
     """
     xx, yy, zz, xy, xz, yz = wx * wx, wy * wy, wz * wz, wx * wy, wx * wz, wy * wz
@@ -106,7 +111,7 @@ def exp_terms(
 def _compose_exp(pose: Pose, d: list[float]) -> Pose:
     """``pose · exp(d)`` for a twist d = [v, ω] in the platform frame, in scalar arithmetic.
 
-    The same map as :func:`cdpr_twin.se3.se3_exp` (Rodrigues and its left Jacobian).
+    The same map as :func:`cdpr_twin.math.se3.se3_exp` (Rodrigues and its left Jacobian).
     """
     vx, vy, vz, wx, wy, wz = d
     th2 = wx * wx + wy * wy + wz * wz

@@ -10,7 +10,7 @@ from types import MappingProxyType
 import numpy as np
 
 from cdpr_twin import plugins
-from cdpr_twin.scenario import EstimatorConfig, Scenario, load_scenario
+from cdpr_twin.scenario.loading import EstimatorConfig, Scenario, load_scenario
 
 
 def configure(

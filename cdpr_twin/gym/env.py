@@ -42,10 +42,10 @@ from gymnasium import spaces
 
 from cdpr_twin.gym.configuration import check_arguments, configure
 from cdpr_twin.gym.tasks import Score, Truth, make_task
-from cdpr_twin.kinematics import jacobian
-from cdpr_twin.runner import RunSetup, prepare, start
-from cdpr_twin.scenario import Scenario
-from cdpr_twin.se3 import so3_log
+from cdpr_twin.math.kinematics import jacobian
+from cdpr_twin.math.se3 import so3_log
+from cdpr_twin.run.runner import RunSetup, prepare, start
+from cdpr_twin.scenario.loading import Scenario
 from cdpr_twin.sim import SimulationError, WinchLimitError
 from cdpr_twin.types import Command, Measurement, PoseEstimate
 

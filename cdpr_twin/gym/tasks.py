@@ -12,7 +12,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from cdpr_twin.se3 import pose_distance, pose_from_vector
+from cdpr_twin.math.se3 import pose_distance, pose_from_vector
 from cdpr_twin.types import T_TAGPUPIL_TAGVISP
 
 P1 = (0.284, -0.197, 0.08, 0.0, 0.0, 0.0)

@@ -14,7 +14,7 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from cdpr_twin.deviations import DeviationSpec, TruthDeviations
+from cdpr_twin.robot.deviations import DeviationSpec, TruthDeviations
 from cdpr_twin.sim.model import ModelError, build_model, cable_count, read_geometry
 from cdpr_twin.sim.monitor import Fault, FaultKind, Monitor, MonitorLimits, robot_limits
 from cdpr_twin.sim.physics import Physics, SimulationError, StepHook

@@ -1,6 +1,6 @@
 """A discretised stretchable cable in MuJoCo: point masses joined by elastic tendons.
 
-The reference for :mod:`cdpr_twin.catenary` (MuJoCo's ``cable`` composite is inextensible, and
+The reference for :mod:`cdpr_twin.math.catenary` (MuJoCo's ``cable`` composite is inextensible, and
 its tendons are massless). A cable of unstretched length L0, stiffness E·S and linear density ρ
 between two fixed points becomes N segments: N − 1 free nodes of mass ρ L0 / N (three slide
 joints each), joined by spatial tendons of stiffness N E·S / L0 and rest length L0 / N; the two

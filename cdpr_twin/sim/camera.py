@@ -11,8 +11,8 @@ import os
 import mujoco
 import numpy as np
 
-from cdpr_twin.plugins import OptionError
-from cdpr_twin.se3 import matrix_from_quat_wxyz, rot_x, transform
+from cdpr_twin.math.se3 import matrix_from_quat_wxyz, rot_x, transform
+from cdpr_twin.options import OptionError
 from cdpr_twin.sim import contexts
 from cdpr_twin.sim.imaging import lens_margins
 from cdpr_twin.types import CameraIntrinsics

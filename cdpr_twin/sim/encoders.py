@@ -18,9 +18,9 @@ import math
 
 import numpy as np
 
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.kinematics import cable_lengths, rest_lengths
-from cdpr_twin.realism import WinchRealism
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.math.kinematics import cable_lengths, rest_lengths
+from cdpr_twin.robot.realism import WinchRealism
 from cdpr_twin.sim.physics import Physics
 
 

@@ -17,8 +17,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from cdpr_twin.robot import Robot, load_robot
-from cdpr_twin.se3 import pose_from_vector
+from cdpr_twin.math.se3 import pose_from_vector
+from cdpr_twin.robot.description import Robot, load_robot
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim.mjcf_writer import to_xml
 from cdpr_twin.sim.model import (
@@ -351,9 +351,10 @@ def build_files(description: str | Path, out_dir: str | Path | None = None) -> t
 
     Raises:
         RobotError: for a bad description.
-        cdpr_twin.outputs.OutputError: a file cannot be written; no half-written file is left.
+        cdpr_twin.files.transaction.OutputError: a file cannot be written; no half-written file is
+            left.
     """
-    from cdpr_twin.outputs import write_whole
+    from cdpr_twin.files.transaction import write_whole
 
     r = load_robot(description)
     out = Path(description).parent if out_dir is None else Path(out_dir)

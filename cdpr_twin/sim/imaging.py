@@ -2,7 +2,7 @@
 
 The renderer gives what an ideal pinhole sees at one instant, its 8-bit values being the
 display-encoded scene radiance (``DN = 255 · L^γ``, L the linear radiance in 0…1, γ the encoding
-gamma of :class:`~cdpr_twin.realism.CameraRealism`). A real camera's frame is made from such
+gamma of :class:`~cdpr_twin.robot.realism.CameraRealism`). A real camera's frame is made from such
 renders the way the light reaches the sensor:
 
 1. :func:`linear_luminance`: back to linear light, as a monochrome sensor sees it (Rec. 601
@@ -23,8 +23,8 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from cdpr_twin.plugins import OptionError
-from cdpr_twin.realism import CameraRealism
+from cdpr_twin.options import OptionError
+from cdpr_twin.robot.realism import CameraRealism
 from cdpr_twin.types import CameraIntrinsics
 
 LUMA = (0.299, 0.587, 0.114)

@@ -1,6 +1,6 @@
 """Load the ACROBOT MJCF, apply the robot's truth deviations, read its geometry.
 
-The nominal :class:`~cdpr_twin.geometry.CdprGeometry` (what estimators and controllers believe)
+The nominal :class:`~cdpr_twin.math.geometry.CdprGeometry` (what estimators and controllers believe)
 and the twin's true one come from the same model file: the true one is read after
 :func:`build_model` has moved exit and anchor points, scaled E·S, changed pulley radii and
 re-mounted the camera and tag as a seeded :class:`TruthDeviations` says (the calibration errors
@@ -15,12 +15,12 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from cdpr_twin.deviations import TruthDeviations
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.input_files import MAX_MODEL_BYTES, read_bytes
-from cdpr_twin.paths import path_kind
-from cdpr_twin.robot_sensing import RobotSensing
-from cdpr_twin.se3 import matrix_from_quat_wxyz, quat_wxyz_from_matrix, so3_exp, transform
+from cdpr_twin.files.inputs import MAX_MODEL_BYTES, read_bytes
+from cdpr_twin.files.paths import path_kind
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.math.se3 import matrix_from_quat_wxyz, quat_wxyz_from_matrix, so3_exp, transform
+from cdpr_twin.robot.deviations import TruthDeviations
+from cdpr_twin.robot.sensing import RobotSensing
 from cdpr_twin.sim import camera
 from cdpr_twin.sim.occluder import add_occluder
 

@@ -5,7 +5,7 @@ its workspace or hits the floor, the robot loses its constraint (fewer than six 
 the platform is no longer held in all six directions), or the platform moves faster than the
 winches can drive it. The twin's :class:`Monitor` checks the same limits on the simulated
 robot's *true* state (it is part of the simulation, like the robot's own safety hardware),
-between physics steps (a :class:`~cdpr_twin.events.StepHook`: every refresh chunk, 5 ms on
+between physics steps (a :class:`~cdpr_twin.sim.events.StepHook`: every refresh chunk, 5 ms on
 ACROBOT) and once more at each control tick. Each limit crossed is a :class:`Fault`, kept with
 the simulation time it was seen at; the runner stops the run at the tick the fault happens in
 (status ``fault: <kind>``) unless the scenario says to continue (``[monitor] on_fault``).

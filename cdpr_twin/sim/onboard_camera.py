@@ -3,7 +3,7 @@
 Ideal (``CameraRealism()``): one noise-free render of the current instant through an ideal
 pinhole, detected at once with the nominal intrinsics (the twin before realism, bit for bit).
 
-With realism (:class:`~cdpr_twin.realism.CameraRealism`), the frame is *formed* as a real
+With realism (:class:`~cdpr_twin.robot.realism.CameraRealism`), the frame is *formed* as a real
 monochrome camera forms it (:mod:`cdpr_twin.sim.imaging`):
 
 - motion blur: the sensor integrates, in linear light, sub-frames rendered at the true states
@@ -45,7 +45,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import cv2
 import numpy as np
 
-from cdpr_twin.realism import CameraRealism
+from cdpr_twin.robot.realism import CameraRealism
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim import imaging
 from cdpr_twin.sim.model import SimulationError
@@ -219,7 +219,7 @@ class OnboardCamera:
             )
         r = realism
         imaging.check_exposure(r, period, physics.timestep)
-        from cdpr_twin.vision import TagDetector  # OpenCV and pupil-apriltags, on demand
+        from cdpr_twin.vision.detection import TagDetector  # OpenCV and pupil-apriltags, on demand
 
         self.physics, self.realism, self.run_rng = physics, realism, run_rng
         # render()'s own noise: a look at the camera must not shift the run's frames

@@ -21,14 +21,15 @@ import math
 import mujoco
 import numpy as np
 
-from cdpr_twin import se3
-from cdpr_twin.events import StepHook, fire_due
-from cdpr_twin.geometry import CdprGeometry
-from cdpr_twin.kinematics import cable_lengths, rest_lengths
-from cdpr_twin.realism import WinchRealism, robot_rng
-from cdpr_twin.robot import DRUM_SCALE_TOLERANCE as DRUM_TOL
+from cdpr_twin.math import se3
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.math.kinematics import cable_lengths, rest_lengths
+from cdpr_twin.math.statics import tension_distribution
+from cdpr_twin.robot.description import DRUM_SCALE_TOLERANCE as DRUM_TOL
+from cdpr_twin.robot.realism import WinchRealism, robot_rng
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim import winch as winch_mod
+from cdpr_twin.sim.events import StepHook, fire_due
 from cdpr_twin.sim.model import (
     PLATFORM_BODY,
     ModelError,
@@ -45,7 +46,6 @@ from cdpr_twin.sim.model import (
 from cdpr_twin.sim.monitor import divergence
 from cdpr_twin.sim.occluder import occluder_of
 from cdpr_twin.sim.winch import WinchServos, check_lengths, checked_rates, whole_steps
-from cdpr_twin.statics import tension_distribution
 
 TAG_SITE = "tag_center"
 

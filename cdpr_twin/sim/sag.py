@@ -6,7 +6,7 @@ and stiffnesses (every ``align_every`` steps), the difference between the saggin
 straight cable's force on the platform as an applied force at each anchor point B_i. The span
 is MuJoCo's last tendon segment, from the sheave's tangent point to B_i, and its unstretched
 length the cable's l0 in proportion of that segment in the tendon path (stretch uniform along
-the cable). The catenary (:mod:`cdpr_twin.catenary`) is solved for that unstretched length and
+the cable). The catenary (:mod:`cdpr_twin.math.catenary`) is solved for that unstretched length and
 span; the platform then also carries its share of the cable's weight. The span's upper end pulls
 on the sheave with the catenary's upper-end force (:attr:`SaggingPhysics.pulley_force`): its
 tension exceeds the one at B_i by about the weight of the cable's rise, w·Δz. The tension
@@ -25,7 +25,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from cdpr_twin.catenary import CatenaryError, end_forces, hangs_vertically, solve_catenary
+from cdpr_twin.math.catenary import CatenaryError, end_forces, hangs_vertically, solve_catenary
 from cdpr_twin.sim.physics import Physics
 
 

@@ -4,7 +4,7 @@ Sensor i reads ``(1 + g_i)·τ_i + b_i + n``: a gain error g_i and an offset b_i
 the sensor (drawn once per robot, from the truth seed: the datasheet's *accuracy*, a systematic
 error), plus white noise n of ``noise_std`` drawn at every reading from the run's generator (the
 datasheet's *repeatability*); with ``clip`` the reading saturates at the sensor's range, and
-the measurement says which readings did (see :class:`~cdpr_twin.realism.TensionRealism`).
+the measurement says which readings did (see :class:`~cdpr_twin.robot.realism.TensionRealism`).
 
 Ideal (``TensionRealism()``): the true tension plus Gaussian noise of ``noise_std`` per reading,
 drawn from the run's generator (the twin's behaviour before realism, bit for bit).
@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from cdpr_twin.realism import TensionRealism
+from cdpr_twin.robot.realism import TensionRealism
 
 
 class TensionSensors:

@@ -19,10 +19,10 @@ import mujoco
 import numpy as np
 
 from cdpr_twin import resources
-from cdpr_twin.deviations import DeviationSpec, TruthDeviations
-from cdpr_twin.realism import WinchRealism
-from cdpr_twin.robot_schema import MAX_TIMESTEP, MIN_TIMESTEP
-from cdpr_twin.se3 import matrix_from_quat_wxyz, transform
+from cdpr_twin.math.se3 import matrix_from_quat_wxyz, transform
+from cdpr_twin.robot.deviations import DeviationSpec, TruthDeviations
+from cdpr_twin.robot.realism import WinchRealism
+from cdpr_twin.robot.schema import MAX_TIMESTEP, MIN_TIMESTEP
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim.model import (
     TAG_BODY,
@@ -87,8 +87,8 @@ def nominal_from_description(path: str | Path, model_nominal: NominalRobot) -> N
         ModelError: the description is invalid or describes another robot (another cable
             count, or an exit point beyond :data:`SAME_ROBOT` of the frame's span).
     """
-    from cdpr_twin.robot import RobotError, load_robot
-    from cdpr_twin.workspace import geometry_of
+    from cdpr_twin.math.workspace import geometry_of
+    from cdpr_twin.robot.description import RobotError, load_robot
 
     try:
         r = load_robot(path)

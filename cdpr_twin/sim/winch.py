@@ -26,7 +26,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from cdpr_twin.realism import WinchRealism
+from cdpr_twin.robot.realism import WinchRealism
 
 
 def robot_winch(model, winch: WinchRealism | None) -> WinchRealism:
@@ -57,7 +57,7 @@ def draw_drum_radii(winch: WinchRealism, rng: np.random.Generator, n: int) -> np
 
     Args:
         winch: the nominal radius r [m] and the relative std σ.
-        rng: the robot's winch generator (:func:`cdpr_twin.realism.robot_rng`).
+        rng: the robot's winch generator (:func:`cdpr_twin.robot.realism.robot_rng`).
         n: number of winches.
 
     Returns:

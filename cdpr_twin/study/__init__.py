@@ -19,7 +19,7 @@ import multiprocessing
 import time
 from pathlib import Path
 
-from cdpr_twin.outputs import OutputDir, others, write_json_atomic
+from cdpr_twin.files.transaction import OutputDir, others, write_json_atomic
 from cdpr_twin.study.analysis import accuracy_at_p1, analyse
 from cdpr_twin.study.files import STUDY_FILES, STUDY_MARKER, clear_earlier_study
 from cdpr_twin.study.findings import FINDINGS, Finding, evaluate
@@ -71,7 +71,7 @@ def study_runs(
 
     Raises:
         ValueError: an option is invalid (``runs_scale``), or a run's scenario is
-            (:class:`~cdpr_twin.scenario.ScenarioError`: a scenario file, ``duration``, a
+            (:class:`~cdpr_twin.scenario.loading.ScenarioError`: a scenario file, ``duration``, a
             ``decompose`` source or ``other_goal``).
     """
     scenarios = Scenarios(*scenarios) if scenarios is not None else Scenarios()
@@ -117,7 +117,7 @@ def reproduce(
         duration: duration override of every run [s], or ``None``.
         progress: ``progress(done, total, record)``, called as each run ends.
         scenarios: the (open-loop, PBVS) scenario files; default the paper's.
-        decompose: per-run sources of variation (:data:`cdpr_twin.realism.RUN_SOURCES`) to
+        decompose: per-run sources of variation (:data:`cdpr_twin.robot.realism.RUN_SOURCES`) to
             switch off in turn, repeating the open-loop and control-in-the-loop PBVS runs.
         other_goal: a second PBVS goal (``"nominal"``/``"taught"``) for the control runs.
 

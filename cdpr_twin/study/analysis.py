@@ -13,8 +13,12 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_twin.outputs import write_json_atomic
-from cdpr_twin.results import (
+from cdpr_twin.files.transaction import write_json_atomic
+from cdpr_twin.math.se3 import pose_distance, pose_from_vector
+from cdpr_twin.recording.timeseries import Timeseries
+from cdpr_twin.study.findings import evaluate
+from cdpr_twin.study.plan import PBVS_SCENARIO
+from cdpr_twin.study.results import (
     image_noise_vs_distance,
     load_summary,
     model_estimators,
@@ -22,12 +26,8 @@ from cdpr_twin.results import (
     roughness,
     value_at,
 )
-from cdpr_twin.se3 import pose_distance, pose_from_vector
-from cdpr_twin.study.findings import evaluate
-from cdpr_twin.study.plan import PBVS_SCENARIO
 from cdpr_twin.study.robot_numbers import model_physics, payloads, robot_errors
 from cdpr_twin.study.spread import PBVS_CONVERGED, is_main, repetition_rms, spread
-from cdpr_twin.timeseries import Timeseries
 
 
 @dataclass(frozen=True, eq=False)
@@ -254,7 +254,7 @@ def _robot_scenario(records: list[dict]) -> str | Path:
 
 def _realism(scenario_file: str | Path) -> tuple[dict, str]:
     """The runs' realism profile (JSON-ready: ``inf`` → ``None``) and the PBVS goal option."""
-    from cdpr_twin.scenario import load_scenario
+    from cdpr_twin.scenario.loading import load_scenario
 
     s = load_scenario(scenario_file)
 

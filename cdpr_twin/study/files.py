@@ -1,9 +1,10 @@
 """The study's own files: each written whole, and an earlier study's removed before a new one.
 
-The study directory keeps the promises of a run's directory (:mod:`cdpr_twin.outputs`):
+The study directory keeps the promises of a run's directory (:mod:`cdpr_twin.files.transaction`):
 
 1. **One writer.** ``reproduce`` claims the directory with the run's lock
-   (:class:`~cdpr_twin.outputs.OutputDir`): a second study on it is refused, touching nothing.
+   (:class:`~cdpr_twin.files.transaction.OutputDir`): a second study on it is refused, touching
+   nothing.
 2. **One study's files.** Right after the claim, before any run starts, the earlier study's
    outputs are removed: :data:`STUDY_FILES` (its report, figures and ``runs.json``), every
    ``*.partial`` and its run directories under ``runs/`` (the ones named as the study names
@@ -14,7 +15,8 @@ The study directory keeps the promises of a run's directory (:mod:`cdpr_twin.out
    ``report.md``) is refused, nothing removed.
 3. **Whole files only.** Each file is written as ``<name>.partial``, flushed and ``fsync``'ed,
    then renamed to its final name (the directory ``fsync``'ed); ``report.md`` is written last.
-   An ``OSError`` (a full disk) is an :class:`~cdpr_twin.outputs.OutputError` naming the file;
+   An ``OSError`` (a full disk) is an :class:`~cdpr_twin.files.transaction.OutputError` naming the
+   file;
    what was written stays ``*.partial`` (the next study removes it), no final name is left
    truncated.
 """
@@ -25,7 +27,7 @@ import contextlib
 import re
 from pathlib import Path
 
-from cdpr_twin.outputs import Marker, OutputDir, OutputDirError, partial_of, writing
+from cdpr_twin.files.transaction import Marker, OutputDir, OutputDirError, partial_of, writing
 
 FIGURES = ("fig5a", "fig5b", "fig7a", "fig7b", "fig8")
 """The study's figures (``<name>.png``)."""

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdpr_twin.metrics import sample_std
+from cdpr_twin.run.metrics import sample_std
 from cdpr_twin.study.verdicts import Finding, verdict
 
 

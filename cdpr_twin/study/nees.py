@@ -15,10 +15,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from cdpr_twin.deviations import DeviationSpec
-from cdpr_twin.runner import prepare, start
-from cdpr_twin.scenario import Scenario
-from cdpr_twin.se3 import inverse, se3_log
+from cdpr_twin.math.se3 import inverse, se3_log
+from cdpr_twin.robot.deviations import DeviationSpec
+from cdpr_twin.run.runner import prepare, start
+from cdpr_twin.scenario.loading import Scenario
 
 
 @dataclass(frozen=True)

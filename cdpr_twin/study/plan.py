@@ -95,9 +95,9 @@ def plan(
 
     Raises:
         ValueError: ``runs_scale`` is not a number in (0, :data:`MAX_RUNS_SCALE`].
-        cdpr_twin.scenario.ScenarioError: a scenario file is invalid.
+        cdpr_twin.scenario.loading.ScenarioError: a scenario file is invalid.
     """
-    from cdpr_twin.scenario import load_scenario
+    from cdpr_twin.scenario.loading import load_scenario
 
     if not (math.isfinite(runs_scale) and 0 < runs_scale <= MAX_RUNS_SCALE):
         raise ValueError(
@@ -153,9 +153,9 @@ def spec_scenario(spec: RunSpec):
     """The scenario a spec runs: its file with the spec's overrides (``Scenario``).
 
     Raises:
-        cdpr_twin.scenario.ScenarioError: the file or an override is invalid.
+        cdpr_twin.scenario.loading.ScenarioError: the file or an override is invalid.
     """
-    from cdpr_twin.scenario import load_scenario
+    from cdpr_twin.scenario.loading import load_scenario
 
     s = load_scenario(spec.scenario).with_overrides(
         seed=spec.seed, in_loop=spec.in_loop, duration=spec.duration
@@ -170,7 +170,7 @@ def _run_one(spec: RunSpec, runs_dir: str) -> dict:
     Ctrl-C is ignored here: the terminal sends it to the worker too, and the study stops its
     workers itself (SIGTERM), cancelling the queued runs.
     """
-    from cdpr_twin.runner import run
+    from cdpr_twin.run.runner import run
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     out = Path(runs_dir) / spec.name
@@ -198,7 +198,8 @@ def run_study(
 ) -> list[dict]:
     """Run every spec in ``workers`` spawned processes; writes ``runs.json`` (whole).
 
-    A stop (Ctrl-C, SIGTERM as :class:`~cdpr_twin.outputs.Terminated`) or any error ends the
+    A stop (Ctrl-C, SIGTERM as :class:`~cdpr_twin.files.transaction.Terminated`) or any error ends
+    the
     workers and cancels the queued runs before it propagates; no ``runs.json`` is written, and
     the runs under way leave no lock or ``*.partial`` file.
 
@@ -210,8 +211,8 @@ def run_study(
         OutputError: ``runs/`` or ``runs.json`` cannot be written.
     """
     from cdpr_twin.campaign.executor import run_local  # the one engine of parallel runs
-    from cdpr_twin.outputs import write_json_atomic, writing
-    from cdpr_twin.sweep import sweep_abandoned
+    from cdpr_twin.files.cleanup import sweep_abandoned
+    from cdpr_twin.files.transaction import write_json_atomic, writing
 
     runs_dir = out / "runs"
     with writing(runs_dir):

@@ -6,12 +6,12 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_twin.metrics import sample_std
-from cdpr_twin.outputs import write_atomic, write_json_atomic
-from cdpr_twin.results import load_summary, model_estimators
+from cdpr_twin.files.transaction import write_atomic, write_json_atomic
+from cdpr_twin.recording.timeseries import Timeseries
+from cdpr_twin.run.metrics import sample_std
 from cdpr_twin.study.analysis import figure_runs, segment_ends
 from cdpr_twin.study.files import FIGURES
-from cdpr_twin.timeseries import Timeseries
+from cdpr_twin.study.results import load_summary, model_estimators
 
 PAPER_PBVS = {
     "control": "≤ 0.9 cm / 2°",
@@ -29,12 +29,12 @@ NOT_IN_PAPER = "—"
 def make_figures(out: Path, rep: dict, records: list[dict]) -> list[Path]:
     """Fig. 5a/5b, 7a/7b and 8 into ``out``, from the seed-1 runs and the report's accuracy.
 
-    Each is written whole (``<name>.png.partial``, then renamed: :mod:`cdpr_twin.figures`).
+    Each is written whole (``<name>.png.partial``, then renamed: :mod:`cdpr_twin.study.figures`).
 
     Raises:
         OutputError: a figure cannot be written (it is left ``*.partial``).
     """
-    from cdpr_twin import figures
+    from cdpr_twin.study import figures
 
     open_loop, pbvs = figure_runs(records)
     paths: list[Path] = []

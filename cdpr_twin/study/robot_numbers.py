@@ -10,13 +10,13 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_twin.timeseries import Timeseries
+from cdpr_twin.recording.timeseries import Timeseries
 
 
 def model_physics(ts: Timeseries, scenario_file: Path) -> dict:
     """Why the model-based variants agree or not: stretch, wrap and sag along the run."""
-    from cdpr_twin import kinematics as kin
-    from cdpr_twin.scenario import load_scenario
+    from cdpr_twin.math import kinematics as kin
+    from cdpr_twin.scenario.loading import load_scenario
     from cdpr_twin.sim import build_model, read_geometry
     from cdpr_twin.sim.model import numeric
 
@@ -47,14 +47,14 @@ def model_physics(ts: Timeseries, scenario_file: Path) -> dict:
 def sag_numbers(geom, rho: float, poses: np.ndarray, tau: np.ndarray) -> dict[str, float]:
     """Largest mid-span sag, and arc − chord, of the cables along the run if they had their mass.
 
-    Irvine's elastic catenary (:mod:`cdpr_twin.catenary`, exact, not the small-sag law) for
+    Irvine's elastic catenary (:mod:`cdpr_twin.math.catenary`, exact, not the small-sag law) for
     each span A_i → B_i with a tension above 1 N, its unstretched length the straight one at
     the measured tension; NaN without a density (rho [kg/m]).
 
     Returns:
         ``{"max_sag_m": …, "max_sag_excess_m": …}`` [m].
     """
-    from cdpr_twin.catenary import CatenaryError, solve_catenary
+    from cdpr_twin.math.catenary import CatenaryError, solve_catenary
 
     if not rho > 0:
         return {"max_sag_m": float("nan"), "max_sag_excess_m": float("nan")}
@@ -81,7 +81,7 @@ def robot_errors(scenario_file: str | Path) -> dict:
     Camera-mount and tag-placement errors, the largest exit- and anchor-point offsets, the tag's
     size, the PBVS goal's camera–tag distance, and whether the cables sag in the physics.
     """
-    from cdpr_twin.scenario import load_scenario
+    from cdpr_twin.scenario.loading import load_scenario
     from cdpr_twin.sim import build_model, cable_count
     from cdpr_twin.sim.model import has_numeric, numeric
 
@@ -108,7 +108,7 @@ def robot_errors(scenario_file: str | Path) -> dict:
 
 def payloads(records: list[dict]) -> dict[str, float]:
     """The payload each experiment's scenario fixes to the platform [kg]."""
-    from cdpr_twin.scenario import load_scenario
+    from cdpr_twin.scenario.loading import load_scenario
 
     files = {r["kind"]: r["scenario"] for r in records}
     return {kind: float(load_scenario(f).model.payload) for kind, f in files.items()}

@@ -1,7 +1,7 @@
 """Repeatability (Fig. 8's spread) and where it comes from, and the PBVS goal two ways.
 
 The decomposition repeats the open-loop runs and the control-in-the-loop PBVS runs with one
-per-run source of variation switched off at a time (:data:`cdpr_twin.realism.RUN_SOURCES`).
+per-run source of variation switched off at a time (:data:`cdpr_twin.robot.realism.RUN_SOURCES`).
 A source's share of the variance is 1 − Var(without it) / Var(all): the part of the spread that
 disappears with it (sampling noise can make it slightly negative or push the shares' sum past
 1 when the sources interact).
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cdpr_twin.metrics import sample_std
+from cdpr_twin.run.metrics import sample_std
 
 PBVS_CONVERGED = "converged"
 """The status of a PBVS run that reached its goal (only those count for accuracy)."""

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from cdpr_twin.catenary import end_forces, solve_catenary
+from cdpr_twin.math.catenary import end_forces, solve_catenary
 from cdpr_twin.sim.cable_chain import chain_end_forces
 
 RHO, ES = 0.064, 68.5e9 * math.pi * 0.002**2

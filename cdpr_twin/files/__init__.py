@@ -1,0 +1,1 @@
+"""Files in and out: output directories as transactions, paths, JSON."""

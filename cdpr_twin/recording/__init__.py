@@ -1,0 +1,1 @@
+"""Where a run's ticks go: timeseries.csv and the Rerun recording."""

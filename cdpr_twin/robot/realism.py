@@ -1,0 +1,370 @@
+"""How imperfect the simulated robot is: the scenario's ``[realism]`` profile (numpy only).
+
+Each effect is *generated* by the simulation layer (rendered, integrated, quantised), with a
+magnitude from ``models/acrobot/README.md`` (its source named there), and each can be switched
+off. What is robot data — the drum radius, the tension sensors' range, accuracy and
+repeatability — is not here: ``nan`` fields (and ``repeatability_noise``) take it from the
+robot description (``robot.toml`` → the model's ``<numeric>``;
+:func:`cdpr_twin.robot.sensing.for_robot`).
+Profiles: ``profile = "ideal"`` is the twin before realism, bit for bit. Magnitudes come in two
+kinds, as physics dictates:
+
+- per robot (drawn from the truth seed, fixed across repetitions, like one physical robot):
+  intrinsics calibration error, drum radius error, tension-sensor bias and gain;
+- per run (drawn from the run seed): pixel noise, tension repeatability noise, the homing offset
+  of the start pose.
+
+A scenario overrides any field: ``[realism.camera] exposure_s = 0.004``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+import numpy as np
+
+from cdpr_twin.options import OptionError, option
+from cdpr_twin.robot.realism_limits import (
+    MAX_CENTER_ERROR_STD_PX,
+    MAX_DISTORTION_ERROR_STD,
+    MAX_FULL_WELL_E,
+    MAX_HOMING_POSITION_STD,
+    MAX_HOMING_ROTATION_STD,
+    MAX_LATENCY_TICKS,
+    MAX_TENSION_NOISE_STD,
+    TENSION_NOISE_WHY,
+    check_at_most,
+    check_relative_std,
+)
+
+PROFILES = ("ideal", "acrobot")
+
+
+@dataclass(frozen=True)
+class CameraRealism:
+    """The onboard camera's imperfections (all off: an ideal pinhole, noise-free, instantaneous).
+
+    Attributes:
+        noise: simulate photon shot noise and read noise on a linear signal, then gamma and
+            8-bit quantisation.
+        full_well_e: electrons at the brightest rendered level [e⁻].
+        read_noise_e: read noise std [e⁻].
+        gamma: encoding gamma from the linear signal to 8-bit values.
+        white_level: the fraction of the full well the brightest rendered level (white paper)
+            reaches: exposure keeps it below saturation.
+        black_level: the fraction of the full well the darkest rendered level (black ink)
+            reaches: ink reflects some light.
+        exposure_s: exposure time [s]; 0 renders one instant (no motion blur).
+        blur_subframes: frames rendered at the true poses during the exposure and averaged.
+        supersample: render ``supersample`` × ``supersample`` samples per pixel and average
+            them (each pixel integrates light over its area); 1 point-samples the render.
+        distortion: true Brown–Conrady coefficients (k1, k2, p1, p2) of the lens.
+        focal_error_std: per-robot relative std of the calibrated fx, fy.
+        center_error_std_px: per-robot std of the calibrated cx, cy [px].
+        distortion_error_std: per-robot std of each calibrated distortion coefficient
+            (k1, k2, p1, p2).
+        latency_ticks: the tag pose available at tick k comes from the frame exposed at k − d.
+    """
+
+    noise: bool = option(False)
+    full_well_e: float = option(10_000.0, minimum=1.0, unit="e-")
+    read_noise_e: float = option(0.0, minimum=0.0, unit="e-")
+    gamma: float = option(1.0, minimum=0.1)
+    white_level: float = option(1.0, minimum=0.0, exclusive=True)
+    black_level: float = option(0.0, minimum=0.0)
+    exposure_s: float = option(0.0, minimum=0.0, unit="s")
+    blur_subframes: int = option(1, minimum=1)
+    supersample: int = option(1, minimum=1)
+    distortion: tuple[float, ...] = option((0.0, 0.0, 0.0, 0.0))
+    focal_error_std: float = option(0.0, minimum=0.0)
+    center_error_std_px: float = option(0.0, minimum=0.0, unit="px")
+    distortion_error_std: tuple[float, ...] = option((0.0, 0.0, 0.0, 0.0), minimum=0.0)
+    latency_ticks: int = option(0, minimum=0)
+
+    def __post_init__(self) -> None:
+        if not self.black_level < self.white_level <= 1.0:
+            raise OptionError("white_level", "need black_level < white_level ≤ 1")
+        for name in ("distortion", "distortion_error_std"):
+            if len(getattr(self, name)) != 4:
+                raise OptionError(name, "must list 4 values, for k1, k2, p1, p2")
+        check_relative_std("focal_error_std", self.focal_error_std, "focal length")
+        check_at_most(
+            "center_error_std_px",
+            self.center_error_std_px,
+            MAX_CENTER_ERROR_STD_PX,
+            " px (calibrations place the principal point within 0.3–1.3 px)",
+        )
+        check_at_most(
+            "distortion_error_std",
+            max(self.distortion_error_std),
+            MAX_DISTORTION_ERROR_STD,
+            " each (calibrations leave 3e-4–7e-3)",
+        )
+        check_at_most(
+            "full_well_e",
+            self.full_well_e,
+            MAX_FULL_WELL_E,
+            " e- (the frame is formed in float32; sensors hold 1e3-1e6)",
+        )
+        check_at_most(
+            "latency_ticks",
+            self.latency_ticks,
+            MAX_LATENCY_TICKS,
+            " (every frame in flight is held in memory; cameras deliver within a few frames)",
+        )
+
+
+@dataclass(frozen=True)
+class WinchRealism:
+    """Winch servo and encoder imperfections (all off: rates applied instantly, exact encoders).
+
+    Attributes:
+        bandwidth_hz: velocity-loop bandwidth (first order, time constant 1/(2π f)); ``inf``
+            follows the commanded rate instantly.
+        max_accel: acceleration limit of the cable rate [m/s²] (``inf``: none).
+        encoder_counts: encoder counts per drum revolution (0: exact encoders).
+        drum_radius: nominal drum radius [m] (the length the encoder reports uses it); ``nan``:
+            the robot's (``[winches] drum_radius_m``).
+        drum_radius_error_std: per-robot relative std of the true drum radius.
+    """
+
+    bandwidth_hz: float = option(math.inf, minimum=0.0, exclusive=True, infinite=True, unit="Hz")
+    max_accel: float = option(math.inf, minimum=0.0, exclusive=True, infinite=True, unit="m/s2")
+    encoder_counts: int = option(0, minimum=0)
+    drum_radius: float = option(math.nan, minimum=0.0, exclusive=True, unit="m")
+    drum_radius_error_std: float = option(0.0, minimum=0.0)
+
+    def __post_init__(self) -> None:
+        check_relative_std("drum_radius_error_std", self.drum_radius_error_std, "drum radius")
+
+
+@dataclass(frozen=True)
+class TensionRealism:
+    """Tension-sensor imperfections beyond the per-reading noise ``[sensors] tension_noise_std``.
+
+    Sensor i reads ``(1 + g_i)·τ_i + b_i + n`` (:class:`cdpr_twin.sim.tension.TensionSensors`):
+    b_i and g_i are fixed per robot (truth seed), n is drawn at each reading (run seed).
+
+    How a datasheet maps onto these fields. A stated *accuracy* (the paper's 0.24 N) is a bound
+    on the total error, not a standard deviation: accuracy itself is qualitative (JCGM 200:2012,
+    VIM 2.13), and a number given for it is the half-width a of an interval ±a that the error
+    stays within. Its random part is the *repeatability* (VIM 2.21; the paper's 0.01 N), so a
+    24:1 ratio leaves the error budget almost wholly systematic: an offset that stays put
+    between readings, drawn once per sensor, not redrawn per reading. With nothing known but
+    the bound, GUM (JCGM 100:2008) 4.3.7 gives the standard uncertainty of a ±a rectangular
+    distribution as u = a/√3, so ``bias_std`` = 0.24/√3 ≈ 0.139 N, not 0.24 N (which would
+    treat the bound as 1σ and let a third of the sensors exceed their own datasheet).
+    ``gain_error_std`` adds a load-proportional part (e.g. 0.1 %: 0.075 N at 75 N), small
+    beside the offset. The repeatability 0.01 N is taken as 1σ of the reading noise (the
+    conservative reading; as an ISO 5725 repeatability limit r = 2.8 σ it would be 0.004 N).
+
+    Attributes:
+        bias_std: per-robot std of each sensor's offset b_i [N] (accuracy a → a/√3); ``nan``:
+            the robot's sensor accuracy a/√3 (``[tension_sensors] accuracy_n``).
+        gain_error_std: per-robot relative std of each sensor's gain error g_i.
+        clip: clip readings to [``range_min``, ``range_max``], and say which did in
+            ``Measurement.tensions_clipped`` (and per cable in ``summary.json``).
+        range_min: lowest reading [N]; ``nan``: the robot's (``[tension_sensors] range_n``).
+        range_max: highest reading [N]; ``nan``: the robot's.
+        noise_std: per-reading noise std [N]; ``nan`` keeps ``[sensors] tension_noise_std``
+            (the ideal profile: the scenario's value, as before realism), or with
+            ``repeatability_noise`` the robot's sensor repeatability.
+        repeatability_noise: a ``nan`` noise_std is the robot's repeatability
+            (``[tension_sensors] repeatability_n``) instead of ``[sensors] tension_noise_std``.
+    """
+
+    bias_std: float = option(0.0, minimum=0.0, unit="N")
+    gain_error_std: float = option(0.0, minimum=0.0)
+    clip: bool = option(False)
+    range_min: float = option(math.nan, unit="N")
+    range_max: float = option(math.nan, unit="N")
+    noise_std: float = option(math.nan, unit="N")
+    repeatability_noise: bool = option(False)
+
+    def __post_init__(self) -> None:
+        if not (math.isnan(self.noise_std) or self.noise_std >= 0):
+            raise OptionError("noise_std", f"must be ≥ 0 N, got {self.noise_std}")
+        if not (math.isnan(self.range_min) or math.isnan(self.range_max)) and not (
+            self.range_min < self.range_max
+        ):
+            raise OptionError("range_max", f"must exceed range_min = {self.range_min} N")
+        check_relative_std("gain_error_std", self.gain_error_std, "sensor's gain")
+        for name in ("bias_std", "noise_std"):  # (a nan noise_std: [sensors]', bounded there)
+            check_at_most(name, getattr(self, name), MAX_TENSION_NOISE_STD, TENSION_NOISE_WHY)
+
+
+@dataclass(frozen=True)
+class HomingRealism:
+    """Repeatability of the start pose between repetitions (per run, from the run seed).
+
+    Each run places the *true* platform at the start pose moved by a drawn offset
+    (:func:`draw_homing_offset`), while the encoders are homed as if it stood at the nominal
+    start pose and every estimator and the controller start from the nominal start pose: the
+    robot believes it is where it always starts.
+
+    Attributes:
+        position_std: per-axis std of the true start position's offset [m].
+        rotation_std: per-axis std of the true start orientation's offset [rad] (file:
+            ``rotation_std_deg``).
+    """
+
+    position_std: float = option(0.0, minimum=0.0, unit="m")
+    rotation_std: float = option(0.0, minimum=0.0, unit="deg")
+
+    def __post_init__(self) -> None:
+        why = " (a repeatability: a robot homing farther off starts elsewhere; set start.pose)"
+        check_at_most("position_std", self.position_std, MAX_HOMING_POSITION_STD, " m" + why)
+        check_at_most(
+            "rotation_std_deg",
+            math.degrees(self.rotation_std),
+            math.degrees(MAX_HOMING_ROTATION_STD),
+            "°" + why,
+        )
+
+
+@dataclass(frozen=True)
+class Realism:
+    """The whole profile.
+
+    Attributes:
+        profile: the named profile the fields start from.
+        camera: camera imperfections.
+        winch: winch and encoder imperfections.
+        tension: tension-sensor imperfections.
+        homing: start-pose repeatability.
+    """
+
+    profile: str = "ideal"
+    camera: CameraRealism = field(default_factory=CameraRealism)
+    winch: WinchRealism = field(default_factory=WinchRealism)
+    tension: TensionRealism = field(default_factory=TensionRealism)
+    homing: HomingRealism = field(default_factory=HomingRealism)
+
+    @property
+    def is_ideal(self) -> bool:
+        """Whether every effect is off."""
+        return self == Realism(profile=self.profile)
+
+
+PARTS: dict[str, type] = {
+    "camera": CameraRealism,
+    "winch": WinchRealism,
+    "tension": TensionRealism,
+    "homing": HomingRealism,
+}
+"""The profile's parts, by their table name in ``[realism.<part>]``."""
+
+
+ACROBOT: dict[str, dict[str, Any]] = {
+    "camera": {
+        "noise": True,
+        "full_well_e": 10_000.0,
+        "read_noise_e": 10.0,
+        "gamma": 1.0,
+        "white_level": 0.7,
+        "black_level": 0.035,
+        "exposure_s": 0.008,
+        "blur_subframes": 2,
+        "distortion": (-0.20, 0.08, 0.002, -0.002),
+        "focal_error_std": 0.003,
+        "center_error_std_px": 1.5,
+        "distortion_error_std": (0.01, 0.02, 0.0005, 0.0005),
+        "latency_ticks": 1,
+    },
+    "winch": {
+        "bandwidth_hz": 20.0,
+        "max_accel": 2.0,
+        "encoder_counts": 4096,
+        "drum_radius_error_std": 0.005,
+    },
+    "tension": {
+        "bias_std": math.nan,  # the robot's accuracy a/√3 (ACROBOT: 0.24 N, paper §IV-A)
+        "gain_error_std": 0.001,
+        "clip": True,
+        "repeatability_noise": True,  # the robot's repeatability (ACROBOT: 0.01 N)
+    },
+    "homing": {"position_std": 0.001, "rotation_std": math.radians(0.2)},
+}
+"""The ``acrobot`` profile: each magnitude and its source in ``models/acrobot/README.md``."""
+
+
+def profile(name: str, **parts: dict[str, Any]) -> Realism:
+    """A named profile with some fields overridden (SI units).
+
+    Args:
+        name: one of :data:`PROFILES`.
+        **parts: per part (``camera=…``), the fields to override.
+
+    Raises:
+        ValueError: for an unknown profile, part or field.
+    """
+    if name not in PROFILES:
+        raise ValueError(f"unknown realism profile {name!r}; choose one of {', '.join(PROFILES)}")
+    base = ACROBOT if name == "acrobot" else {}
+    out = Realism(profile=name)
+    for part, cls in PARTS.items():
+        values = {**base.get(part, {}), **parts.get(part, {})}
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"realism.{part}: unknown field {unknown[0]!r}")
+        out = replace(out, **{part: cls(**values)})
+    return out
+
+
+_STREAMS = {"camera": 1, "winch": 2, "tension": 3, "homing": 4}
+
+
+def robot_rng(robot_seed: int, part: str) -> np.random.Generator:
+    """The generator of one part's per-robot draws, from the truth seed.
+
+    Independent of the truth deviations' own stream and of the other parts'.
+    """
+    return np.random.default_rng(np.random.SeedSequence([int(robot_seed), 1, _STREAMS[part]]))
+
+
+def run_rng(run_seed: int, part: str) -> np.random.Generator:
+    """The generator of one part's per-run draws, from the run seed.
+
+    The tension sensors' reading noise keeps the run seed's own stream, as before realism.
+    """
+    return np.random.default_rng(np.random.SeedSequence([int(run_seed), 2, _STREAMS[part]]))
+
+
+def draw_homing_offset(h: HomingRealism, rng: np.random.Generator) -> np.ndarray:
+    """A start-pose offset [δp (m), δθ (rad)] in the base frame. Returns (6,).
+
+    The true start pose is ᵇT_p0' = (exp([δθ]×) ᵇR_p0, ᵇp_p0 + δp)
+    (:func:`cdpr_twin.run.homing_and_teaching.true_start_pose`).
+    Draws, in order: 3 positions (``position_std``), 3 rotations (``rotation_std``).
+
+    Args:
+        h: the homing repeatability.
+        rng: the run's homing generator (``run_rng(seed, "homing")``).
+    """
+    return np.concatenate([rng.normal(0.0, h.position_std, 3), rng.normal(0.0, h.rotation_std, 3)])
+
+
+RUN_SOURCES = ("pixel_noise", "tension_noise", "homing")
+"""What changes between repetitions of a run on one robot: the camera's pixel noise, the
+tension sensors' reading noise (``[sensors] tension_noise_std``) and the homing offset."""
+
+
+def without_source(realism: Realism, source: str) -> Realism:
+    """The profile with one per-run source of variation off.
+
+    ``tension_noise`` lives in the scenario's ``[sensors]`` table: see
+    :meth:`cdpr_twin.scenario.loading.Scenario.without`.
+
+    Raises:
+        ValueError: for an unknown source.
+    """
+    if source == "pixel_noise":
+        return replace(realism, camera=replace(realism.camera, noise=False))
+    if source == "homing":
+        return replace(realism, homing=HomingRealism())
+    if source == "tension_noise":
+        return replace(realism, tension=replace(realism.tension, noise_std=0.0))
+    raise ValueError(f"unknown source of variation {source!r}; choose one of {RUN_SOURCES}")

@@ -1,0 +1,1 @@
+"""A run: the control loop, its metrics, its summary, and stops (Ctrl-C, SIGTERM)."""

@@ -1,0 +1,108 @@
+"""What a run keeps beyond its metrics for ``summary.json``, and the summary itself.
+
+Truth stays here and in :mod:`cdpr_twin.run.metrics`: the controller's summary fields get only the
+error of its goal view, never a true pose.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from cdpr_twin.controllers.base import RunEnd
+from cdpr_twin.math.se3 import pose_error
+from cdpr_twin.run.metrics import RunMetrics, run_summary
+from cdpr_twin.types import Measurement
+
+
+@dataclass
+class Tally:
+    """What the run keeps from its measurements for the summary.
+
+    Attributes:
+        last_tag: the last tag detection after a command, or ``None``.
+        last_tag_time: the time of the read that delivered it [s], or ``None``.
+        clipped: (m,) clipped tension readings per cable (every read of the run, t = 0
+            included), or ``None`` (the sensors never clip).
+        faults: the robot's faults (:class:`cdpr_twin.sim.Fault`), in time order.
+        truth: the true state at the last recorded tick (``time`` [s], ``T_base_platform``
+            (4, 4), ``tensions`` (m,) [N], ``T_cam_tag`` (4, 4) or ``None``), or ``None``
+            before the first. The summary is of that tick, not of a physics state a stop
+            (Ctrl-C, SIGTERM, a failure) left mid-tick, which no file recorded.
+        events: how many events had fired by that tick (later ones: not reached).
+    """
+
+    last_tag: object = None
+    last_tag_time: float | None = None
+    clipped: np.ndarray | None = None
+    faults: list = dataclasses.field(default_factory=list)
+    truth: dict | None = None
+    events: int | None = None
+
+    def recorded(self, physics, T_true: np.ndarray, tag_view: bool, events: int) -> None:
+        """Keep the tick just recorded: its true state (the tag's too) and events fired."""
+        T_cam_tag = physics.T_cam_tag if tag_view else None
+        self.truth = {"time": physics.time, "T_base_platform": T_true,
+                      "tensions": physics.tensions, "T_cam_tag": T_cam_tag}  # fmt: skip
+        self.events = events
+
+    def seen(self, m: Measurement) -> None:
+        """Keep the read's tag detection (and its time) when it has one."""
+        if m.tag is not None:
+            self.last_tag, self.last_tag_time = m.tag, float(m.time)
+
+    def add(self, m: Measurement) -> None:
+        """Count one measurement's clipped tension readings."""
+        if m.tensions_clipped is not None:
+            if self.clipped is None:
+                self.clipped = np.zeros(len(m.tensions_clipped), dtype=int)
+            self.clipped += m.tensions_clipped
+
+
+def summarize(setup, metrics: RunMetrics, status: str, tally: Tally) -> dict:
+    """The content of ``summary.json`` for a run that ended with ``status``.
+
+    Args:
+        setup: the run's :class:`~cdpr_twin.run.runner.RunSetup`.
+        metrics: its metrics.
+        status: how it ended.
+        tally: what it kept from its measurements and monitor.
+    """
+    p, view = setup.physics, setup.controller.goal_view
+    if view is not None and setup.shown_view is not None:
+        view = setup.shown_view  # a taught view: what the camera truly saw when shown
+    if tally.truth is None:  # stopped before its first tick was recorded: the state now
+        tally.recorded(p, p.T_base_platform, tag_view(setup), len(setup.events.fired))
+    truth = tally.truth
+    true_tag_error = None
+    if view is not None and truth["T_cam_tag"] is not None:  # truth stays here: the error only
+        true_tag_error = pose_error(truth["T_cam_tag"], view)
+    end = RunEnd(status, tally.last_tag, true_tag_error, tally.last_tag_time)
+    extra = setup.controller.summary(end)
+    out = run_summary(setup.scenario, status, metrics, truth, setup.goal_pose, extra)
+    if setup.homing_offset is not None:
+        off = setup.homing_offset
+        out["homing_offset"] = {
+            "position_m": off[:3].tolist(),
+            "rotation_deg": np.degrees(off[3:]).tolist(),
+        }
+    if tally.clipped is not None:
+        out["tension_clipped_readings"] = tally.clipped.tolist()
+    fired, later = setup.events.fired[: tally.events], setup.events.fired[tally.events :]
+    if fired:
+        out["events"] = [e.as_dict(t, phase) for t, e, phase in fired]
+    late = [{"due_s": t, "kind": e.kind, "phase": phase, "at": e.at} | e.fields()
+            for t, e, phase in later]  # (fired after the last recorded tick: a stop's)  # fmt: skip
+    if pending := late + setup.events.pending:  # the run ended first: said, not dropped
+        out["events_not_reached"] = pending
+    if tally.faults:
+        out["faults"] = [f.as_dict() for f in tally.faults]
+    return out
+
+
+def tag_view(setup) -> bool:
+    """Whether the summary needs the true tag pose (a goal view, a camera and a tag)."""
+    p = setup.physics
+    return setup.controller.goal_view is not None and p.has_camera and p.has_tag

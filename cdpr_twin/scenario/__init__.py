@@ -1,0 +1,1 @@
+"""Scenario files (TOML) → a frozen, validated Scenario, and its checks before a run."""

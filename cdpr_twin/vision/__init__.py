@@ -1,0 +1,1 @@
+"""AprilTag detection and sub-pixel corners (OpenCV and pupil-apriltags, no MuJoCo)."""
