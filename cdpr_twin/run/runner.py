@@ -85,11 +85,21 @@ class RunSetup:
     def estimate(self, m: Measurement) -> dict[str, PoseEstimate]:
         """Update every estimator (in dependency order); returns estimates in recording order."""
         out: dict[str, PoseEstimate] = {}
+        # loops, not comprehensions: this runs every tick, for every estimator
         for name in self.order:
             est = self.estimators[name]
-            inputs = {n: out[n] for n in est.inputs}
-            out[name] = est.update(m, inputs) if inputs else est.update(m)
-        return {name: out[name] for name in self.estimators}
+            needs = est.inputs
+            if needs:
+                inputs = {}
+                for n in needs:
+                    inputs[n] = out[n]
+                out[name] = est.update(m, inputs)
+            else:
+                out[name] = est.update(m)
+        recorded: dict[str, PoseEstimate] = {}
+        for name in self.estimators:
+            recorded[name] = out[name]
+        return recorded
 
     @property
     def cov(self) -> tuple[str, ...]:
