@@ -259,3 +259,51 @@ class Measurement:
     def camera_on(self) -> bool:
         """Whether this measurement carries a camera frame."""
         return self.image is not None
+
+
+@dataclass(frozen=True, eq=False)
+class TickRecord:
+    """One control tick of a run, as it happened: what every sink records.
+
+    Ground truth sits beside what the robot's software saw (``measurement``, ``estimates``,
+    ``command``), never inside it: sinks (the time series, the Rerun recording, the metrics,
+    the summary) read both, estimators and controllers only ever get the latter.
+
+    Attributes:
+        time: simulation time of the tick's read [s].
+        measurement: what the sensors read.
+        estimates: every estimator's estimate, by name, in recording order.
+        command: the command that led to this tick, or ``None`` at the start (tick 0).
+        plan: (4, 4) the pose the controller plans for ``time``, or ``None``.
+        T_base_platform: (4, 4) the true platform pose.
+        tensions: (m,) the true cable tensions [N].
+        T_cam_tag: (4, 4) the true tag pose in the camera frame, when asked for, else ``None``.
+        deviations: each estimator's distance from the true pose (translation [m], rotation
+            [rad]), by name.
+        events: the scenario's events fired during the tick (since the last tick's read):
+            (simulation time [s], event, ``"start"`` or ``"end"``) each.
+        faults: the faults the robot's monitor saw during the tick
+            (:class:`cdpr_twin.sim.Fault` each), in time order.
+        stop: the run status the first fault ends the run with (``[monitor] on_fault =
+            "stop"``), or ``None``: the run goes on.
+    """
+
+    time: float
+    measurement: Measurement
+    estimates: dict[str, PoseEstimate]
+    command: Command | None
+    plan: np.ndarray | None
+    T_base_platform: np.ndarray
+    tensions: np.ndarray
+    T_cam_tag: np.ndarray | None
+    deviations: dict[str, tuple[float, float]]
+    events: tuple = ()
+    faults: tuple = ()
+    stop: str | None = None
+
+    @property
+    def marks(self) -> tuple[str, ...]:
+        """What happened during the tick, in words: the events, then the faults."""
+        return tuple(e.describe(phase) for _, e, phase in self.events) + tuple(
+            f.described for f in self.faults
+        )

@@ -112,6 +112,60 @@ class Recording:
         return replace(self, obs=self.obs.subset(keep), truth=truth)
 
 
+@dataclass(frozen=True, eq=False)
+class Reading:
+    """The averaged readings at one pose.
+
+    Attributes:
+        encoder: (m,) mean encoder lengths [m].
+        tensions: (m,) mean tension readings [N].
+        taut: (m,) each cable read taut (above 1 N, unclipped) in every reading.
+        T_cam_tag: (4, 4) the mean detected tag pose, or ``None`` (not seen).
+    """
+
+    encoder: np.ndarray
+    tensions: np.ndarray
+    taut: np.ndarray
+    T_cam_tag: np.ndarray | None
+
+
+@dataclass(frozen=True, eq=False)
+class _Segment:
+    """One segment of the tour, as its process recorded it.
+
+    Attributes:
+        index: its place in the tour.
+        readings: one per pose read.
+        true_poses: (4, 4) the true platform pose at each reading.
+        simulated_time: simulated seconds [s].
+        geometry: the simulated robot's true geometry.
+        T_base_tag: (4, 4) the true tag pose.
+        drum_scale: (m,) true drum radius / the radius set − 1.
+        intrinsics_error: (8,) the detector's intrinsics minus the true ones.
+        nominal: the robot's software model.
+        detector: what the software assumes of its tag detector.
+        drum_radii: (m,) the radii the drives and encoders were set to [m].
+        tension_sensors: offset std [N], relative gain error std, reading noise std [N].
+        tension_bias: (m,) each tension sensor's drawn offset [N].
+        tension_gain: (m,) each tension sensor's drawn relative gain error.
+    """
+
+    index: int
+    readings: list[Reading]
+    true_poses: list[np.ndarray]
+    simulated_time: float
+    geometry: object
+    T_base_tag: np.ndarray
+    drum_scale: np.ndarray
+    intrinsics_error: np.ndarray
+    nominal: object
+    detector: Detector
+    drum_radii: np.ndarray
+    tension_sensors: tuple[float, float, float]
+    tension_bias: np.ndarray
+    tension_gain: np.ndarray
+
+
 def _read(
     physics,
     sensors,
@@ -119,17 +173,18 @@ def _read(
     frames: int,
     wait: int,
     look: bool,
-    tighten: tuple | None = None,
-) -> tuple:
+    geometry=None,
+    moved_to: np.ndarray | None = None,
+) -> Reading:
     """Rest, tighten, then average ``frames`` readings.
 
-    Tightening only if ``tighten`` (the nominal geometry and the pose commanded); the camera's
-    readings only if ``look``. Returns (encoders, tensions, taut, tag).
+    Tightening only after a move (``moved_to``: the pose commanded, in the nominal
+    ``geometry``); the camera's readings only if ``look``.
     """
     rest = np.zeros(physics.n_cables)
-    if tighten is not None:
+    if moved_to is not None:
         physics.advance(round(SWING / period) * period, rest)
-        drive.tighten(physics, sensors, *tighten)
+        drive.tighten(physics, sensors, geometry, moved_to)
     settle = round(SETTLE / period) * period
     physics.advance(settle - period * look, rest)
     if look:  # the camera records the states of its exposures from the tick before its reads
@@ -150,7 +205,7 @@ def _read(
             tags.append(m.tag.T_cam_tag)
         physics.advance(period, rest)
     _exposures(sensors, False)
-    return np.mean(enc, axis=0), np.mean(ten, axis=0), ok, _mean_pose(tags)
+    return Reading(np.mean(enc, axis=0), np.mean(ten, axis=0), ok, _mean_pose(tags))
 
 
 def _exposures(sensors, on: bool) -> None:
@@ -197,28 +252,37 @@ def record(s: Scenario, poses: list[np.ndarray], frames: int = 4, workers: int =
     started = time.perf_counter()
     n = min(SEGMENTS, len(poses))
     bounds = np.linspace(0, len(poses), n + 1).round().astype(int)
-    items = [(i, poses[bounds[i] : bounds[i + 1]]) for i in range(n)]
+    parts = [poses[bounds[i] : bounds[i + 1]] for i in range(n)]
     if workers > 1 and n > 1:
-        parts = _in_processes(items, min(workers, n), s, frames)
+        segments = _in_processes(parts, min(workers, n), s, frames)
     else:
-        parts = [_segment(item, s, frames) for item in items]
-    _, rows, truth, sim_time, static = zip(*parts, strict=True)
-    geometry, T_tag, drum, k_error, nominal, detector, radii, tension = static[0]
+        segments = [_segment(i, part, s, frames) for i, part in enumerate(parts)]
+    first = segments[0]  # the robot and its sensors are the same in every segment
+    truth = Truth(
+        T_base_platform=np.array([T for seg in segments for T in seg.true_poses]),
+        geometry=first.geometry,
+        T_base_tag=first.T_base_tag,
+        drum_scale=first.drum_scale,
+        intrinsics_error=first.intrinsics_error,
+        tension_bias=first.tension_bias,
+        tension_gain=first.tension_gain,
+    )
     return Recording(
-        obs=_observations([r for part in rows for r in part], [s.start_pose, *poses]),
-        nominal=nominal,
-        detector=detector,
-        truth=Truth(np.array([T for part in truth for T in part]), geometry, T_tag, drum,
-                    k_error, *tension[1]),
-        simulated_time=float(sum(sim_time)),
+        obs=_observations([r for seg in segments for r in seg.readings], [s.start_pose, *poses]),
+        nominal=first.nominal,
+        detector=first.detector,
+        truth=truth,
+        simulated_time=float(sum(seg.simulated_time for seg in segments)),
         wall_time=time.perf_counter() - started,
-        drum_radii=radii,
-        tension_sensors=tension[0],
-    )  # fmt: skip
+        drum_radii=first.drum_radii,
+        tension_sensors=first.tension_sensors,
+    )
 
 
-def _in_processes(items: list, workers: int, s: Scenario, frames: int) -> list[tuple]:
-    """:func:`_segment` of each item in spawned processes, in order.
+def _in_processes(
+    parts: list[list[np.ndarray]], workers: int, s: Scenario, frames: int
+) -> list[_Segment]:
+    """:func:`_segment` of each part of the tour in spawned processes, in order.
 
     The first failure — a segment's error, a worker that died, Ctrl-C or SIGTERM in this
     process — ends the other segments at once: nothing is left running.
@@ -227,7 +291,7 @@ def _in_processes(items: list, workers: int, s: Scenario, frames: int) -> list[t
     with ProcessPoolExecutor(
         workers, mp_context=ctx, initializer=_worker_start, initargs=(os.getpid(),)
     ) as pool:
-        futures = [pool.submit(_segment, item, s, frames) for item in items]
+        futures = [pool.submit(_segment, i, part, s, frames) for i, part in enumerate(parts)]
         try:
             for f in as_completed(futures):
                 f.result()  # raises the segment's error (BrokenProcessPool: a worker died)
@@ -294,8 +358,10 @@ def _refuse_what_it_cannot_use(s: Scenario) -> None:
     """The camera off, events (its own tour has none), a payload (its balance weighs none)."""
     if not s.sensors.camera:
         raise ScenarioError(f"{s.source}: sensors.camera: calibration needs the camera; set true")
-    unused = [("[[events]]", s.events, "drives its own tour"),
-              ("model.payload_kg", s.model.payload, "weighs the platform alone")]  # fmt: skip
+    unused = [
+        ("[[events]]", s.events, "drives its own tour"),
+        ("model.payload_kg", s.model.payload, "weighs the platform alone"),
+    ]
     for field, used, why in unused:
         if used:
             raise ScenarioError(f"{s.source}: {field}: a calibration {why}; remove it from a copy")
@@ -311,26 +377,25 @@ def _worker_start(parent: int) -> None:
     exit_with(parent)
 
 
-def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tuple:
-    """Record one segment of the tour from homing.
-
-    Returns:
-        (index, rows, true poses, simulated time, (true geometry, true tag, drum scales,
-        intrinsics error, nominal robot, detector, drum radii, (tension sensors' specification,
-        their drawn offsets and gain errors)).
-    """
+def _segment(index: int, poses: list[np.ndarray], s: Scenario, frames: int) -> _Segment:
+    """Record one segment of the tour (the ``index``-th, through ``poses``) from homing."""
     from cdpr_twin.sim import Sensors
 
-    index, poses = item
     physics, nominal = _build(s)
     period = s.model.control_period
     seed = (
         s.seed if index == 0 else int(np.random.SeedSequence([s.seed, index]).generate_state(1)[0])
     )
     sensors = Sensors(
-        physics, nominal, s.sensors.tension_noise_std, seed, camera=True,
-        realism=s.realism, robot_seed=s.truth.seed, period=period,
-    )  # fmt: skip
+        physics,
+        nominal,
+        s.sensors.tension_noise_std,
+        seed,
+        camera=True,
+        realism=s.realism,
+        robot_seed=s.truth.seed,
+        period=period,
+    )
     g = nominal.geometry
     try:
         _reset_at_start(s, physics, settle_time=0.3)
@@ -342,23 +407,37 @@ def _segment(item: tuple[int, list[np.ndarray]], s: Scenario, frames: int) -> tu
         for T, moved in stops:
             if moved:
                 drive.move(physics, g, here, T, period)
-            look = tag_in_view(g, nominal.T_base_tag, nominal.intrinsics, nominal.tag_size, T,
-                               VIEW_MARGIN)  # fmt: skip
+            look = tag_in_view(
+                g, nominal.T_base_tag, nominal.intrinsics, nominal.tag_size, T, VIEW_MARGIN
+            )
             wait = s.realism.camera.latency_ticks
-            at = (g, T) if moved else None
-            rows.append(_read(physics, sensors, period, frames, wait, look, at))
+            moved_to = T if moved else None
+            rows.append(_read(physics, sensors, period, frames, wait, look, g, moved_to))
             truth.append(np.array(physics.T_base_platform))
             here = T
         detector, intrinsics_error = _detector(sensors.camera, nominal.tag_size, s.realism)
         t = sensors.realism.tension
-        tension = ((t.bias_std, t.gain_error_std, sensors.tension.noise_std),
-                   (sensors.tension.bias.copy(), sensors.tension.gain_error.copy()))  # fmt: skip
+        tension_sensors = (t.bias_std, t.gain_error_std, sensors.tension.noise_std)
+        bias, gain = sensors.tension.bias.copy(), sensors.tension.gain_error.copy()
     finally:
         sensors.close()
-    scale = physics.drum_radius_true / physics.drum_radius_set - 1.0  # against what it reads
-    static = (physics.geometry, np.array(physics.T_base_tag), scale, intrinsics_error, nominal,
-              detector, physics.drum_radius_set.copy(), tension)  # fmt: skip
-    return index, rows, truth, float(physics.time), static
+    return _Segment(
+        index=index,
+        readings=rows,
+        true_poses=truth,
+        simulated_time=float(physics.time),
+        geometry=physics.geometry,
+        T_base_tag=np.array(physics.T_base_tag),
+        # against what it reads
+        drum_scale=physics.drum_radius_true / physics.drum_radius_set - 1.0,
+        intrinsics_error=intrinsics_error,
+        nominal=nominal,
+        detector=detector,
+        drum_radii=physics.drum_radius_set.copy(),
+        tension_sensors=tension_sensors,
+        tension_bias=bias,
+        tension_gain=gain,
+    )
 
 
 def _detector(camera, tag_size: float, realism) -> tuple[Detector, np.ndarray]:
@@ -376,14 +455,14 @@ def _detector(camera, tag_size: float, realism) -> tuple[Detector, np.ndarray]:
     return Detector(tag_size, cal.fx, tuple(lens)), error
 
 
-def _observations(rows: list[tuple], poses: list[np.ndarray]) -> Observations:
+def _observations(rows: list[Reading], poses: list[np.ndarray]) -> Observations:
     """The rows read at ``poses``: the first where the encoders were homed, then the tour's."""
-    seen = np.array([r[3] is not None for r in rows])
+    seen = np.array([r.T_cam_tag is not None for r in rows])
     return Observations(
-        encoder=np.array([r[0] for r in rows]),
-        tensions=np.array([r[1] for r in rows]),
-        taut=np.array([r[2] for r in rows]),
-        T_cam_tag=np.array([np.eye(4) if r[3] is None else r[3] for r in rows]),
+        encoder=np.array([r.encoder for r in rows]),
+        tensions=np.array([r.tensions for r in rows]),
+        taut=np.array([r.taut for r in rows]),
+        T_cam_tag=np.array([np.eye(4) if r.T_cam_tag is None else r.T_cam_tag for r in rows]),
         seen=seen,
         T_guess=np.array(poses),
         home=np.arange(len(rows)) == 0,

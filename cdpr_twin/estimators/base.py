@@ -70,7 +70,7 @@ class TensionWatch:
             return ()
         self._same = np.where(tensions == self._last, self._same + 1, 0)
         self._last = tensions.copy()
-        return tuple(int(i) for i in np.flatnonzero(self._same >= self.ticks))
+        return tuple((self._same >= self.ticks).nonzero()[0].tolist())
 
 
 class EncoderWatch:
@@ -108,7 +108,7 @@ class EncoderWatch:
             self._diffs[:-1] = self._diffs[1:]
         self._diffs[self._n - 1] = diff
         total = self._diffs[: self._n].sum(axis=0)
-        return tuple(int(i) for i in np.flatnonzero(np.abs(total) > self.threshold))
+        return tuple((np.abs(total) > self.threshold).nonzero()[0].tolist())
 
 
 class SensorWatch(enum.Flag):

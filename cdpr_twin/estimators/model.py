@@ -210,7 +210,7 @@ class ModelEstimator(Estimator):
         _, rows = _kernel(self._cables, self.pulley, _pose(self._T))
         rows = np.asarray(rows)
         if self.selection == "all_taut":
-            cables = np.flatnonzero(taut).tolist()
+            cables = np.asarray(taut).nonzero()[0].tolist()
         else:
             cables = best_conditioned(rows, tensions, taut)
         return cables, condition_number(rows[cables])
@@ -231,7 +231,10 @@ class ModelEstimator(Estimator):
             return self._update_selected(m, lengths, tensions, watch_flags)
         cables = most_tensioned(tl)  # line 8
         used = tuple(cables)
-        if sum(t > self.taut_threshold for t in tl) < N_USED:
+        taut = 0
+        for t in tl:  # (a loop, not a generator: the hot path)
+            taut += t > self.taut_threshold
+        if taut < N_USED:
             return self._held(m, FEW_TAUT_CABLES, cables=used)
         targets = self.corrected_lengths(lengths, tensions)
         T, residual, iterations = self.solve(targets, cables, self._T)
@@ -259,7 +262,7 @@ class ModelEstimator(Estimator):
         """
         taut = tensions > self.taut_threshold
         if taut.sum() < N_USED:
-            return self._held(m, FEW_TAUT_CABLES, cables=tuple(np.flatnonzero(taut).tolist()))
+            return self._held(m, FEW_TAUT_CABLES, cables=tuple(taut.nonzero()[0].tolist()))
         cables, condition = self.choose(tensions, taut)
         used = tuple(cables)
         if not condition <= self.options.max_condition:

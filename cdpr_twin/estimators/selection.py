@@ -43,7 +43,7 @@ def best_conditioned(rows: np.ndarray, tensions: np.ndarray, taut: np.ndarray) -
     Returns:
         Six indices (from 0), sorted.
     """
-    candidates = [list(c) for c in combinations(np.flatnonzero(taut).tolist(), N_USED)]
+    candidates = [list(c) for c in combinations(np.asarray(taut).nonzero()[0].tolist(), N_USED)]
     sv = np.linalg.svd(rows[np.array(candidates)], compute_uv=False)  # (k, 6), descending
     with np.errstate(divide="ignore"):
         cond = sv[:, 0] / sv[:, -1]

@@ -44,10 +44,11 @@ from cdpr_twin.gym.configuration import check_arguments, configure
 from cdpr_twin.gym.tasks import Score, Truth, make_task
 from cdpr_twin.math.kinematics import jacobian
 from cdpr_twin.math.se3 import so3_log
-from cdpr_twin.run.runner import RunSetup, prepare, start
+from cdpr_twin.run.episode import Episode
+from cdpr_twin.run.runner import RunSetup, prepare
 from cdpr_twin.scenario.loading import Scenario
 from cdpr_twin.sim import SimulationError, WinchLimitError
-from cdpr_twin.types import Command, Measurement, PoseEstimate
+from cdpr_twin.types import Command, Measurement, PoseEstimate, TickRecord
 
 ACTIONS = ("twist", "cable_rates")
 """What an action commands."""
@@ -112,14 +113,21 @@ class CdprEnv(gym.Env):
         on_fault: str | None = None,
     ) -> None:
         self.task = make_task(task)
-        check_arguments(on_fault, max_speed=max_speed, max_angular_speed=max_angular_speed,
-                        max_cable_rate=max_cable_rate)  # fmt: skip
+        check_arguments(
+            on_fault,
+            max_speed=max_speed,
+            max_angular_speed=max_angular_speed,
+            max_cable_rate=max_cable_rate,
+        )
         if action not in ACTIONS:
             raise ValueError(f"unknown action {action!r}; choose one of {', '.join(ACTIONS)}")
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"unknown render_mode {render_mode!r}; use None or 'rgb_array'")
-        wants = {"the task": self.task.needs_camera, "image=True": image,
-                 f"render_mode={render_mode!r}": render_mode is not None}  # fmt: skip
+        wants = {
+            "the task": self.task.needs_camera,
+            "image=True": image,
+            f"render_mode={render_mode!r}": render_mode is not None,
+        }
         self.action_kind, self.image, self.render_mode = action, bool(image), render_mode
         self.random_robot, self.estimator = bool(random_robot), estimator
         self.scenario = configure(scenario, estimator, camera, wants, truth_scale, realism)
@@ -144,12 +152,12 @@ class CdprEnv(gym.Env):
         """Units of an action of 1: [m/s ×3, rad/s ×3] (twist) or m/s per cable."""
         self.action_space = spaces.Box(-1.0, 1.0, (len(self.action_scale),), np.float32)
         self.observation_space = self._observation_space(n)
-        self._m: Measurement | None = None
+        self._episode: Episode | None = None
+        self._tick: TickRecord | None = None  # the last step that went through (or reset's)
         self._last: Truth | None = None  # the truth after the last step that went through
         self._pending: str | None = None  # a stopping fault found at reset
         self._ended: str | None = None  # how the episode ended: step() then needs a reset()
         self._pose = np.zeros(6)  # the last finite estimate's pose6 (the observation's)
-        self._estimate: PoseEstimate | None = None
         self._steps, self._seeds = 0, (self.scenario.truth.seed, self.scenario.seed)
 
     @property
@@ -191,14 +199,12 @@ class CdprEnv(gym.Env):
         )
         self.close()
         self._setup = prepare(s)
-        start(self._setup)
-        physics = self._setup.physics
-        self._setup.events.fire(0.5 * physics.timestep)  # what is due at t = 0
+        self._episode = Episode(self._setup, true_tag_view=self._sees_tag())
         self._steps, self._seeds, self._ended = 0, (robot_seed, run_seed), None
         self._pose = pose6(self.scenario.start_pose)  # a lost first estimate: the start's
-        self._read(None)
-        self._last = self._truth()
-        faults = self._faults()
+        self._tick = self._episode.reset()
+        self._last = self._truth_of(self._tick)
+        faults = self._faults(self._tick)
         self._pending = faults.get("failure")  # the first step ends with it, as a run would
         info = self._info(self.task.score(self._last), self._last)
         return self._observation(), {**info, **faults}
@@ -209,7 +215,7 @@ class CdprEnv(gym.Env):
         Returns:
             ``(observation, reward, terminated, truncated, info)``.
         """
-        if self._setup is None or self._m is None:
+        if self._setup is None or self._tick is None:
             raise RuntimeError("call reset() before step()")
         if self._ended is not None:  # gymnasium leaves it undefined: here it is an error
             raise RuntimeError(f"the episode ended ({self._ended}); call reset() before step()")
@@ -220,7 +226,6 @@ class CdprEnv(gym.Env):
                 f"outside are clipped), got shape {a.shape}: {np.round(a, 4).tolist()}"
             )
         command, scale = self._command(np.clip(a, -1.0, 1.0) * self.action_scale)
-        physics = self._setup.physics
         self._steps += 1
         extra = {"rate_scale": scale}
         if self._pending is not None:  # a stopping fault at reset: the robot does not move
@@ -228,19 +233,18 @@ class CdprEnv(gym.Env):
         if not np.isfinite(command.cable_rates).all():
             return self._failed(f"the {self.estimator} estimate is not finite: no command", extra)
         try:
-            physics.advance(self._period, command.cable_rates)
-            self._setup.events.fire(physics.time + 0.5 * physics.timestep)
-            self._read(command)
+            tick = self._episode.step(command)
         except WinchLimitError as exc:  # refused before any step: the state is the last one
             return self._failed(str(exc), extra)
         except SimulationError as exc:  # MuJoCo reset its state: score where the robot was
             return self._failed(str(exc), extra, self._last)
-        faults = self._faults()
+        self._tick = tick
+        faults = self._faults(tick)
         if "failure" in faults:
             return self._failed(faults.pop("failure"), {**extra, **faults})
         if not np.isfinite(self._estimate.T_base_platform).all():  # ends now, not a step later
             return self._failed(f"the {self.estimator} estimate is not finite", extra)
-        self._last = self._truth()
+        self._last = self._truth_of(tick)
         score = self.task.score(self._last)
         truncated = self._steps >= self._horizon and not score.success
         if score.success or truncated:
@@ -266,22 +270,17 @@ class CdprEnv(gym.Env):
         self._ended = f"terminated: {why}"
         return self._observation(), reward, True, False, info
 
-    def _faults(self) -> dict[str, Any]:
-        """The monitor's faults since the last call, and the failure they are if they stop.
+    def _faults(self, tick: TickRecord) -> dict[str, Any]:
+        """The monitor's faults during a tick, and the failure they are if they stop.
 
         Returns:
             ``{}``, or ``{"faults": [...]}`` plus ``"failure"`` when the scenario's
             ``[monitor] on_fault`` is ``"stop"``.
         """
-        monitor = self._setup.monitor
-        if monitor is None:
+        if not tick.faults:
             return {}
-        monitor.check()  # the state the step's last physics chunk left
-        faults = monitor.take()
-        if not faults:
-            return {}
-        out: dict[str, Any] = {"faults": [f.described for f in faults]}
-        if self.scenario.monitor.on_fault == "stop":
+        out: dict[str, Any] = {"faults": [f.described for f in tick.faults]}
+        if tick.stop is not None:
             out["failure"] = out["faults"][0]
         return out
 
@@ -304,14 +303,27 @@ class CdprEnv(gym.Env):
         twist, *_ = np.linalg.lstsq(jacobian(geometry, T, "platform"), a, rcond=None)
         return Command(a, twist), 1.0
 
-    def _read(self, command: Command | None) -> None:
-        self._m = self._setup.sensors.read(command)
-        self._estimate = self._setup.estimate(self._m)[self.estimator]
+    @property
+    def _m(self) -> Measurement:
+        return self._tick.measurement
+
+    @property
+    def _estimate(self) -> PoseEstimate:
+        return self._tick.estimates[self.estimator]
+
+    def _sees_tag(self) -> bool:
+        p = self._setup.physics
+        return p.has_camera and p.has_tag
 
     def _truth(self) -> Truth:
+        """Where the robot is now (after a failed step: no tick recorded it)."""
         p = self._setup.physics
-        view = p.T_cam_tag.copy() if p.has_camera and p.has_tag else None
-        return Truth(p.T_base_platform.copy(), view)
+        return Truth(p.T_base_platform.copy(), p.T_cam_tag.copy() if self._sees_tag() else None)
+
+    @staticmethod
+    def _truth_of(tick: TickRecord) -> Truth:
+        view = None if tick.T_cam_tag is None else tick.T_cam_tag.copy()
+        return Truth(tick.T_base_platform.copy(), view)
 
     def _observation(self) -> dict[str, Any]:
         m = self._m

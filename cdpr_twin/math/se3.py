@@ -132,7 +132,7 @@ def so3_exp(theta_u: np.ndarray) -> np.ndarray:
     Returns:
         (3, 3) rotation matrix.
     """
-    wx, wy, wz = (float(v) for v in theta_u)
+    wx, wy, wz = np.asarray(theta_u, dtype=float).tolist()  # Python floats, no generator
     a, b, _ = exp_coefficients(wx * wx + wy * wy + wz * wz)
     return np.array(_rodrigues(wx, wy, wz, a, b))
 
@@ -276,7 +276,7 @@ def se3_exp(twist: np.ndarray) -> np.ndarray:
     Returns:
         (4, 4) rigid transform.
     """
-    vx, vy, vz, wx, wy, wz = (float(x) for x in twist)
+    vx, vy, vz, wx, wy, wz = np.asarray(twist, dtype=float).tolist()
     a, b, c = exp_coefficients(wx * wx + wy * wy + wz * wz)
     R = _rodrigues(wx, wy, wz, a, b)
     V = _rodrigues(wx, wy, wz, b, c)

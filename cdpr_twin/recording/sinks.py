@@ -8,12 +8,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from cdpr_twin.files.transaction import fsync_dir, write_json_partial, writing
 from cdpr_twin.recording.rerun import RerunRecorder, SceneInfo
 from cdpr_twin.recording.timeseries import TimeseriesWriter
-from cdpr_twin.types import Command, Measurement, PoseEstimate
+from cdpr_twin.types import TickRecord
 
 
 class Recorders:
@@ -56,29 +54,28 @@ class Recorders:
         if rrd:
             try:
                 self.rrd = RerunRecorder(
-                    out_dir / "recording.rrd", scene, names, "cdpr-twin", recording_id, spawn,
+                    out_dir / "recording.rrd",
+                    scene,
+                    names,
+                    "cdpr-twin",
+                    recording_id,
+                    spawn,
                     covariance=covariance,
                     connect=connect,
-                )  # fmt: skip
+                )
             except BaseException:
                 self.csv.abort()
                 raise
 
-    def tick(
-        self,
-        m: Measurement,
-        T_true: np.ndarray,
-        estimates: dict[str, PoseEstimate],
-        deviations: dict[str, tuple[float, float]],
-        command: Command | None,
-        plan: np.ndarray | None,
-        marks: tuple[str, ...] = (),
-    ) -> None:
-        """Record one control tick (``marks``: what happened in it, events and faults)."""
+    def add(self, tick: TickRecord) -> None:
+        """Record one control tick (its marks: what happened in it, events and faults)."""
+        m, marks = tick.measurement, tick.marks
         if self.csv is not None:
-            self.csv.tick(m.time, T_true, estimates, m, command, plan, marks)
+            self.csv.tick(
+                tick.time, tick.T_base_platform, tick.estimates, m, tick.command, tick.plan, marks
+            )
         if self.rrd is not None:
-            self.rrd.tick(m, T_true, estimates, deviations, plan)
+            self.rrd.tick(m, tick.T_base_platform, tick.estimates, tick.deviations, tick.plan)
             if marks:
                 self.rrd.mark(m.time, marks)
 

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from cdpr_twin.math.se3 import pose_distance, pose_error, vector_from_pose
-from cdpr_twin.types import PoseEstimate
+from cdpr_twin.types import PoseEstimate, TickRecord
 
 NON_FINITE_ESTIMATE = "non_finite_estimate"
 """The flag counted for an estimate whose pose is not finite (no deviation is measured)."""
@@ -34,10 +34,16 @@ def sample_std(values) -> float:
 
 
 _NO_DEVIATION = dict.fromkeys(
-    ("max_translation_m", "max_translation_time_s", "max_rotation_deg", "max_rotation_time_s",
-     "rms_translation_m", "rms_rotation_deg"),
+    (
+        "max_translation_m",
+        "max_translation_time_s",
+        "max_rotation_deg",
+        "max_rotation_time_s",
+        "rms_translation_m",
+        "rms_rotation_deg",
+    ),
     math.nan,
-)  # fmt: skip
+)
 
 
 @dataclass
@@ -104,6 +110,16 @@ class DeviationTrack:
         return summary if self.count else {**summary, **_NO_DEVIATION}
 
 
+def deviations(
+    estimates: dict[str, PoseEstimate], T_true: np.ndarray
+) -> dict[str, tuple[float, float]]:
+    """Each estimate's distance from the true pose: (translation [m], rotation [rad]), by name."""
+    dts, drs = pose_distance(
+        np.array([e.T_base_platform for e in estimates.values()]), T_true[None]
+    )
+    return {name: (float(a), float(b)) for name, a, b in zip(estimates, dts, drs, strict=True)}
+
+
 class RunMetrics:
     """Every estimator's deviation from ground truth, tick by tick, and the checkpoints.
 
@@ -120,21 +136,15 @@ class RunMetrics:
         self.checkpoints, self.period = checkpoints, period
         self.segment_ends: list[dict] = []
 
-    def add(
-        self, time: float, T_true: np.ndarray, estimates: dict[str, PoseEstimate]
-    ) -> dict[str, tuple[float, float]]:
-        """Account one tick; returns each estimator's (translation [m], rotation [rad])."""
-        dts, drs = pose_distance(
-            np.array([e.T_base_platform for e in estimates.values()]), T_true[None]
-        )
-        deviations = {}
-        for (name, e), a, b in zip(estimates.items(), dts, drs, strict=True):
-            deviations[name] = (float(a), float(b))
-            self.tracks[name].add(e, deviations[name])
+    def add(self, tick: TickRecord) -> None:
+        """Account one tick: each estimator's deviation, and a checkpoint if one is due."""
+        for name, e in tick.estimates.items():
+            self.tracks[name].add(e, tick.deviations[name])
         for t_c, waypoint in self.checkpoints:
-            if abs(time - t_c) < 0.5 * self.period:
-                self.segment_ends.append(_segment_end(time, waypoint, T_true, estimates))
-        return deviations
+            if abs(tick.time - t_c) < 0.5 * self.period:
+                self.segment_ends.append(
+                    _segment_end(tick.time, waypoint, tick.T_base_platform, tick.estimates)
+                )
 
     def estimators(self) -> dict[str, dict]:
         """Each estimator's summary (max/final deviations, invalid updates, flags)."""

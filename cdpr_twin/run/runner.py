@@ -1,20 +1,17 @@
-"""The headless run: sense → estimate → control → actuate → step → record (DESIGN §6).
+"""The headless run: prepare a scenario, claim its outputs, drive its episode, save it all.
 
-One tick (:func:`_loop`)::
-
-    m = sensors.read(last_command)              # sim/sensors.py: encoders, tensions, tag
-    estimates = setup.estimate(m)               # estimators/*: in dependency order
-    command = controller.command(t, Δt, estimates[in_loop], m)   # controllers/*
-    physics.advance(Δt, command.cable_rates)    # sim/physics.py: winches, events fire
-    deviations = metrics.add(t, truth, estimates)                # metrics.py (truth only here)
-    recorders.tick(m, truth, estimates, deviations, command, plan)  # record.py → timeseries.py
+:func:`prepare` builds and checks everything a run needs (:class:`RunSetup`) before any output
+is written; :func:`run` claims the output directory, then drives one
+:class:`~cdpr_twin.run.episode.Episode` (where a control tick is spelled out: sense → estimate →
+control → actuate → step → record) until the controller is done, a fault stops it or the time
+is up, and completes the files as one transaction, whatever ended the run.
 
 The runner knows no controller or estimator by name: each controller supplies its goal pose,
 checkpoints, summary fields and the status of a run that ran out of time. Before the loop
-(:func:`prepare`, :func:`start`): the controller may learn its task by being shown a pose
-(teach-by-showing, :meth:`Controller.teach`); then the true robot is put at the start pose moved
-by this run's homing offset (``[realism.homing]``), while the encoders are homed, and the
-estimators and controller reset, at the *nominal* start pose.
+(:func:`prepare`, :func:`~cdpr_twin.run.episode.start`): the controller may learn its task by
+being shown a pose (teach-by-showing, :meth:`Controller.teach`); then the true robot is put at
+the start pose moved by this run's homing offset (``[realism.homing]``), while the encoders are
+homed, and the estimators and controller reset, at the *nominal* start pose.
 """
 
 from __future__ import annotations
@@ -35,6 +32,7 @@ from cdpr_twin.math.statics import InfeasibleTensionError
 from cdpr_twin.options import OptionError
 from cdpr_twin.recording.rerun import SceneInfo
 from cdpr_twin.recording.sinks import Recorders
+from cdpr_twin.run.episode import Episode, start
 from cdpr_twin.run.homing_and_teaching import homing, teach
 from cdpr_twin.run.interrupts import interruption, shielded
 from cdpr_twin.run.metrics import RunMetrics
@@ -44,8 +42,10 @@ from cdpr_twin.scenario.preflight import check_goal, controller_for
 from cdpr_twin.sim.events import EventSchedule, TagOcclusion
 from cdpr_twin.types import Measurement, PoseEstimate, Status
 
+__all__ = ["RunResult", "RunSetup", "prepare", "run", "start"]
 
-@dataclass
+
+@dataclass(kw_only=True)
 class RunSetup:
     """Everything a run needs, built and validated before any output is written.
 
@@ -85,11 +85,21 @@ class RunSetup:
     def estimate(self, m: Measurement) -> dict[str, PoseEstimate]:
         """Update every estimator (in dependency order); returns estimates in recording order."""
         out: dict[str, PoseEstimate] = {}
+        # loops, not comprehensions: this runs every tick, for every estimator
         for name in self.order:
             est = self.estimators[name]
-            inputs = {n: out[n] for n in est.inputs}
-            out[name] = est.update(m, inputs) if inputs else est.update(m)
-        return {name: out[name] for name in self.estimators}
+            needs = est.inputs
+            if needs:
+                inputs = {}
+                for n in needs:
+                    inputs[n] = out[n]
+                out[name] = est.update(m, inputs)
+            else:
+                out[name] = est.update(m)
+        recorded: dict[str, PoseEstimate] = {}
+        for name in self.estimators:
+            recorded[name] = out[name]
+        return recorded
 
     @property
     def cov(self) -> tuple[str, ...]:
@@ -156,9 +166,15 @@ def prepare(scenario: Scenario) -> RunSetup:
     try:
         occluder = any(isinstance(e, TagOcclusion) for e in s.events)
         physics, nominal, _ = build_robot(
-            s.model.file, s.truth, s.model.timestep, s.model.align_every, s.realism.winch,
-            occluder, s.model.nominal, (s.model.payload, s.model.payload_com),
-        )  # fmt: skip
+            s.model.file,
+            s.truth,
+            s.model.timestep,
+            s.model.align_every,
+            s.realism.winch,
+            occluder,
+            s.model.nominal,
+            (s.model.payload, s.model.payload_com),
+        )
         sensors = Sensors(
             physics,
             nominal,
@@ -211,9 +227,20 @@ def _assemble(s: Scenario, physics, sensors, nominal) -> RunSetup:
     if goal is not None and shown_view is None:  # a goal the nominal model predicts: reachable?
         check_goal(s, nominal, controller, goal)
     return RunSetup(
-        s, physics, sensors, nominal, estimators, order, controller, goal, events, monitor,
-        true_start, offset, shown_view,
-    )  # fmt: skip
+        scenario=s,
+        physics=physics,
+        sensors=sensors,
+        nominal=nominal,
+        estimators=estimators,
+        order=order,
+        controller=controller,
+        goal_pose=goal,
+        events=events,
+        monitor=monitor,
+        true_start=true_start,
+        homing_offset=offset,
+        shown_view=shown_view,
+    )
 
 
 def _monitor(s: Scenario, physics):
@@ -292,7 +319,7 @@ def run(
     owner, metrics, recorders = _claim(setup, out_dir, record_rrd, spawn, connect)
     tally, status, commit, started = Tally(), "running", True, time.perf_counter()
     try:
-        status = _loop(setup, metrics, recorders, progress, tally)
+        status = _loop(setup, (metrics, recorders, tally), progress)
     except OutputError:  # nothing is renamed: what was written stays *.partial
         status, commit = "failed: output", False
         raise
@@ -334,71 +361,20 @@ def _claim(setup: RunSetup, out_dir, record_rrd, spawn, connect) -> tuple:
         raise
 
 
-def start(setup: RunSetup) -> None:
-    """Put the robot at its start and everything that believes in it at the nominal start.
-
-    The true platform settles at ``setup.true_start`` (the start pose moved by the homing
-    offset); the encoders are homed, and the controller and estimators reset, at the
-    scenario's nominal start pose.
-    """
+def _loop(setup: RunSetup, sinks: tuple, progress) -> str:
+    """Drive the run's episode until it ends; returns the run's status."""
     s = setup.scenario
-    setup.physics.reset(s.start_pose if setup.true_start is None else setup.true_start)
-    setup.sensors.home(s.start_pose)
-    setup.controller.reset(s.start_pose)
-    for est in setup.estimators.values():
-        est.reset(s.start_pose, 0.0)
-    if setup.monitor is not None:
-        setup.monitor.reset()
-
-
-def _marks(setup: RunSetup) -> tuple[tuple[str, ...], list]:
-    """What happened since the last call, in words (events, then faults), and the faults."""
-    marks = [event.describe(phase) for _, event, phase in setup.events.take()]
-    faults = []
-    if setup.monitor is not None:
-        setup.monitor.check()  # the state the tick's last physics chunk left
-        faults = setup.monitor.take()
-        marks += [f.described for f in faults]
-    return tuple(marks), faults
-
-
-def _loop(setup: RunSetup, metrics: RunMetrics, recorders: Recorders, progress, tally) -> str:
-    """The control loop; returns the run's status."""
-    s, physics, sensors, controller = setup.scenario, setup.physics, setup.sensors, setup.controller
-    period, in_loop = s.model.control_period, s.estimators.in_loop
-    n_ticks = round(s.duration / period)
-    start(setup)
-
-    def record(m: Measurement, estimates: dict[str, PoseEstimate], command) -> str | None:
-        plan = controller.planned_pose(m.time)  # (a plugin's code: outside the shield)
-        (marks, faults), fired = _marks(setup), len(setup.events.fired)
-        with shielded(escape=True):  # a stop waits until the tick is in metrics, files, summary
-            tally.add(m)
-            T_true = physics.T_base_platform
-            deviations = metrics.add(m.time, T_true, estimates)
-            recorders.tick(m, T_true, estimates, deviations, command, plan, marks)
-            tally.recorded(physics, T_true, tag_view(setup), fired)
-            tally.faults += faults
-        stop = faults and s.monitor.on_fault == "stop"
-        return faults[0].status if stop else None
-
-    setup.events.fire(0.5 * physics.timestep)  # what is due at t = 0, before the first read
-    m = sensors.read(None)
-    estimates = setup.estimate(m)
-    if fault := record(m, estimates, None):
-        return fault
+    n_ticks = round(s.duration / s.model.control_period)
+    episode = Episode(setup, sinks, true_tag_view=tag_view(setup))
+    tick = episode.reset()
+    if tick.stop:  # a fault already at the start
+        return tick.stop
     for k in range(n_ticks):
-        command = controller.command(k * period, period, estimates[in_loop], m)
-        physics.advance(period, command.cable_rates)
-        setup.events.fire(physics.time + 0.5 * physics.timestep)  # due before this tick's read
-        m = sensors.read(command)
-        tally.seen(m)
-        estimates = setup.estimate(m)
-        fault = record(m, estimates, command)
+        tick = episode.step()
         if progress is not None:
-            progress((k + 1) / n_ticks, m.time)
-        if fault:  # stopped at the tick the fault happened in
-            return fault
-        if command.done:
-            return command.status
-    return controller.timeout_status
+            progress((k + 1) / n_ticks, tick.time)
+        if tick.stop:  # stopped at the tick the fault happened in
+            return tick.stop
+        if tick.command.done:
+            return tick.command.status
+    return setup.controller.timeout_status

@@ -14,7 +14,7 @@ import numpy as np
 from cdpr_twin.controllers.base import RunEnd
 from cdpr_twin.math.se3 import pose_error
 from cdpr_twin.run.metrics import RunMetrics, run_summary
-from cdpr_twin.types import Measurement
+from cdpr_twin.types import TickRecord
 
 
 @dataclass
@@ -41,24 +41,23 @@ class Tally:
     truth: dict | None = None
     events: int | None = None
 
-    def recorded(self, physics, T_true: np.ndarray, tag_view: bool, events: int) -> None:
-        """Keep the tick just recorded: its true state (the tag's too) and events fired."""
-        T_cam_tag = physics.T_cam_tag if tag_view else None
-        self.truth = {"time": physics.time, "T_base_platform": T_true,
-                      "tensions": physics.tensions, "T_cam_tag": T_cam_tag}  # fmt: skip
-        self.events = events
-
-    def seen(self, m: Measurement) -> None:
-        """Keep the read's tag detection (and its time) when it has one."""
-        if m.tag is not None:
-            self.last_tag, self.last_tag_time = m.tag, float(m.time)
-
-    def add(self, m: Measurement) -> None:
-        """Count one measurement's clipped tension readings."""
+    def add(self, tick: TickRecord) -> None:
+        """Keep what the summary needs of the tick just recorded."""
+        m = tick.measurement
         if m.tensions_clipped is not None:
             if self.clipped is None:
                 self.clipped = np.zeros(len(m.tensions_clipped), dtype=int)
             self.clipped += m.tensions_clipped
+        if tick.command is not None and m.tag is not None:  # a detection after a command
+            self.last_tag, self.last_tag_time = m.tag, float(m.time)
+        self.truth = {
+            "time": tick.time,
+            "T_base_platform": tick.T_base_platform,
+            "tensions": tick.tensions,
+            "T_cam_tag": tick.T_cam_tag,
+        }
+        self.events = (self.events or 0) + len(tick.events)
+        self.faults += tick.faults
 
 
 def summarize(setup, metrics: RunMetrics, status: str, tally: Tally) -> dict:
@@ -73,9 +72,16 @@ def summarize(setup, metrics: RunMetrics, status: str, tally: Tally) -> dict:
     p, view = setup.physics, setup.controller.goal_view
     if view is not None and setup.shown_view is not None:
         view = setup.shown_view  # a taught view: what the camera truly saw when shown
-    if tally.truth is None:  # stopped before its first tick was recorded: the state now
-        tally.recorded(p, p.T_base_platform, tag_view(setup), len(setup.events.fired))
-    truth = tally.truth
+    truth, recorded = tally.truth, tally.events
+    if truth is None:  # stopped before its first tick was recorded: the state now
+        T_cam_tag = p.T_cam_tag if tag_view(setup) else None
+        truth = {
+            "time": p.time,
+            "T_base_platform": p.T_base_platform,
+            "tensions": p.tensions,
+            "T_cam_tag": T_cam_tag,
+        }
+        recorded = len(setup.events.fired)
     true_tag_error = None
     if view is not None and truth["T_cam_tag"] is not None:  # truth stays here: the error only
         true_tag_error = pose_error(truth["T_cam_tag"], view)
@@ -90,11 +96,14 @@ def summarize(setup, metrics: RunMetrics, status: str, tally: Tally) -> dict:
         }
     if tally.clipped is not None:
         out["tension_clipped_readings"] = tally.clipped.tolist()
-    fired, later = setup.events.fired[: tally.events], setup.events.fired[tally.events :]
+    fired, later = setup.events.fired[:recorded], setup.events.fired[recorded:]
     if fired:
         out["events"] = [e.as_dict(t, phase) for t, e, phase in fired]
-    late = [{"due_s": t, "kind": e.kind, "phase": phase, "at": e.at} | e.fields()
-            for t, e, phase in later]  # (fired after the last recorded tick: a stop's)  # fmt: skip
+    # fired after the last recorded tick (a stop's): not reached, as far as the files go
+    late = [
+        {"due_s": t, "kind": e.kind, "phase": phase, "at": e.at} | e.fields()
+        for t, e, phase in later
+    ]
     if pending := late + setup.events.pending:  # the run ended first: said, not dropped
         out["events_not_reached"] = pending
     if tally.faults:

@@ -199,7 +199,7 @@ class Monitor:
             return
         seen: dict[FaultKind, tuple[str, int]] = {}
         tau = p.tensions
-        worst = int(np.argmax(tau))
+        worst = int(tau.argmax())
         for kind, limit in ((FaultKind.BREAKING_LOAD, lim.breaking_load),
                             (FaultKind.SENSOR_RANGE, lim.sensor_max)):  # fmt: skip
             if tau[worst] > limit:
@@ -217,13 +217,15 @@ class Monitor:
         p, lim = self.physics, self.limits
         q, v = p.platform_state  # views: no copy on the hot path
         x0, y0, z0, w, x, y, z = q.tolist()
-        box = zip(lim.frame_min, (x0, y0, z0), lim.frame_max, strict=True)
-        if any(c < lo or c > hi for lo, c, hi in box):
+        (x_lo, y_lo, z_lo), (x_hi, y_hi, z_hi) = lim.frame_min, lim.frame_max
+        # comparisons spelled out: no generator on the hot path (a check runs at every chunk)
+        if x0 < x_lo or x0 > x_hi or y0 < y_lo or y0 > y_hi or z0 < z_lo or z0 > z_hi:
             pos = [round(c, 3) for c in (x0, y0, z0)]
             seen[FaultKind.OUTSIDE_FRAME] = (f"origin at {pos} m", 0)
         # the lowest corner: the third row of R against the half sizes, each at its worst sign
-        row_z = (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y))
-        low = z0 - sum(h * abs(r) for h, r in zip(self._half, row_z, strict=True))
+        hx, hy, hz = self._half
+        reach = hx * abs(2 * (x * z - w * y)) + hy * abs(2 * (y * z + w * x))
+        low = z0 - (reach + hz * abs(1 - 2 * (x * x + y * y)))
         if low <= lim.floor_z:
             seen[FaultKind.ON_FLOOR] = (f"lowest corner at z = {low:.4f} m", 0)
         vx, vy, vz, wx, wy, wz = v.tolist()
@@ -237,7 +239,7 @@ class Monitor:
 
     def _constraint(self, taut_cables: np.ndarray, seen: dict) -> None:
         lim, t = self.limits, self.physics.time
-        taut = int(np.count_nonzero(taut_cables))
+        taut = len(taut_cables.nonzero()[0])
         if taut >= lim.min_taut:
             self._slack_since = math.nan
             return
@@ -252,7 +254,7 @@ class Monitor:
     def _mujoco(self, seen: dict) -> None:
         d = self.physics.data
         counts = d.warning.number[self._other]
-        new = np.flatnonzero(counts > self._warnings)
+        new = (counts > self._warnings).nonzero()[0]
         self._warnings = counts
         if new.size:
             names = [mujoco.mjtWarning(_OTHER_WARNINGS[i]).name for i in new]

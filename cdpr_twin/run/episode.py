@@ -1,0 +1,153 @@
+"""One run's control loop, one tick at a time: the only place that says what a tick does.
+
+An :class:`Episode` owns a prepared run (:class:`~cdpr_twin.run.runner.RunSetup`). Its
+:meth:`~Episode.reset` puts the robot at its start and records tick 0; each
+:meth:`~Episode.step` is one control tick::
+
+    command = controller.command(...)     # or the caller's: a policy, a calibration's tour
+    physics.advance(period, rates)        # events and the monitor act between physics steps
+    m = sensors.read(command)             # encoders, tensions, the tag
+    estimates = setup.estimate(m)         # every estimator, inputs first
+    tick = TickRecord(...)                # what happened, the truth beside it
+    for sink in sinks: sink.add(tick)     # time series, Rerun, metrics, summary
+
+The runner (:func:`cdpr_twin.run.runner.run`), the Gymnasium environment, campaign workers
+(through the runner) and the calibration's readings drive this object; sinks only consume the
+:class:`~cdpr_twin.types.TickRecord` it returns.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Protocol
+
+from cdpr_twin.run.interrupts import shielded
+from cdpr_twin.run.metrics import deviations
+from cdpr_twin.types import Command, Measurement, PoseEstimate, TickRecord
+
+
+class TickSink(Protocol):
+    """Something that records each tick (it reads the record, changes nothing of the run)."""
+
+    def add(self, tick: TickRecord) -> None:
+        """Record one tick."""
+        ...
+
+
+class Episode:
+    """A run of a prepared scenario, one control tick per :meth:`step`.
+
+    Args:
+        setup: the prepared run (:class:`~cdpr_twin.run.runner.RunSetup`).
+        sinks: where each tick goes, in this order (a stop waits until every one has it).
+        true_tag_view: also keep the true tag pose in the camera frame in each record.
+    """
+
+    def __init__(self, setup, sinks: Sequence[TickSink] = (), true_tag_view: bool = False):
+        self.setup, self.sinks, self.true_tag_view = setup, tuple(sinks), true_tag_view
+        self.period = setup.scenario.model.control_period
+        self.ticks = 0
+        """Control ticks stepped since :meth:`reset` (tick 0, the start, not counted)."""
+        self.last: TickRecord | None = None
+        """The last tick recorded, or ``None`` before :meth:`reset`."""
+
+    def reset(self) -> TickRecord:
+        """Put the robot at its start, read and estimate there: tick 0 (no command yet).
+
+        The true platform settles at the start pose moved by this run's homing offset; the
+        encoders are homed, and the controller and estimators reset, at the nominal start pose
+        (:func:`start`). Events due at t = 0 act before the first read.
+        """
+        setup = self.setup
+        start(setup)
+        self.ticks = 0
+        setup.events.fire(0.5 * setup.physics.timestep)
+        m = setup.sensors.read(None)
+        return self._record(m, setup.estimate(m), None)
+
+    def step(self, command: Command | None = None) -> TickRecord:
+        """One control tick: command, actuate and simulate, sense, estimate, record.
+
+        Args:
+            command: the winch command for this tick; ``None``: the scenario's controller
+                decides it from the last tick's in-loop estimate and measurement.
+
+        Returns:
+            The tick's record (also given to every sink).
+
+        Raises:
+            ValueError: the command's rates are refused by the winches (the state unchanged).
+            SimulationError: the simulation diverged.
+        """
+        setup, physics, last = self.setup, self.setup.physics, self.last
+        if command is None:
+            in_loop = last.estimates[setup.scenario.estimators.in_loop]
+            command = setup.controller.command(
+                self.ticks * self.period, self.period, in_loop, last.measurement
+            )
+        # the winches run for one period; events and the monitor act between physics steps
+        physics.advance(self.period, command.cable_rates)
+        self.ticks += 1
+        # what is due at the tick's end acts before its read (a hook fires before a chunk)
+        setup.events.fire(physics.time + 0.5 * physics.timestep)
+        m = setup.sensors.read(command)
+        return self._record(m, setup.estimate(m), command)
+
+    def _record(
+        self, m: Measurement, estimates: dict[str, PoseEstimate], command: Command | None
+    ) -> TickRecord:
+        """What happened during the tick, beside the truth; given to every sink."""
+        setup, physics = self.setup, self.setup.physics
+        plan = setup.controller.planned_pose(m.time)  # (a plugin's code: outside the shield)
+        events = tuple(setup.events.take())
+        faults = ()
+        if setup.monitor is not None:
+            # its last look, at the state the tick's last physics chunk left (after the read:
+            # a MuJoCo warning the camera's rendering raised belongs to this tick too)
+            setup.monitor.check()
+            faults = tuple(setup.monitor.take())
+        stop = None
+        if faults and setup.scenario.monitor.on_fault == "stop":
+            stop = faults[0].status
+        T_true = physics.T_base_platform
+        tick = TickRecord(
+            time=m.time,
+            measurement=m,
+            estimates=estimates,
+            command=command,
+            plan=plan,
+            T_base_platform=T_true,
+            tensions=physics.tensions,
+            T_cam_tag=physics.T_cam_tag if self.true_tag_view else None,
+            deviations=deviations(estimates, T_true),
+            events=events,
+            faults=faults,
+            stop=stop,
+        )
+        self.last = tick
+        if self.sinks:
+            # a stop waits until the tick is in every sink (metrics, files, summary)
+            with shielded(escape=True):
+                for sink in self.sinks:
+                    sink.add(tick)
+        return tick
+
+
+def start(setup) -> None:
+    """Put the robot at its start and everything that believes in it at the nominal start.
+
+    The true platform settles at ``setup.true_start`` (the start pose moved by the homing
+    offset); the encoders are homed, and the controller and estimators reset, at the
+    scenario's nominal start pose.
+
+    Args:
+        setup: the prepared run (:class:`~cdpr_twin.run.runner.RunSetup`).
+    """
+    s = setup.scenario
+    setup.physics.reset(s.start_pose if setup.true_start is None else setup.true_start)
+    setup.sensors.home(s.start_pose)
+    setup.controller.reset(s.start_pose)
+    for est in setup.estimators.values():
+        est.reset(s.start_pose, 0.0)
+    if setup.monitor is not None:
+        setup.monitor.reset()
