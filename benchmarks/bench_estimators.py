@@ -88,12 +88,11 @@ def solve_scipy_kernel(
         n2 = w * w + qx * qx + qy * qy + qz * qz
         s = 1.0 / math.sqrt(n2)  # matrix_from_quat_wxyz normalises too
         w, qx, qy, qz = w * s, qx * s, qy * s, qz * s
-        pose = (
-            1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy - w * qz), 2.0 * (qx * qz + w * qy),
-            2.0 * (qx * qy + w * qz), 1.0 - 2.0 * (qx * qx + qz * qz), 2.0 * (qy * qz - w * qx),
-            2.0 * (qx * qz - w * qy), 2.0 * (qy * qz + w * qx), 1.0 - 2.0 * (qx * qx + qy * qy),
-            tx, ty, tz,
-        )  # fmt: skip
+        # the rotation's rows, then the translation: the kernel's flat 3 × 4 pose
+        r0 = (1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy - w * qz), 2.0 * (qx * qz + w * qy))
+        r1 = (2.0 * (qx * qy + w * qz), 1.0 - 2.0 * (qx * qx + qz * qz), 2.0 * (qy * qz - w * qx))
+        r2 = (2.0 * (qx * qz - w * qy), 2.0 * (qy * qz + w * qx), 1.0 - 2.0 * (qx * qx + qy * qy))
+        pose = (*r0, *r1, *r2, tx, ty, tz)
         lengths, _ = _kernel(cables, pulley, pose)
         return np.array([a - b for a, b in zip(lengths, goal, strict=True)] + [n2 - 1.0])
 
@@ -328,8 +327,9 @@ def bench_solve(session) -> None:
 
     def problem() -> Problem:  # a fresh one: no sparsity pattern or column groups kept
         noise = noise_of(rec, 4)
-        return Problem(nominal.geometry, nominal.T_base_tag, rec.obs, session.priors, noise,
-                       rec.detector)  # fmt: skip
+        return Problem(
+            nominal.geometry, nominal.T_base_tag, rec.obs, session.priors, noise, rec.detector
+        )
 
     t0 = time.perf_counter()
     now, _ = solver.solve_weighted(problem())

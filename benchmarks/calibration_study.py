@@ -91,8 +91,9 @@ def one(
     )
     p1, exact, refused = {}, {}, None
     # the homing exactly at the start pose: what the model alone misses p1 by
-    at_start = replace(s.realism, homing=replace(s.realism.homing, position_std=0.0,
-                                                 rotation_std=0.0))  # fmt: skip
+    at_start = replace(
+        s.realism, homing=replace(s.realism.homing, position_std=0.0, rotation_std=0.0)
+    )
     holds = holds_p1(s, robot)
     models = [("nominal", None), ("calibrated", robot)]
     if not holds["calibrated"]:  # planned anyway, the waypoint check's floor lowered to 1 N

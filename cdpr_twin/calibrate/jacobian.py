@@ -116,8 +116,10 @@ class PartJacobian:
             [_where(self.pattern, cols, part[0]) for cols in part_groups]
             for part, part_groups in zip(parts, self.groups, strict=True)
         ]
-        self._given = [[_where(self.pattern, [c], part[0]) for c in cols]
-                       for part, cols in zip(parts, given, strict=True)]  # fmt: skip
+        self._given = [
+            [_where(self.pattern, [c], part[0]) for c in cols]
+            for part, cols in zip(parts, given, strict=True)
+        ]
 
     @property
     def evaluations(self) -> int:

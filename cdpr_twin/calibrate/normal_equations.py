@@ -50,10 +50,16 @@ class Solution:
 
 
 def levenberg_marquardt(
-    fun: Callable[[np.ndarray], np.ndarray], jac: Callable[[np.ndarray], tuple[csc_matrix, int]],
-    x0: np.ndarray, max_iterations: int = 100, ftol: float = 1e-10, xtol: float = 1e-10,
-    lam0: float = 1e-3, shrink: float = 1.0 / 3.0, n_shared: int | None = None,
-) -> Solution:  # fmt: skip
+    fun: Callable[[np.ndarray], np.ndarray],
+    jac: Callable[[np.ndarray], tuple[csc_matrix, int]],
+    x0: np.ndarray,
+    max_iterations: int = 100,
+    ftol: float = 1e-10,
+    xtol: float = 1e-10,
+    lam0: float = 1e-3,
+    shrink: float = 1.0 / 3.0,
+    n_shared: int | None = None,
+) -> Solution:
     """Minimise ½‖fun(x)‖² from ``x0``.
 
     Args:

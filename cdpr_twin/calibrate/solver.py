@@ -150,9 +150,12 @@ def solve(problem: Problem, max_iterations: int = 100, rank_tol: float = 1e-6) -
 
 
 def solve_weighted(
-    problem: Problem, rounds: int = 3, tol: float = 0.05, max_iterations: int = 100,
+    problem: Problem,
+    rounds: int = 3,
+    tol: float = 0.05,
+    max_iterations: int = 100,
     rank_tol: float = 1e-6,
-) -> tuple[Calibration, Weighting]:  # fmt: skip
+) -> tuple[Calibration, Weighting]:
     """Solve, estimate each residual group's noise from its residuals, solve again.
 
     Variance components (:mod:`cdpr_twin.calibrate.variance`): after each solve every

@@ -60,8 +60,11 @@ def _build(args: argparse.Namespace) -> int:
         return 2
     except OSError as exc:  # the directory cannot be reached or created
         where = args.out or Path(args.description).parent
-        print(f"cdpr-twin: error: --out {where}: cannot create it: {exc.strerror or exc}; give "
-              "another directory", file=sys.stderr)  # fmt: skip
+        print(
+            f"cdpr-twin: error: --out {where}: cannot create it: {exc.strerror or exc}; give "
+            "another directory",
+            file=sys.stderr,
+        )
         return 2
     except OutputError as exc:
         print(

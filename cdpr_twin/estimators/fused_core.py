@@ -115,9 +115,15 @@ def moving(step: np.ndarray) -> bool:
 
 @jit
 def transition(
-    T: np.ndarray, step: np.ndarray, rates_dt: np.ndarray, hanging: np.ndarray,
-    cables: np.ndarray, max_condition: float, blocks: np.ndarray, n: int,
-) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    T: np.ndarray,
+    step: np.ndarray,
+    rates_dt: np.ndarray,
+    hanging: np.ndarray,
+    cables: np.ndarray,
+    max_condition: float,
+    blocks: np.ndarray,
+    n: int,
+) -> tuple[np.ndarray, np.ndarray]:
     """The predicted pose T exp(ξΔt) (4, 4) and the transition's pose rows F (6, n).
 
     F's pose block is Ad(exp(−ξΔt)); while the hanging cables' Jacobian A is well conditioned
@@ -157,9 +163,16 @@ def transition(
 
 @jit
 def predict(
-    T: np.ndarray, P: np.ndarray, step: np.ndarray, rates_dt: np.ndarray, hanging: np.ndarray,
-    lag_var: np.ndarray, cables: np.ndarray, max_condition: float, blocks: np.ndarray,
-) -> np.ndarray:  # fmt: skip
+    T: np.ndarray,
+    P: np.ndarray,
+    step: np.ndarray,
+    rates_dt: np.ndarray,
+    hanging: np.ndarray,
+    lag_var: np.ndarray,
+    cables: np.ndarray,
+    max_condition: float,
+    blocks: np.ndarray,
+) -> np.ndarray:
     """Propagate pose and covariance over one step: P ← F P Fᵀ + diag(lag_var), in place.
 
     Args:
@@ -192,9 +205,13 @@ def predict(
 
 @jit
 def cable_rows(
-    T: np.ndarray, T0: np.ndarray, moved: np.ndarray, cables: np.ndarray, blocks: np.ndarray,
+    T: np.ndarray,
+    T0: np.ndarray,
+    moved: np.ndarray,
+    cables: np.ndarray,
+    blocks: np.ndarray,
     n: int,
-) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+) -> tuple[np.ndarray, np.ndarray]:
     """The cable readings' H (m, n) and model motions L(T) − L(T₀) (m,) [m].
 
     ∂/∂δ: the rows at T; ∂/∂δ₀: minus those at T₀; ∂/∂ρ_i: −Δl_i; ∂/∂a_i: R₀u₀ − Ru (F_b);
@@ -220,10 +237,18 @@ def cable_rows(
 
 @jit
 def update_cables(
-    T: np.ndarray, T0: np.ndarray, P: np.ndarray, readings: np.ndarray, rho: np.ndarray,
-    var: np.ndarray, taut: np.ndarray, cables: np.ndarray, half_quantum: float, gate: float,
+    T: np.ndarray,
+    T0: np.ndarray,
+    P: np.ndarray,
+    readings: np.ndarray,
+    rho: np.ndarray,
+    var: np.ndarray,
+    taut: np.ndarray,
+    cables: np.ndarray,
+    half_quantum: float,
+    gate: float,
     blocks: np.ndarray,
-) -> tuple[int, bool, np.ndarray]:  # fmt: skip
+) -> tuple[int, bool, np.ndarray]:
     """Fuse the taut cables' readings since the reference (``fused_models``' cable model).
 
     y_i = c_i − c_i(t₀) (+ q/2 once the count moved) against h_i = L_i(T) − L_i(T₀) − ρ_i Δl_i;
@@ -274,9 +299,15 @@ def update_cables(
 
 @jit
 def anchor_tag(
-    T: np.ndarray, P: np.ndarray, z: np.ndarray, lag: np.ndarray, R: np.ndarray,
-    calib: np.ndarray, T_platform_cam: np.ndarray, blocks: np.ndarray,
-) -> np.ndarray:  # fmt: skip
+    T: np.ndarray,
+    P: np.ndarray,
+    z: np.ndarray,
+    lag: np.ndarray,
+    R: np.ndarray,
+    calib: np.ndarray,
+    T_platform_cam: np.ndarray,
+    blocks: np.ndarray,
+) -> np.ndarray:
     """Put the tag in F_b from the first detection, ᵇT_o = T exp(−ξd) ᵖT_c z: (4, 4).
 
     Its error δ_o = J x − n (J: the pose's, the mount's and the calibration's), so its rows of P
@@ -303,10 +334,18 @@ def anchor_tag(
 
 @jit
 def update_tag(
-    T: np.ndarray, T_tag: np.ndarray, anchored: bool, P: np.ndarray, z: np.ndarray,
-    last_twist: np.ndarray, T_platform_cam: np.ndarray, options: np.ndarray, lens: np.ndarray,
-    gate: float, blocks: np.ndarray,
-) -> tuple[int, np.ndarray, np.ndarray]:  # fmt: skip
+    T: np.ndarray,
+    T_tag: np.ndarray,
+    anchored: bool,
+    P: np.ndarray,
+    z: np.ndarray,
+    last_twist: np.ndarray,
+    T_platform_cam: np.ndarray,
+    options: np.ndarray,
+    lens: np.ndarray,
+    gate: float,
+    blocks: np.ndarray,
+) -> tuple[int, np.ndarray, np.ndarray]:
     """Fuse a tag detection z = ᶜT_o, or anchor the tag with the first one; P in place.
 
     The detection is the tag seen at T_lag = T exp(−ξd) (d the frame's age):
@@ -355,9 +394,13 @@ def update_tag(
 
 @jit
 def inject(
-    T: np.ndarray, T0: np.ndarray, T_tag: np.ndarray, rho: np.ndarray, dx: np.ndarray,
+    T: np.ndarray,
+    T0: np.ndarray,
+    T_tag: np.ndarray,
+    rho: np.ndarray,
+    dx: np.ndarray,
     blocks: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Apply a correction dx (c,): pose, start and tag on the right, drums (if corrected) added."""
     drum0, tag0 = blocks[DRUM], blocks[TAG]
     rho_new = rho.copy()
@@ -389,8 +432,19 @@ def warm_up(cables: np.ndarray, n: int, blocks: np.ndarray) -> None:
     P = np.eye(n) * 1e-6
     hanging = np.ones(m, dtype=bool)
     predict(T, P, np.full(6, 1e-3), np.zeros(m), hanging, np.full(6, 1e-9), cables, 1e12, blocks)
-    update_cables(T, T, P, np.zeros((3, m)), np.zeros(m), np.full(m, 1e-6), hanging, cables,
-                  1e-5, 1e300, blocks)  # fmt: skip
+    update_cables(
+        T,
+        T,
+        P,
+        np.zeros((3, m)),
+        np.zeros(m),
+        np.full(m, 1e-6),
+        hanging,
+        cables,
+        1e-5,
+        1e300,
+        blocks,
+    )
     z = np.eye(4)
     z[:3, 3] = [0.01, 0.02, 0.3]
     options, lens = np.array([0.04, 400.0, 1.0, 0.04, 0.008]), np.zeros(4)

@@ -170,9 +170,13 @@ class ModelEstimator(Estimator):
         """Weights 1/σ_i² of every cable in the ``all_taut`` solve (m,) [1/m²]."""
         o = self.options
         sigma = length_sigma(
-            lengths, tensions, self.geometry.es, o.length_noise_std, o.tension_noise_std,
+            lengths,
+            tensions,
+            self.geometry.es,
+            o.length_noise_std,
+            o.tension_noise_std,
             self.elastic,
-        )  # fmt: skip
+        )
         return 1.0 / sigma**2
 
     def solve_weighted(self, targets, weights, cables: list[int], T0: np.ndarray):

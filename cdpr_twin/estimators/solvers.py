@@ -88,9 +88,17 @@ def _kernel(
 
 
 def exp_terms(
-    vx: float, vy: float, vz: float, wx: float, wy: float, wz: float,
-    th2: float, a: float, b: float, c: float,
-) -> tuple[float, ...]:  # fmt: skip
+    vx: float,
+    vy: float,
+    vz: float,
+    wx: float,
+    wy: float,
+    wz: float,
+    th2: float,
+    a: float,
+    b: float,
+    c: float,
+) -> tuple[float, ...]:
     """exp(d) of a twist d = [v, ω] as 12 floats: its rotation row-major (9), then V·v (3).
 
     dR = I + a[ω]× + b[ω]×², V = I + b[ω]× + c[ω]×², with [ω]×² = ωωᵀ − θ² I and (a, b, c) the
@@ -119,16 +127,19 @@ def _compose_exp(pose: Pose, d: list[float]) -> Pose:
     d00, d01, d02, d10, d11, d12, d20, d21, d22, px, py, pz = terms
     r00, r01, r02, r10, r11, r12, r20, r21, r22, t0, t1, t2 = pose
     return (
-        r00 * d00 + r01 * d10 + r02 * d20, r00 * d01 + r01 * d11 + r02 * d21,
+        r00 * d00 + r01 * d10 + r02 * d20,
+        r00 * d01 + r01 * d11 + r02 * d21,
         r00 * d02 + r01 * d12 + r02 * d22,
-        r10 * d00 + r11 * d10 + r12 * d20, r10 * d01 + r11 * d11 + r12 * d21,
+        r10 * d00 + r11 * d10 + r12 * d20,
+        r10 * d01 + r11 * d11 + r12 * d21,
         r10 * d02 + r11 * d12 + r12 * d22,
-        r20 * d00 + r21 * d10 + r22 * d20, r20 * d01 + r21 * d11 + r22 * d21,
+        r20 * d00 + r21 * d10 + r22 * d20,
+        r20 * d01 + r21 * d11 + r22 * d21,
         r20 * d02 + r21 * d12 + r22 * d22,
         t0 + r00 * px + r01 * py + r02 * pz,
         t1 + r10 * px + r11 * py + r12 * pz,
         t2 + r20 * px + r21 * py + r22 * pz,
-    )  # fmt: skip
+    )
 
 
 def _cable_tuples(

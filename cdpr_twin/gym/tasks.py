@@ -63,8 +63,10 @@ def _check_task(name: str, pose_key: str, pose, **positive: float) -> None:
     except (TypeError, ValueError, OverflowError):
         p = np.full(1, np.nan)
     if p.shape != (6,) or not np.all(np.isfinite(p)) or np.asarray(pose).dtype == bool:
-        raise ValueError(f"{name}: {pose_key} must be 6 finite numbers [x, y, z, rx, ry, rz] "
-                         f"(m, deg), got {pose!r}")  # fmt: skip
+        raise ValueError(
+            f"{name}: {pose_key} must be 6 finite numbers [x, y, z, rx, ry, rz] "
+            f"(m, deg), got {pose!r}"
+        )
     for key, value in positive.items():
         low = "≥ 0" if key == "rotation_weight" else "> 0"
         try:
@@ -97,9 +99,15 @@ class ReachPose:
     needs_camera: ClassVar[bool] = False
 
     def __post_init__(self) -> None:
-        _check_task("reach", "goal", self.goal, position_tolerance=self.position_tolerance,
-                    rotation_tolerance_deg=self.rotation_tolerance_deg,
-                    rotation_weight=self.rotation_weight, horizon=self.horizon)  # fmt: skip
+        _check_task(
+            "reach",
+            "goal",
+            self.goal,
+            position_tolerance=self.position_tolerance,
+            rotation_tolerance_deg=self.rotation_tolerance_deg,
+            rotation_weight=self.rotation_weight,
+            horizon=self.horizon,
+        )
 
     @property
     def goal_pose(self) -> np.ndarray:
@@ -109,8 +117,9 @@ class ReachPose:
     def score(self, truth: Truth) -> Score:
         """Score the true platform pose against the goal."""
         dt, dr = pose_distance(truth.T_base_platform, self.goal_pose)
-        return _score(dt, dr, self.rotation_weight, self.position_tolerance,
-                      self.rotation_tolerance_deg)  # fmt: skip
+        return _score(
+            dt, dr, self.rotation_weight, self.position_tolerance, self.rotation_tolerance_deg
+        )
 
 
 @dataclass(frozen=True)
@@ -135,10 +144,15 @@ class ServoToTag:
     needs_camera: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
-        _check_task("servo", "goal_view", self.goal_view,
-                    position_tolerance=self.position_tolerance,
-                    rotation_tolerance_deg=self.rotation_tolerance_deg,
-                    rotation_weight=self.rotation_weight, horizon=self.horizon)  # fmt: skip
+        _check_task(
+            "servo",
+            "goal_view",
+            self.goal_view,
+            position_tolerance=self.position_tolerance,
+            rotation_tolerance_deg=self.rotation_tolerance_deg,
+            rotation_weight=self.rotation_weight,
+            horizon=self.horizon,
+        )
 
     @property
     def goal_T_cam_tag(self) -> np.ndarray:
@@ -150,8 +164,9 @@ class ServoToTag:
         if truth.T_cam_tag is None:
             raise ValueError("servo: the robot has no camera or no tag; use the reach task")
         dt, dr = pose_distance(truth.T_cam_tag, self.goal_T_cam_tag)
-        return _score(dt, dr, self.rotation_weight, self.position_tolerance,
-                      self.rotation_tolerance_deg)  # fmt: skip
+        return _score(
+            dt, dr, self.rotation_weight, self.position_tolerance, self.rotation_tolerance_deg
+        )
 
 
 def _score(dt: float, dr: float, weight: float, tol: float, tol_deg: float) -> Score:
@@ -171,8 +186,11 @@ def make_task(task: str | ReachPose | ServoToTag) -> ReachPose | ServoToTag:
             ``score(truth)``, ``horizon`` and ``needs_camera``).
     """
     if not isinstance(task, str):
-        if not (callable(getattr(task, "score", None)) and hasattr(task, "horizon")
-                and hasattr(task, "needs_camera")):  # fmt: skip
+        if not (
+            callable(getattr(task, "score", None))
+            and hasattr(task, "horizon")
+            and hasattr(task, "needs_camera")
+        ):
             raise ValueError(
                 f"task must be {' or '.join(map(repr, TASKS))} or a task object (with score(), "
                 f"horizon and needs_camera), got {task!r}"

@@ -159,8 +159,9 @@ class RerunRecorder:
         corners = np.array(
             [[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])]
         )
-        edges = [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5),
-                 (2, 6), (3, 7)]  # fmt: skip
+        # corner i is at hi in x, y, z where bit 0, 1, 2 of i is set: an edge joins two corners
+        # that differ in one bit (the four edges along x, then along y, then along z)
+        edges = [(i, i ^ bit) for bit in (1, 2, 4) for i in range(8) if not i & bit]
         frame = rr.LineStrips3D([corners[list(e)] for e in edges], colors=[150, 150, 160])
         rec.log("world/frame", frame, static=True)
         exits = rr.Points3D(s.a_base, radii=0.008, colors=[230, 140, 30])

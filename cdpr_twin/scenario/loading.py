@@ -379,9 +379,10 @@ def _scenario(top: OptionReader, source: Path) -> Scenario:
     model, truth = _model(top, source), read_truth(top, source)
     s = top.table_of("sensors", required=False)
     sensors = SensorConfig(
-        s.number("tension_noise_std", 0.24, minimum=0, unit="N"), s.boolean("camera", True),
+        s.number("tension_noise_std", 0.24, minimum=0, unit="N"),
+        s.boolean("camera", True),
         s.boolean("tag_window", False),
-    )  # fmt: skip
+    )
     s.done()
     try:
         check_at_most(
@@ -398,7 +399,20 @@ def _scenario(top: OptionReader, source: Path) -> Scenario:
     realism = read_realism(top)
     top.done()
     scenario = Scenario(
-        name, source, description, duration, seed, start, model, truth, sensors,
-        controller, estimators, events, monitor, loaded, realism,
-    )  # fmt: skip
+        name,
+        source,
+        description,
+        duration,
+        seed,
+        start,
+        model,
+        truth,
+        sensors,
+        controller,
+        estimators,
+        events,
+        monitor,
+        loaded,
+        realism,
+    )
     return scenario.with_overrides()

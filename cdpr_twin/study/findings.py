@@ -30,9 +30,16 @@ from cdpr_twin.study.verdicts import (
 )
 
 __all__ = [
-    "AGREES", "DISAGREES", "FINDINGS", "MIN_ACCURACY_RATIO", "NOT_APPLICABLE", "Finding", "Rule",
-    "evaluate", "verdict",
-]  # fmt: skip
+    "AGREES",
+    "DISAGREES",
+    "FINDINGS",
+    "MIN_ACCURACY_RATIO",
+    "NOT_APPLICABLE",
+    "Finding",
+    "Rule",
+    "evaluate",
+    "verdict",
+]
 
 
 def open_loop_miss(rep: dict) -> Finding | None:

@@ -109,10 +109,12 @@ def pbvs_goal(rep: dict) -> Finding | None:
     main_goal = rep.get("pbvs_goal", "file")
     rows = {main_goal: sp["all"], **goals}
     ratios = {
-        g: (ol["mean_translation_m"] / v["mean_translation_m"],
-            ol["mean_rotation_deg"] / v["mean_rotation_deg"])
+        g: (
+            ol["mean_translation_m"] / v["mean_translation_m"],
+            ol["mean_rotation_deg"] / v["mean_rotation_deg"],
+        )
         for g, v in rows.items()
-    }  # fmt: skip
+    }
     best = max(ratios, key=lambda g: min(ratios[g]))
     return Finding(
         finding="the PBVS goal the paper's procedure implies (nominal model vs taught at p1)",
