@@ -58,6 +58,7 @@ from scipy.optimize import least_squares
 
 from cdpr_twin.estimators.base import Estimator, PoseEstimate
 from cdpr_twin.estimators.model import ModelEstimator, _cable_tuples, _kernel
+from cdpr_twin.estimators.solvers import PoseSolution
 from cdpr_twin.math.geometry import CdprGeometry
 from cdpr_twin.math.kinematics import jacobian
 from cdpr_twin.math.se3 import pose_distance, pose_from_vector, quat_wxyz_from_matrix
@@ -80,7 +81,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def solve_scipy_kernel(
     cables: list[tuple[float, ...]], pulley: bool, goal: list[float], T0: np.ndarray
-) -> tuple[np.ndarray, float, int]:
+) -> PoseSolution:
     """``model.solve_scipy``'s formulation and tolerances, residuals from ``model._kernel``."""
 
     def residuals(x: np.ndarray) -> np.ndarray:
@@ -109,7 +110,7 @@ def solve_scipy_kernel(
             [0.0, 0.0, 0.0, 1.0],
         ]
     )
-    return T, float(np.max(np.abs(sol.fun[:6]))), int(sol.nfev)
+    return PoseSolution(T, float(np.max(np.abs(sol.fun[:6]))), int(sol.nfev))
 
 
 def make_kernel_estimator(name: str, geometry: CdprGeometry) -> ModelEstimator:

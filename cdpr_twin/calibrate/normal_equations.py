@@ -149,8 +149,8 @@ def shared_covariance(J: csc_matrix, n_shared: int, s2: float) -> np.ndarray:
     N = (J.T.tocsr() @ J).toarray()
     blocks = arrow(N, n_shared)
     parts = None if blocks is None else inverse_parts(blocks)
-    if parts is not None and parts[0] is not None:
-        return s2 * parts[0]
+    if parts is not None and parts.S_inv is not None:
+        return s2 * parts.S_inv
     E = np.zeros((N.shape[0], n_shared))
     E[np.arange(n_shared), np.arange(n_shared)] = 1.0
     try:

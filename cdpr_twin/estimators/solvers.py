@@ -15,6 +15,7 @@ Two backends solve the same square system lengths(T) = targets and agree to roun
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -35,6 +36,45 @@ N_USED = 6
 
 Pose = tuple[float, ...]
 """A pose as 12 floats: R row-major (9), then t (3)."""
+
+
+@dataclass(frozen=True, eq=False)
+class PoseSolution:
+    """A platform pose solved from six cable lengths.
+
+    Attributes:
+        T: (4, 4) the pose.
+        residual: the largest |lengths(T) − targets| [m].
+        iterations: Newton steps taken (SciPy: residual evaluations).
+    """
+
+    T: np.ndarray
+    residual: float
+    iterations: int
+
+
+@dataclass(frozen=True, eq=False)
+class WeightedSolution:
+    """A platform pose fitted by weighted least squares to any number (≥ 6) of cable lengths.
+
+    Attributes:
+        T: (4, 4) the pose.
+        residuals: (k,) lengths(T) − targets [m].
+        iterations: Gauss-Newton steps taken (SciPy: residual evaluations).
+        converged: whether the solver met its own stopping test.
+    """
+
+    T: np.ndarray
+    residuals: np.ndarray
+    iterations: int
+    converged: bool
+
+    @property
+    def largest_residual(self) -> float:
+        """Max |residuals| [m]."""
+        return float(np.max(np.abs(self.residuals)))
+
+
 _POSE_IDX = (0, 1, 2, 4, 5, 6, 8, 9, 10, 3, 7, 11)  # from the first 3 rows of T, row-major
 
 
@@ -157,7 +197,7 @@ def solve_fast(
     T0: np.ndarray,
     max_iterations: int = 30,
     tol: float = 1e-12,
-) -> tuple[np.ndarray, float, int]:
+) -> PoseSolution:
     """Newton solve of lengths(T) = targets on SE(3) from T0.
 
     Args:
@@ -170,7 +210,7 @@ def solve_fast(
         tol: stop when every residual is below this [m].
 
     Returns:
-        ``(T, residual, iterations)`` with residual = max |lengths(T) − targets| [m].
+        The pose, its largest length residual and the steps taken.
     """
     return _newton(
         _cable_tuples(a_base, b_platform, pulley_radius),
@@ -189,7 +229,7 @@ def _newton(
     T0: np.ndarray,
     max_iterations: int = 30,
     tol: float = 1e-12,
-) -> tuple[np.ndarray, float, int]:
+) -> PoseSolution:
     pose = _pose(T0)
     target = goal.tolist() if isinstance(goal, np.ndarray) else goal
     lengths, rows = _kernel(cables, pulley, pose)
@@ -218,7 +258,7 @@ def _newton(
         else:
             break
         pose, rows, r, cost = pose_new, rows_new, r_new, cost_new
-    return _matrix(pose), max(map(abs, r)), it
+    return PoseSolution(_matrix(pose), max(map(abs, r)), it)
 
 
 def _pose(T: np.ndarray) -> Pose:
@@ -248,7 +288,7 @@ def gauss_newton(
     T0: np.ndarray,
     max_iterations: int = 30,
     tol: float = 1e-11,
-) -> tuple[np.ndarray, np.ndarray, int, bool]:
+) -> WeightedSolution:
     """Weighted least squares min Σ w_i (l_i(T) − goal_i)² on SE(3), from T0.
 
     Gauss-Newton steps T ← T·exp(δ), (AᵀWA) δ = −AᵀW r, halved while the cost grows.
@@ -263,7 +303,8 @@ def gauss_newton(
         tol: converged when the step's largest component is below this [m, rad].
 
     Returns:
-        ``(T, residuals, iterations, converged)``: the pose, (k,) lengths(T) − goal [m].
+        The pose, its (k,) residuals lengths(T) − goal [m], the steps taken and whether the
+        last step fell below ``tol``.
     """
     pose = _pose(T0)
     sw = np.sqrt(np.asarray(weights, dtype=float))
@@ -272,13 +313,13 @@ def gauss_newton(
     r = np.asarray(lengths) - goal
     cost = float(np.sum((sw * r) ** 2))
     if not math.isfinite(cost):  # e.g. an infinite target or weight: no step, not converged
-        return _matrix(pose), r, 0, False
+        return WeightedSolution(_matrix(pose), r, 0, False)
     for it in range(1, max_iterations + 1):
         x = np.linalg.lstsq(np.asarray(rows) * sw[:, None], -sw * r, rcond=None)[0]
         if not math.isfinite(x @ x):  # huge targets with small weights: a finite cost, no step
-            return _matrix(pose), r, it, False
+            return WeightedSolution(_matrix(pose), r, it, False)
         if np.max(np.abs(x)) < tol:
-            return _matrix(pose), r, it, True
+            return WeightedSolution(_matrix(pose), r, it, True)
         step = 1.0
         for _ in range(30):
             pose_new = _compose_exp(pose, (step * x).tolist())
@@ -289,9 +330,9 @@ def gauss_newton(
                 break
             step *= 0.5
         else:  # no decrease along the step: at the minimum to round-off
-            return _matrix(pose), r, it, step * np.max(np.abs(x)) < tol
+            return WeightedSolution(_matrix(pose), r, it, bool(step * np.max(np.abs(x)) < tol))
         pose, rows, r, cost = pose_new, rows_new, r_new, cost_new
-    return _matrix(pose), r, max_iterations, False
+    return WeightedSolution(_matrix(pose), r, max_iterations, False)
 
 
 def solve_scipy(
@@ -301,7 +342,7 @@ def solve_scipy(
     targets: np.ndarray,
     T0: np.ndarray,
     x0: np.ndarray | None = None,
-) -> tuple[np.ndarray, float, int]:
+) -> PoseSolution:
     """The paper's Algorithm 1 with ``scipy.optimize.least_squares`` (7 unknowns, 7 equations).
 
     Arguments and return value as :func:`solve_fast`; ``x0`` optionally gives the initial
@@ -318,4 +359,4 @@ def solve_scipy(
         x0 = np.concatenate([T0[:3, 3], quat_wxyz_from_matrix(T0[:3, :3])])
     sol = least_squares(residuals, x0, method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15)
     T = transform(matrix_from_quat_wxyz(sol.x[3:]), sol.x[:3])
-    return T, float(np.max(np.abs(sol.fun[:N_USED]))), int(sol.nfev)
+    return PoseSolution(T, float(np.max(np.abs(sol.fun[:N_USED]))), int(sol.nfev))
