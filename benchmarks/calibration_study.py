@@ -251,7 +251,7 @@ def main() -> None:
             med[f"exit_{k}tag_known_mm"] = statistics.median(
                 r["tag_known_exit_median_mm"][k] for r in rows
             )
-    from cdpr_twin.files.json_format import finite_or_null
+    from cdpr_twin.files.transaction import finite_or_null
 
     print("medians over robots:", json.dumps({k: round(v, 2) for k, v in med.items()}))
     Path(out).mkdir(parents=True, exist_ok=True)

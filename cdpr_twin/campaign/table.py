@@ -28,8 +28,14 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from cdpr_twin.files.json_format import finite_or_null
-from cdpr_twin.files.transaction import OutputDirError, OutputError, Partial, fsync_dir, writing
+from cdpr_twin.files.transaction import (
+    OutputDirError,
+    OutputError,
+    Partial,
+    finite_or_null,
+    fsync_dir,
+    writing,
+)
 
 PARTS = "parts"
 RESULTS = "results.parquet"
