@@ -19,7 +19,7 @@ Measures, in one run:
     (the paper's ``least_squares`` formulation, numpy residuals), and ``scipy+kernel``, defined
     here: the same ``least_squares`` formulation (unknowns [x y z q1 q2 q3 q4], f1…f6 the length
     residuals, f7 = |q|² − 1, trf, xtol = ftol = gtol = 1e-15) whose residuals are computed by
-    the fast backend's scalar kernel ``cdpr_twin.estimators.model._kernel``. It subclasses the
+    the fast backend's scalar kernel ``cdpr_twin.estimators.model_based._kernel``. It subclasses the
     estimator, so the cable choice (six largest tensions), stretch correction and acceptance test
     are the estimator's own. scipy/scipy+kernel shows what the scalar kernel alone buys;
     scipy+kernel/fast what the Newton method with the analytic Jacobian buys;
@@ -57,7 +57,7 @@ import scipy
 from scipy.optimize import least_squares
 
 from cdpr_twin.estimators.base import Estimator, PoseEstimate
-from cdpr_twin.estimators.model import ModelEstimator, _cable_tuples, _kernel
+from cdpr_twin.estimators.model_based import ModelEstimator, _cable_tuples, _kernel
 from cdpr_twin.estimators.solvers import PoseSolution
 from cdpr_twin.math.geometry import CdprGeometry
 from cdpr_twin.math.kinematics import jacobian

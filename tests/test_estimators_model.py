@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cdpr_twin.estimators.base import FEW_TAUT_CABLES, NON_FINITE_INPUT
-from cdpr_twin.estimators.model import solve_fast, solve_scipy
+from cdpr_twin.estimators.model_based import solve_fast, solve_scipy
 from cdpr_twin.math import kinematics as kin
 from cdpr_twin.math import se3
 from cdpr_twin.math.statics import InfeasibleTensionError, tension_distribution

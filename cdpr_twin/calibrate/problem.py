@@ -56,18 +56,18 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.sparse import coo_matrix, csc_matrix
 
-from cdpr_twin.calibrate.balance import cable_columns, cable_jacobian, wrench_residuals
 from cdpr_twin.calibrate.jacobian import PartJacobian
-from cdpr_twin.calibrate.layout import BLOCKS, Layout
 from cdpr_twin.calibrate.observations import Observations
-from cdpr_twin.calibrate.variance import NoiseModel
-from cdpr_twin.calibrate.views import (
+from cdpr_twin.calibrate.parameter_layout import BLOCKS, Layout
+from cdpr_twin.calibrate.tag_views import (
     exp_stack,
     predicted_tags,
     tag_residuals,
     view_columns,
     view_jacobian,
 )
+from cdpr_twin.calibrate.variance import NoiseModel
+from cdpr_twin.calibrate.wrench_balance import cable_columns, cable_jacobian, wrench_residuals
 from cdpr_twin.math.geometry import CdprGeometry
 from cdpr_twin.math.kinematics import pulley_vectors
 from cdpr_twin.math.se3 import inverse, se3_exp
@@ -288,9 +288,10 @@ class Problem:
 
         Each part reaches fewer parameters than the whole (for
         :class:`~cdpr_twin.calibrate.jacobian.PartJacobian`). The tag views differentiate their
-        shared columns themselves, all at once (:func:`~cdpr_twin.calibrate.views.view_jacobian`),
-        and the wrench balance each cable's own, term by term
-        (:func:`~cdpr_twin.calibrate.balance.cable_jacobian`).
+        shared columns themselves, all at once
+        (:func:`~cdpr_twin.calibrate.tag_views.view_jacobian`), and the wrench balance each
+        cable's own, term by term
+        (:func:`~cdpr_twin.calibrate.wrench_balance.cable_jacobian`).
         """
         c, t, f = self.n_cable_rows, self.n_tag_rows, self.n_force_rows
         views = (view_columns(self.layout) if t else [], lambda x, h: view_jacobian(self, x, h))

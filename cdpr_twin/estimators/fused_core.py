@@ -12,12 +12,12 @@ The functions are compiled on first use and cached on disk (Numba's ``cache=True
 ``__pycache__`` beside this file, or ``NUMBA_CACHE_DIR``): the first process to use them after
 an install compiles them (16–20 s; :func:`warm_up` does it when the filter is built), later ones
 load the machine code (≈ 0.2 s). The algebra is written as loops
-(:mod:`~cdpr_twin.estimators.fused_kernels`' ``mm``, ``inv``, …) rather than NumPy's ``@`` and
+(:mod:`~cdpr_twin.estimators.compiled_kernels`' ``mm``, ``inv``, …) rather than NumPy's ``@`` and
 ``np.linalg``: as fast at these sizes (84 against 94 µs an update), with no BLAS threads, and
 the same numbers whichever BLAS NumPy was built with (it did not shorten the compilation,
 measured 21 s either way). They release the GIL, so a camera's worker thread keeps running
 beside them. The building blocks (SE(3) maps, the pulley
-kernel, a detection's noise) are in :mod:`cdpr_twin.estimators.fused_kernels`.
+kernel, a detection's noise) are in :mod:`cdpr_twin.estimators.compiled_kernels`.
 
 The layout (:class:`cdpr_twin.estimators.fused_models.Layout`) comes as ``blocks``, 7 ints
 indexed by the constants below: the number of leading corrected states, then the first index of
@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdpr_twin.estimators.fused_kernels import (
+from cdpr_twin.estimators.compiled_kernels import (
     add_to,
     adjoint,
     base_direction,
@@ -182,7 +182,7 @@ def predict(
         rates_dt: (m,) commanded winch rates × Δt [m].
         hanging: (m,) bool, the cables the platform hangs on.
         lag_var: (6,) process noise added to the pose's diagonal [m², rad²].
-        cables: (m, 7) :func:`~cdpr_twin.estimators.fused_kernels.kernel`'s cables.
+        cables: (m, 7) :func:`~cdpr_twin.estimators.compiled_kernels.kernel`'s cables.
         max_condition: A's largest condition number for the drum and geometry columns.
         blocks: (7,) the layout.
 
@@ -263,7 +263,7 @@ def update_cables(
         rho: (m,) drum scale errors.
         var: (m,) reading variances [m²].
         taut: (m,) bool, the cables whose readings may be used.
-        cables: (m, 7) :func:`~cdpr_twin.estimators.fused_kernels.kernel`'s cables.
+        cables: (m, 7) :func:`~cdpr_twin.estimators.compiled_kernels.kernel`'s cables.
         half_quantum: half an encoder count [m].
         gate: the χ²(1) gate.
         blocks: (7,) the layout.

@@ -5,8 +5,8 @@ A description holds every number of one cable robot in SI units, each key naming
 pulleys, platform anchor points, the platform's mass, inertia and box, the cable material, the
 winches, the camera, the tag, the monitor's limits and the viewer's scene. The schema is strict:
 an unknown, missing or badly typed key is a one-line :class:`RobotError` naming the file and the
-field. :mod:`cdpr_twin.sim.generate` turns a :class:`Robot` into MJCF through ``mujoco.MjSpec``;
-this module is numpy + tomllib only.
+field. :mod:`cdpr_twin.sim.mjcf_from_robot` turns a :class:`Robot` into MJCF through
+``mujoco.MjSpec``; this module is numpy + tomllib only.
 """
 
 from __future__ import annotations

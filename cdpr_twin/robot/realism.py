@@ -209,8 +209,9 @@ class WinchRealism:
 class TensionRealism:
     """Tension-sensor imperfections beyond the per-reading noise ``[sensors] tension_noise_std``.
 
-    Sensor i reads ``(1 + g_i)·τ_i + b_i + n`` (:class:`cdpr_twin.sim.tension.TensionSensors`):
-    b_i and g_i are fixed per robot (truth seed), n is drawn at each reading (run seed).
+    Sensor i reads ``(1 + g_i)·τ_i + b_i + n``
+    (:class:`cdpr_twin.sim.tension_sensors.TensionSensors`): b_i and g_i are fixed per robot
+    (truth seed), n is drawn at each reading (run seed).
 
     How a datasheet maps onto these fields. A stated *accuracy* (the paper's 0.24 N) is a bound
     on the total error, not a standard deviation: accuracy itself is qualitative (JCGM 200:2012,

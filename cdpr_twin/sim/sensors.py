@@ -20,7 +20,7 @@ from cdpr_twin.sim.encoders import Encoders
 from cdpr_twin.sim.model import ModelError, SimulationError, robot_sensing
 from cdpr_twin.sim.onboard_camera import OnboardCamera
 from cdpr_twin.sim.physics import Physics
-from cdpr_twin.sim.tension import TensionSensors
+from cdpr_twin.sim.tension_sensors import TensionSensors
 from cdpr_twin.types import CameraIntrinsics, Command, Measurement
 
 

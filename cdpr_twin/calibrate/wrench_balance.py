@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdpr_twin.calibrate.layout import Layout
+from cdpr_twin.calibrate.parameter_layout import Layout
 from cdpr_twin.math.kinematics import pulley_vectors
 
 TERMS = (("exit", 3), ("anchor", 3), ("tension_bias", 1), ("tension_gain", 1))
