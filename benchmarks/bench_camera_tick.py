@@ -40,8 +40,9 @@ POSES = {"p0": [0.112, -0.032, 0.301, -12.0, -10.0, 0.0], "p1": [0.284, -0.197, 
 XI = np.array([0.004, -0.002, 0.003, 0.0, 0.0, 0.01])  # slow twist in F_p [m/s, rad/s]
 
 
-def measure(realism: str, pose: str, ticks: int, window: bool = False,
-            pipeline: bool = True) -> dict[str, float]:  # fmt: skip
+def measure(
+    realism: str, pose: str, ticks: int, window: bool = False, pipeline: bool = True
+) -> dict[str, float]:
     """Median ms per part of a camera tick, whole ticks, and one bare render."""
     s = load_scenario(ROOT / "scenarios" / "paper_pbvs.toml").with_realism(realism)
     s = replace(s, sensors=replace(s.sensors, tag_window=window))
@@ -97,8 +98,12 @@ def main() -> None:
     print(f"camera tick vs bare render at {args.pose}, median of {args.ticks} ticks [ms]")
     head = f"{'profile':22s} {'render':>7s} {'b2b':>5s} {'sub':>4s} {'physics':>8s} {'read':>7s}"
     print(f"{head} {'estim.':>7s} {'tick':>7s} {'ratio':>6s} {'(b2b)':>6s} {'tag':>5s}")
-    cases = (("ideal", False, False), ("acrobot", False, False), ("acrobot", False, True),
-             ("acrobot", True, True))  # fmt: skip
+    cases = (
+        ("ideal", False, False),
+        ("acrobot", False, False),
+        ("acrobot", False, True),
+        ("acrobot", True, True),
+    )
     base = {}
     for realism, window, pipeline in cases:
         r = measure(realism, args.pose, args.ticks, window, pipeline)

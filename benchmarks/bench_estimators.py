@@ -19,7 +19,7 @@ Measures, in one run:
     (the paper's ``least_squares`` formulation, numpy residuals), and ``scipy+kernel``, defined
     here: the same ``least_squares`` formulation (unknowns [x y z q1 q2 q3 q4], f1…f6 the length
     residuals, f7 = |q|² − 1, trf, xtol = ftol = gtol = 1e-15) whose residuals are computed by
-    the fast backend's scalar kernel ``cdpr_twin.estimators.model._kernel``. It subclasses the
+    the fast backend's scalar kernel ``cdpr_twin.estimators.model_based._kernel``. It subclasses the
     estimator, so the cable choice (six largest tensions), stretch correction and acceptance test
     are the estimator's own. scipy/scipy+kernel shows what the scalar kernel alone buys;
     scipy+kernel/fast what the Newton method with the analytic Jacobian buys;
@@ -57,7 +57,8 @@ import scipy
 from scipy.optimize import least_squares
 
 from cdpr_twin.estimators.base import Estimator, PoseEstimate
-from cdpr_twin.estimators.model import ModelEstimator, _cable_tuples, _kernel
+from cdpr_twin.estimators.model_based import ModelEstimator, _cable_tuples, _kernel
+from cdpr_twin.estimators.solvers import PoseSolution
 from cdpr_twin.math.geometry import CdprGeometry
 from cdpr_twin.math.kinematics import jacobian
 from cdpr_twin.math.se3 import pose_distance, pose_from_vector, quat_wxyz_from_matrix
@@ -80,7 +81,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def solve_scipy_kernel(
     cables: list[tuple[float, ...]], pulley: bool, goal: list[float], T0: np.ndarray
-) -> tuple[np.ndarray, float, int]:
+) -> PoseSolution:
     """``model.solve_scipy``'s formulation and tolerances, residuals from ``model._kernel``."""
 
     def residuals(x: np.ndarray) -> np.ndarray:
@@ -88,12 +89,11 @@ def solve_scipy_kernel(
         n2 = w * w + qx * qx + qy * qy + qz * qz
         s = 1.0 / math.sqrt(n2)  # matrix_from_quat_wxyz normalises too
         w, qx, qy, qz = w * s, qx * s, qy * s, qz * s
-        pose = (
-            1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy - w * qz), 2.0 * (qx * qz + w * qy),
-            2.0 * (qx * qy + w * qz), 1.0 - 2.0 * (qx * qx + qz * qz), 2.0 * (qy * qz - w * qx),
-            2.0 * (qx * qz - w * qy), 2.0 * (qy * qz + w * qx), 1.0 - 2.0 * (qx * qx + qy * qy),
-            tx, ty, tz,
-        )  # fmt: skip
+        # the rotation's rows, then the translation: the kernel's flat 3 × 4 pose
+        r0 = (1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy - w * qz), 2.0 * (qx * qz + w * qy))
+        r1 = (2.0 * (qx * qy + w * qz), 1.0 - 2.0 * (qx * qx + qz * qz), 2.0 * (qy * qz - w * qx))
+        r2 = (2.0 * (qx * qz - w * qy), 2.0 * (qy * qz + w * qx), 1.0 - 2.0 * (qx * qx + qy * qy))
+        pose = (*r0, *r1, *r2, tx, ty, tz)
         lengths, _ = _kernel(cables, pulley, pose)
         return np.array([a - b for a, b in zip(lengths, goal, strict=True)] + [n2 - 1.0])
 
@@ -110,7 +110,7 @@ def solve_scipy_kernel(
             [0.0, 0.0, 0.0, 1.0],
         ]
     )
-    return T, float(np.max(np.abs(sol.fun[:6]))), int(sol.nfev)
+    return PoseSolution(T, float(np.max(np.abs(sol.fun[:6]))), int(sol.nfev))
 
 
 def make_kernel_estimator(name: str, geometry: CdprGeometry) -> ModelEstimator:
@@ -328,8 +328,9 @@ def bench_solve(session) -> None:
 
     def problem() -> Problem:  # a fresh one: no sparsity pattern or column groups kept
         noise = noise_of(rec, 4)
-        return Problem(nominal.geometry, nominal.T_base_tag, rec.obs, session.priors, noise,
-                       rec.detector)  # fmt: skip
+        return Problem(
+            nominal.geometry, nominal.T_base_tag, rec.obs, session.priors, noise, rec.detector
+        )
 
     t0 = time.perf_counter()
     now, _ = solver.solve_weighted(problem())

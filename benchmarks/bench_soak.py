@@ -40,8 +40,11 @@ def soak_scenario(hours: float, tmp: Path) -> Path:
     laps = max(1, round(hours * 3600 / 25.0))
     a = text.index("waypoints = [")
     b = text.index("]\n", text.index("durations = [")) + 2
-    lap = ["[0.284, -0.197, 0.08, 0, 0, 0]", "[0.284, -0.197, 0.25, 0, 0, 0]",
-           "[0.112, -0.032, 0.301, -12, -10, 0]"]  # fmt: skip
+    lap = [
+        "[0.284, -0.197, 0.08, 0, 0, 0]",
+        "[0.284, -0.197, 0.25, 0, 0, 0]",
+        "[0.112, -0.032, 0.301, -12, -10, 0]",
+    ]
     waypoints = ",\n".join(["    " + w for _ in range(laps) for w in lap])
     durations = ", ".join(["10.0, 5.0, 10.0"] * laps)
     text = text[:a] + f"waypoints = [\n{waypoints}\n]\ndurations = [{durations}]\n" + text[b:]

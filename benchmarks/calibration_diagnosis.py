@@ -58,8 +58,10 @@ def at_truth(rec) -> None:
         A = np.c_[np.ones(len(k)), e - e.mean()]
         coef, *_ = np.linalg.lstsq(A, l0 - e, rcond=None)
         rms = np.sqrt(np.mean((l0 - e - A @ coef) ** 2))
-        print(f"  cable {i + 1}: {coef[1] * 100:+.4f} / {tr.drum_scale[i] * 100:+.4f}"
-              f"  ({rms * 1e6:.1f} µm)")  # fmt: skip
+        print(
+            f"  cable {i + 1}: {coef[1] * 100:+.4f} / {tr.drum_scale[i] * 100:+.4f}"
+            f"  ({rms * 1e6:.1f} µm)"
+        )
     seen = np.flatnonzero(o.seen)
     true = true_views(rec)[seen]
     meas = o.T_cam_tag[seen]
@@ -67,9 +69,11 @@ def at_truth(rec) -> None:
     P = true[:, :3, 3] - true[:, :3, 3].mean(axis=0)
     M = meas[:, :3, 3] - meas[:, :3, 3].mean(axis=0)
     spread = [(M[:, j] @ P[:, j]) / (P[:, j] @ P[:, j]) - 1 for j in range(3)]
-    print(f"tag views ({len(seen)}): distance read {ratio.mean() * 100:+.3f} % (std "
-          f"{ratio.std() * 100:.3f} %); spread read x {spread[0] * 100:+.3f} %, "
-          f"y {spread[1] * 100:+.3f} %, z {spread[2] * 100:+.3f} %")  # fmt: skip
+    print(
+        f"tag views ({len(seen)}): distance read {ratio.mean() * 100:+.3f} % (std "
+        f"{ratio.std() * 100:.3f} %); spread read x {spread[0] * 100:+.3f} %, "
+        f"y {spread[1] * 100:+.3f} %, z {spread[2] * 100:+.3f} %"
+    )
 
 
 def solves(session, nominal, frames: int) -> None:
@@ -80,22 +84,31 @@ def solves(session, nominal, frames: int) -> None:
 
     rec, tr = session.recording, session.recording.truth
     exact = true_views(rec)
-    exact_obs = replace(rec.obs, T_cam_tag=np.where(rec.obs.seen[:, None, None], exact,
-                                                    rec.obs.T_cam_tag))  # fmt: skip
+    exact_obs = replace(
+        rec.obs, T_cam_tag=np.where(rec.obs.seen[:, None, None], exact, rec.obs.T_cam_tag)
+    )
     for label, obs, weighted in (
         ("noise model as written", rec.obs, False),
         ("variance components", rec.obs, True),
         ("variance components, exact tag views", exact_obs, True),
     ):
-        p = Problem(nominal.geometry, nominal.T_base_tag, obs, session.priors,
-                    noise_of(rec, frames), rec.detector)  # fmt: skip
+        p = Problem(
+            nominal.geometry,
+            nominal.T_base_tag,
+            obs,
+            session.priors,
+            noise_of(rec, frames),
+            rec.detector,
+        )
         cal = solve_weighted(p)[0] if weighted else solve(p)
         solved = replace(session, calibration=cal, recording=replace(rec, obs=obs))
         c = truth_check(solved, nominal.geometry, nominal.T_base_tag)["calibrated"]
         common = (cal.model.scale.mean() - tr.drum_scale.mean()) * 100
-        print(f"{label:38s} drums' common scale {common:+.3f} %, exit points "
-              f"{c['exit_error_median_mm']:.2f} mm (shape {c['exit_shape_error_median_mm']:.2f} "
-              f"mm), centroid {c['exit_frame_shift_mm']} mm")  # fmt: skip
+        print(
+            f"{label:38s} drums' common scale {common:+.3f} %, exit points "
+            f"{c['exit_error_median_mm']:.2f} mm (shape {c['exit_shape_error_median_mm']:.2f} "
+            f"mm), centroid {c['exit_frame_shift_mm']} mm"
+        )
 
 
 def main() -> None:

@@ -91,8 +91,9 @@ def one(
     )
     p1, exact, refused = {}, {}, None
     # the homing exactly at the start pose: what the model alone misses p1 by
-    at_start = replace(s.realism, homing=replace(s.realism.homing, position_std=0.0,
-                                                 rotation_std=0.0))  # fmt: skip
+    at_start = replace(
+        s.realism, homing=replace(s.realism.homing, position_std=0.0, rotation_std=0.0)
+    )
     holds = holds_p1(s, robot)
     models = [("nominal", None), ("calibrated", robot)]
     if not holds["calibrated"]:  # planned anyway, the waypoint check's floor lowered to 1 N
@@ -250,7 +251,7 @@ def main() -> None:
             med[f"exit_{k}tag_known_mm"] = statistics.median(
                 r["tag_known_exit_median_mm"][k] for r in rows
             )
-    from cdpr_twin.files.json_format import finite_or_null
+    from cdpr_twin.files.transaction import finite_or_null
 
     print("medians over robots:", json.dumps({k: round(v, 2) for k, v in med.items()}))
     Path(out).mkdir(parents=True, exist_ok=True)

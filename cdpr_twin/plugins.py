@@ -57,12 +57,12 @@ ENTRY_POINT_GROUPS = {"estimator": "cdpr_twin.estimators", "controller": "cdpr_t
 BUILTINS: dict[str, tuple[tuple[str, str], ...]] = {
     "estimator": (
         # the paper's six (Est. 1 … Est. 6), in its order, then those beyond it
-        ("control", "cdpr_twin.estimators.control:ControlEstimator"),
-        ("image", "cdpr_twin.estimators.image:ImageEstimator"),
-        ("model_simple", "cdpr_twin.estimators.model:SimpleModelEstimator"),
-        ("model_elastic", "cdpr_twin.estimators.model:ElasticModelEstimator"),
-        ("model_pulley", "cdpr_twin.estimators.model:PulleyModelEstimator"),
-        ("model_elastic_pulley", "cdpr_twin.estimators.model:ElasticPulleyModelEstimator"),
+        ("control", "cdpr_twin.estimators.control_based:ControlEstimator"),
+        ("image", "cdpr_twin.estimators.image_based:ImageEstimator"),
+        ("model_simple", "cdpr_twin.estimators.model_based:SimpleModelEstimator"),
+        ("model_elastic", "cdpr_twin.estimators.model_based:ElasticModelEstimator"),
+        ("model_pulley", "cdpr_twin.estimators.model_based:PulleyModelEstimator"),
+        ("model_elastic_pulley", "cdpr_twin.estimators.model_based:ElasticPulleyModelEstimator"),
         ("fused", "cdpr_twin.estimators.fused:FusedEstimator"),
         ("model_catenary", "cdpr_twin.estimators.catenary:CatenaryModelEstimator"),
     ),

@@ -21,7 +21,7 @@ from cdpr_twin.robot.description import load_robot
 from cdpr_twin.run.runner import run
 from cdpr_twin.scenario.loading import load_scenario
 from cdpr_twin.sim import Twin
-from cdpr_twin.sim.generate import build_files
+from cdpr_twin.sim.mjcf_from_robot import build_files
 
 ROBOTS = Path(__file__).parent / "fixtures" / "robots"
 CASES = {

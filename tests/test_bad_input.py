@@ -164,8 +164,9 @@ def test_the_solvers_stop_on_targets_no_pose_can_reach(pulley, goal):
     cables = _cable_tuples(g.a_base, g.b_platform, radii)
     targets = goal * np.arange(1.0, len(cables) + 1.0)  # no pose has these lengths
     for weight in (1.0, 1e-2):
-        _, _, _, ok = gauss_newton(cables, pulley, targets, np.full(len(cables), weight), T)
-        assert not ok
-    _, residual, _ = solve_fast(g.a_base[:6], g.b_platform[:6], None if radii is None else
-                                radii[:6], targets[:6], T)  # fmt: skip
-    assert not residual <= 1e-6
+        fit = gauss_newton(cables, pulley, targets, np.full(len(cables), weight), T)
+        assert not fit.converged
+    solution = solve_fast(
+        g.a_base[:6], g.b_platform[:6], None if radii is None else radii[:6], targets[:6], T
+    )
+    assert not solution.residual <= 1e-6

@@ -471,7 +471,7 @@ def test_the_jacobian_by_parts_is_the_whole_residuals_derivative(leave_out):
     from scipy.sparse import csc_matrix
 
     from cdpr_twin.calibrate.jacobian import PartJacobian
-    from cdpr_twin.calibrate.layout import BLOCKS
+    from cdpr_twin.calibrate.parameter_layout import BLOCKS
     from cdpr_twin.calibrate.problem import Detector
 
     g, T_tag, obs, *_ = _leveled_frame_robot(n_poses=8)
@@ -534,7 +534,7 @@ def test_no_measurement_sees_the_base_turning_about_the_vertical_through_the_hom
     for part in ("_cables", "_tags"):
         np.testing.assert_allclose(getattr(problem, part)(turned), getattr(problem, part)(mod),
                                    atol=1e-7)  # fmt: skip
-    from cdpr_twin.calibrate.balance import wrench_residuals
+    from cdpr_twin.calibrate.wrench_balance import wrench_residuals
 
     wrench, wrench_turned = (wrench_residuals(problem, m).reshape(-1, 2, 3) for m in (mod, turned))
     np.testing.assert_allclose(np.linalg.norm(wrench_turned, axis=2),

@@ -13,7 +13,7 @@ from cdpr_twin import MODELS_DIR
 from cdpr_twin.math import se3
 from cdpr_twin.plugins import make_estimator
 from cdpr_twin.sim import Twin
-from cdpr_twin.sim.generate import build_files
+from cdpr_twin.sim.mjcf_from_robot import build_files
 
 
 @pytest.fixture(scope="module", params=["pulley", "anchor"])

@@ -13,7 +13,7 @@ import threading
 import weakref
 from pathlib import Path
 
-from cdpr_twin.sim import camera, contexts
+from cdpr_twin.sim import camera, gl_contexts
 from cdpr_twin.sim.model import build_model
 
 MODEL = Path(__file__).resolve().parent.parent / "models" / "acrobot" / "scene.xml"
@@ -28,10 +28,10 @@ def _drop_in_thread(obj_box: list) -> None:
 def _waiting() -> list:
     """What waits for its maker thread (taken out of the queue and put back, in order)."""
     items = []
-    while not contexts._WAITING.empty():
-        items.append(contexts._WAITING.get_nowait())
+    while not gl_contexts._WAITING.empty():
+        items.append(gl_contexts._WAITING.get_nowait())
     for item in items:
-        contexts._WAITING.put(item)
+        gl_contexts._WAITING.put(item)
     return items
 
 
@@ -73,21 +73,21 @@ def test_a_drop_during_the_drain_is_kept_for_its_maker():
     gl = weakref.ref(box[0]._renderer)
     _drop_in_thread(box)  # it waits for this thread
     other_thread = threading.Thread(target=lambda: None)
-    contexts._WAITING.put((other_thread, object()))  # someone else's, put back by the drain
+    gl_contexts._WAITING.put((other_thread, object()))  # someone else's, put back by the drain
     dropped_during = []
 
     class Reentrant:  # dropped while the drain runs: its finalizer queues from inside it
         def close(self) -> None:
             dropped_during.append(True)
-            contexts._free(object(), other_thread)
+            gl_contexts._free(object(), other_thread)
 
-    contexts._WAITING.put((threading.current_thread(), Reentrant()))
+    gl_contexts._WAITING.put((threading.current_thread(), Reentrant()))
     done = threading.Event()
-    t = threading.Thread(target=lambda: (contexts.free_waiting(), done.set()))
-    contexts.free_waiting()  # this thread's two: the renderer and the re-entrant one
+    t = threading.Thread(target=lambda: (gl_contexts.free_waiting(), done.set()))
+    gl_contexts.free_waiting()  # this thread's two: the renderer and the re-entrant one
     assert dropped_during and (gl() is None or gl()._gl_context is None)
     assert sum(maker is other_thread for maker, _ in _waiting()) == 2
     t.start()
     assert done.wait(10.0)  # another thread's drain finishes
-    while not contexts._WAITING.empty():  # leave nothing of this test behind
-        contexts._WAITING.get_nowait()
+    while not gl_contexts._WAITING.empty():  # leave nothing of this test behind
+        gl_contexts._WAITING.get_nowait()

@@ -163,7 +163,7 @@ def test_a_calibrated_description_moved_with_its_tree_still_finds_its_tag(tmp_pa
 
     from cdpr_twin.calibrate.output import calibrated_description
     from cdpr_twin.sim import nominal_robot
-    from cdpr_twin.sim.generate import build_files
+    from cdpr_twin.sim.mjcf_from_robot import build_files
 
     shutil.copytree(MODELS_DIR / "acrobot", tmp_path / "a" / "models" / "acrobot")
     source, out = tmp_path / "a" / "models" / "acrobot" / "robot.toml", tmp_path / "a" / "cal"

@@ -119,8 +119,7 @@ def test_magnitudes_that_break_the_physics_or_the_arithmetic_are_refused(
 
 
 def test_the_relative_std_bound_keeps_negative_draws_beyond_10_sigma():
-    from cdpr_twin.robot.realism import WinchRealism
-    from cdpr_twin.robot.realism_limits import MAX_RELATIVE_STD
+    from cdpr_twin.robot.realism import MAX_RELATIVE_STD, WinchRealism
 
     WinchRealism(drum_radius_error_std=MAX_RELATIVE_STD)
     with pytest.raises(OptionError, match=r"once in 20\.9 robots"):  # P(z < −1/0.6) = 0.0478

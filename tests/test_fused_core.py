@@ -1,6 +1,6 @@
 """The fused filter's compiled arithmetic computes what the reference formulations compute.
 
-:mod:`cdpr_twin.estimators.fused_core` and :mod:`~cdpr_twin.estimators.fused_kernels` redo,
+:mod:`cdpr_twin.estimators.fused_core` and :mod:`~cdpr_twin.estimators.compiled_kernels` redo,
 compiled, the per-update arithmetic whose reference is
 :mod:`cdpr_twin.estimators.fused_models`, :mod:`cdpr_twin.math.se3` and
 :func:`cdpr_twin.math.kinematics.lengths_and_jacobian` (NumPy). Each compiled stage is held here to
@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from conftest import paper_pose
 
+from cdpr_twin.estimators import compiled_kernels as fk
 from cdpr_twin.estimators import fused_core as fc
-from cdpr_twin.estimators import fused_kernels as fk
 from cdpr_twin.estimators import fused_models as fm
 from cdpr_twin.math import se3
 from cdpr_twin.math.kinematics import lengths_and_jacobian

@@ -101,7 +101,7 @@ def test_an_estimator_a_scenarios_plugin_registers_turns_the_camera_on_too(tmp_p
     root = Path(__file__).resolve().parent.parent
     (tmp_path / "reads_the_tag.py").write_text(
         "from cdpr_twin import plugins\n"
-        "from cdpr_twin.estimators.control import ControlEstimator\n\n\n"
+        "from cdpr_twin.estimators.control_based import ControlEstimator\n\n\n"
         "@plugins.register\n"
         "class ReadsTheTag(ControlEstimator):\n"
         '    name = "reads_the_tag"\n'

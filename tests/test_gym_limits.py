@@ -15,8 +15,7 @@ from cdpr_twin.gym.env import FAILURE_REWARD
 from cdpr_twin.gym.tasks import ReachPose, ServoToTag
 from cdpr_twin.math.kinematics import cable_lengths
 from cdpr_twin.math.se3 import so3_exp, transform
-from cdpr_twin.scenario.loading import ScenarioError, load_scenario
-from cdpr_twin.scenario.tables import MonitorConfig
+from cdpr_twin.scenario.loading import MonitorConfig, ScenarioError, load_scenario
 
 WINCH_RATE_LIMIT = 0.5  # m/s: ACROBOT's winches (models/acrobot/robot.toml, rate_limit_m_s)
 

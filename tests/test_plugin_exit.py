@@ -20,7 +20,7 @@ PLUGIN = """
 import sys
 
 from cdpr_twin import plugins
-from cdpr_twin.estimators.control import ControlEstimator
+from cdpr_twin.estimators.control_based import ControlEstimator
 
 {at_import}
 

@@ -17,7 +17,7 @@ TRUST = "a scenario or campaign that names plugins runs their code: run only fil
 
 PLUGIN = """
 from cdpr_twin import plugins
-from cdpr_twin.estimators.control import ControlEstimator
+from cdpr_twin.estimators.control_based import ControlEstimator
 
 
 @plugins.register

@@ -315,7 +315,7 @@ def test_a_plugin_raising_mid_run_is_one_line(traceback, tmp_path, capsys):
 def test_a_directory_that_is_no_studys_keeps_its_own_report(tmp_path, capsys):
     """Before: ``reproduce --out`` on a directory holding someone's ``report.md`` removed it
     within seconds (only an earlier study's files are promised to go)."""
-    from cdpr_twin.study.files import clear_earlier_study
+    from cdpr_twin.study.output_dir import clear_earlier_study
 
     out = tmp_path / "mydocs"
     (out / "runs" / "open_loop_seed1").mkdir(parents=True)

@@ -18,7 +18,7 @@ from cdpr_twin import MODELS_DIR
 from cdpr_twin.cli import main
 from cdpr_twin.robot.description import RobotError, load_robot
 from cdpr_twin.sim import Physics
-from cdpr_twin.sim.generate import build_files, model_texts
+from cdpr_twin.sim.mjcf_from_robot import build_files, model_texts
 
 FIXTURES = Path(__file__).parent / "fixtures"
 HANDWRITTEN = FIXTURES / "acrobot_handwritten" / "scene.xml"

@@ -14,7 +14,7 @@ from conftest import PAPER_POSES
 from cdpr_twin import DEFAULT_SCENE, MODELS_DIR
 from cdpr_twin.math import se3
 from cdpr_twin.sim import Physics, build_model, build_robot
-from cdpr_twin.sim.generate import build_files
+from cdpr_twin.sim.mjcf_from_robot import build_files
 from cdpr_twin.sim.model import swivel_body
 from cdpr_twin.sim.sag import SaggingPhysics
 

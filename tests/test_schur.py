@@ -39,9 +39,9 @@ def test_the_shared_inverse_and_each_rows_leverage_are_the_dense_ones():
     J = _arrow_jacobian(seed=2)
     N = J.T @ J
     N_inv = np.linalg.inv(N)
-    S_inv, X, D_inv = inverse_parts(arrow(N, S))
-    np.testing.assert_allclose(S_inv, N_inv[:S, :S], rtol=1e-9, atol=1e-12)
-    h = leverages(csc_matrix(J), S, (S_inv, X, D_inv))
+    parts = inverse_parts(arrow(N, S))
+    np.testing.assert_allclose(parts.S_inv, N_inv[:S, :S], rtol=1e-9, atol=1e-12)
+    h = leverages(csc_matrix(J), S, parts)
     np.testing.assert_allclose(h, np.einsum("ij,jk,ik->i", J, N_inv, J), rtol=1e-9, atol=1e-12)
     # the leverages sum to the unknowns' count (the trace of the hat matrix)
     assert h.sum() == pytest.approx(S + 6 * K, rel=1e-9)

@@ -8,7 +8,7 @@ import pytest
 from cdpr_twin.robot.realism import RUN_SOURCES
 from cdpr_twin.scenario.loading import ScenarioError, load_scenario
 from cdpr_twin.study.plan import extra_runs, plan
-from cdpr_twin.study.spread import spread
+from cdpr_twin.study.repeatability import spread
 
 ROOT = Path(__file__).resolve().parent.parent
 

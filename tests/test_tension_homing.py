@@ -28,9 +28,8 @@ from cdpr_twin.robot.realism import (
 )
 from cdpr_twin.run.homing_and_teaching import true_start_pose
 from cdpr_twin.run.runner import prepare, run, start
-from cdpr_twin.scenario.loading import ScenarioError, load_scenario
-from cdpr_twin.scenario.tables import MonitorConfig
-from cdpr_twin.sim.tension import TensionSensors
+from cdpr_twin.scenario.loading import MonitorConfig, ScenarioError, load_scenario
+from cdpr_twin.sim.tension_sensors import TensionSensors
 from cdpr_twin.types import Measurement, TagDetection
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -13,7 +13,7 @@ import pytest
 from cdpr_twin import cli
 from cdpr_twin.calibrate.solver import CalibrationError
 from cdpr_twin.robot.description import load_robot
-from cdpr_twin.sim.generate import model_texts
+from cdpr_twin.sim.mjcf_from_robot import model_texts
 
 ROOT = Path(__file__).resolve().parent.parent
 ACROBOT = ROOT / "models" / "acrobot" / "robot.toml"

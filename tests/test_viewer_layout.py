@@ -6,7 +6,7 @@ from pathlib import Path
 
 import rerun as rr
 
-from cdpr_twin.recording.blueprint import robot_label
+from cdpr_twin.recording.rerun import robot_label
 from cdpr_twin.run.runner import run
 from cdpr_twin.scenario.loading import load_scenario
 

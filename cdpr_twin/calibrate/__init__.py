@@ -1,10 +1,12 @@
-"""Self-calibration (issue 11): exit and anchor points, length offsets, drum scales, camera mount.
+"""Self-calibration: exit and anchor points, length offsets, drum scales, camera mount.
 
-``problem`` (the residuals), ``jacobian`` (their sparse finite differences), ``solver``
-(Levenberg–Marquardt on the normal equations, uncertainty, rank; ``solve_weighted``: the noise
-re-estimated by ``variance``), ``excitation`` (which poses), ``acquire`` (recording them in the
-twin), ``session`` (all of it for one scenario), ``output`` (the calibrated robot description
-and the report).
+``problem`` (the residuals: the cable lengths', with ``tag_views`` and ``wrench_balance``
+holding the other kinds and their vectorised derivatives; ``parameter_layout`` places each
+unknown in the parameter vector), ``jacobian`` (their sparse finite differences), ``solver``
+(Levenberg–Marquardt on the normal equations, ``normal_equations`` and ``schur``; uncertainty,
+rank; ``solve_weighted``: the noise re-estimated by ``variance``), ``excitation`` (which
+poses), ``drive`` and ``acquire`` (recording them in the twin), ``session`` (all of it for one
+scenario), ``output`` (the calibrated robot description and the report).
 """
 
 from cdpr_twin.calibrate.problem import BLOCKS, NoiseModel, Observations, Priors, Problem

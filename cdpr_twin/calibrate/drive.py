@@ -145,8 +145,9 @@ def _internal_forces(N: np.ndarray, tau: np.ndarray, aim: float, hi: float) -> t
     # maximise t with tau + N α ≥ t, tau + N α ≤ hi: variables (α, t)
     A = np.block([[-N, np.ones((m, 1))], [N, np.zeros((m, 1))]])
     c = np.r_[np.zeros(n), -1.0]
-    lp = linprog(c, A_ub=A, b_ub=np.r_[tau, hi - tau], bounds=[*bounds, (None, None)],
-                 method="highs")  # fmt: skip
+    lp = linprog(
+        c, A_ub=A, b_ub=np.r_[tau, hi - tau], bounds=[*bounds, (None, None)], method="highs"
+    )
     if lp.status != 0:  # not even the readings' own distribution: hold still
         return np.zeros(m), float(tau.min())
     return N @ lp.x[:n], float(lp.x[n])

@@ -94,18 +94,30 @@ def excitation_poses(
     n_seen = max(1, round(seen_fraction * n))
     tag = np.array([T_base_tag[0, 3], T_base_tag[1, 3], 0.265])
     seen = _draw(
-        geom, n_seen, tag, np.array([0.2, 0.2, 0.185]), max_angle, t_min, seed,
+        geom,
+        n_seen,
+        tag,
+        np.array([0.2, 0.2, 0.185]),
+        max_angle,
+        t_min,
+        seed,
         lambda T: tag_in_view(geom, T_base_tag, intrinsics, tag_size, T, pixel_margin),
-    )  # fmt: skip
+    )
     if len(seen) < n_seen:
         raise ValueError(
             f"only {len(seen)} of {n_seen} excitation poses see the tag and keep the cables "
             "taut; ask for fewer poses, or check the tag and camera in the robot description"
         )
     wide = _draw(
-        geom, n - n_seen, np.array([0.0, 0.0, 0.315]), np.array([0.3, 0.3, 0.235]),
-        max_angle, t_min, seed + 1, lambda T: True,
-    )  # fmt: skip
+        geom,
+        n - n_seen,
+        np.array([0.0, 0.0, 0.315]),
+        np.array([0.3, 0.3, 0.235]),
+        max_angle,
+        t_min,
+        seed + 1,
+        lambda T: True,
+    )
     return tour(seen + wide, start)
 
 

@@ -12,8 +12,8 @@ a Jacobian costs two evaluations per group instead of two per parameter.
   wrench balances see every cable at once. About 3× fewer residual rows evaluated than
   :func:`grouped_jacobian` on ACROBOT's recordings, same values up to rounding. A part may
   give some of its columns itself, vectorised (the tag views over camera, tag and intrinsics
-  at once, :func:`cdpr_twin.calibrate.views.view_jacobian`; the wrench balance one cable's term
-  at a time, :func:`cdpr_twin.calibrate.balance.cable_jacobian`); the groups cover the rest.
+  at once, :func:`cdpr_twin.calibrate.tag_views.view_jacobian`; the wrench balance one cable's term
+  at a time, :func:`cdpr_twin.calibrate.wrench_balance.cable_jacobian`); the groups cover the rest.
 """
 
 from __future__ import annotations
@@ -116,8 +116,10 @@ class PartJacobian:
             [_where(self.pattern, cols, part[0]) for cols in part_groups]
             for part, part_groups in zip(parts, self.groups, strict=True)
         ]
-        self._given = [[_where(self.pattern, [c], part[0]) for c in cols]
-                       for part, cols in zip(parts, given, strict=True)]  # fmt: skip
+        self._given = [
+            [_where(self.pattern, [c], part[0]) for c in cols]
+            for part, cols in zip(parts, given, strict=True)
+        ]
 
     @property
     def evaluations(self) -> int:

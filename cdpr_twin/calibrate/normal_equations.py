@@ -50,10 +50,16 @@ class Solution:
 
 
 def levenberg_marquardt(
-    fun: Callable[[np.ndarray], np.ndarray], jac: Callable[[np.ndarray], tuple[csc_matrix, int]],
-    x0: np.ndarray, max_iterations: int = 100, ftol: float = 1e-10, xtol: float = 1e-10,
-    lam0: float = 1e-3, shrink: float = 1.0 / 3.0, n_shared: int | None = None,
-) -> Solution:  # fmt: skip
+    fun: Callable[[np.ndarray], np.ndarray],
+    jac: Callable[[np.ndarray], tuple[csc_matrix, int]],
+    x0: np.ndarray,
+    max_iterations: int = 100,
+    ftol: float = 1e-10,
+    xtol: float = 1e-10,
+    lam0: float = 1e-3,
+    shrink: float = 1.0 / 3.0,
+    n_shared: int | None = None,
+) -> Solution:
     """Minimise ½‖fun(x)‖² from ``x0``.
 
     Args:
@@ -143,8 +149,8 @@ def shared_covariance(J: csc_matrix, n_shared: int, s2: float) -> np.ndarray:
     N = (J.T.tocsr() @ J).toarray()
     blocks = arrow(N, n_shared)
     parts = None if blocks is None else inverse_parts(blocks)
-    if parts is not None and parts[0] is not None:
-        return s2 * parts[0]
+    if parts is not None and parts.S_inv is not None:
+        return s2 * parts.S_inv
     E = np.zeros((N.shape[0], n_shared))
     E[np.arange(n_shared), np.arange(n_shared)] = 1.0
     try:

@@ -55,6 +55,11 @@ class Observations:
     def subset(self, keep: np.ndarray) -> Observations:
         """The observations at the poses ``keep`` (a (K,) mask or indices) selects."""
         return Observations(
-            self.encoder[keep], self.tensions[keep], self.taut[keep], self.T_cam_tag[keep],
-            self.seen[keep], self.T_guess[keep], self.homed[keep],
-        )  # fmt: skip
+            self.encoder[keep],
+            self.tensions[keep],
+            self.taut[keep],
+            self.T_cam_tag[keep],
+            self.seen[keep],
+            self.T_guess[keep],
+            self.homed[keep],
+        )

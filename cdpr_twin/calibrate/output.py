@@ -173,8 +173,7 @@ def write(
     Raises:
         cdpr_twin.files.transaction.OutputError: a file cannot be written (naming it).
     """
-    from cdpr_twin.files.json_format import json_text
-    from cdpr_twin.files.transaction import fsync_dir, write_partial, writing
+    from cdpr_twin.files.transaction import fsync_dir, json_text, write_partial, writing
     from cdpr_twin.run.interrupts import shielded
 
     with writing(out):

@@ -56,18 +56,18 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.sparse import coo_matrix, csc_matrix
 
-from cdpr_twin.calibrate.balance import cable_columns, cable_jacobian, wrench_residuals
 from cdpr_twin.calibrate.jacobian import PartJacobian
-from cdpr_twin.calibrate.layout import BLOCKS, Layout
 from cdpr_twin.calibrate.observations import Observations
-from cdpr_twin.calibrate.variance import NoiseModel
-from cdpr_twin.calibrate.views import (
+from cdpr_twin.calibrate.parameter_layout import BLOCKS, Layout
+from cdpr_twin.calibrate.tag_views import (
     exp_stack,
     predicted_tags,
     tag_residuals,
     view_columns,
     view_jacobian,
 )
+from cdpr_twin.calibrate.variance import NoiseModel
+from cdpr_twin.calibrate.wrench_balance import cable_columns, cable_jacobian, wrench_residuals
 from cdpr_twin.math.geometry import CdprGeometry
 from cdpr_twin.math.kinematics import pulley_vectors
 from cdpr_twin.math.se3 import inverse, se3_exp
@@ -209,9 +209,11 @@ class Problem:
 
             d = detector  # (no view: an empty (0, 6, 8) stack, which every step carries)
             self.intrinsics_jacobian = np.array(
-                [tag_calibration_jacobian(T, d.tag_size, d.focal_px, d.lens)
-                 for T in obs.T_cam_tag[self.seen]]
-            ).reshape(-1, 6, 8)  # fmt: skip
+                [
+                    tag_calibration_jacobian(T, d.tag_size, d.focal_px, d.lens)
+                    for T in obs.T_cam_tag[self.seen]
+                ]
+            ).reshape(-1, 6, 8)
         self.n_cable_rows, self.n_tag_rows = len(self.rows_k), 6 * len(self.seen)
         self.n_force_rows = 6 * len(self.force_k)
         self.n_data = self.n_cable_rows + self.n_tag_rows + self.n_force_rows
@@ -277,22 +279,26 @@ class Problem:
     def residuals(self, x: np.ndarray) -> np.ndarray:
         """All residuals, unitless: cables, tag poses, forces, priors. Returns (n_rows,)."""
         mod = self.model(x)
-        return np.concatenate([self._cables(mod), self._tags(mod), wrench_residuals(self, mod),
-                               self._priors(x)])  # fmt: skip
+        return np.concatenate(
+            [self._cables(mod), self._tags(mod), wrench_residuals(self, mod), self._priors(x)]
+        )
 
     def parts(self) -> list[tuple]:
         """The residuals in parts, each with its rows: cables, tags, forces, priors.
 
         Each part reaches fewer parameters than the whole (for
         :class:`~cdpr_twin.calibrate.jacobian.PartJacobian`). The tag views differentiate their
-        shared columns themselves, all at once (:func:`~cdpr_twin.calibrate.views.view_jacobian`),
-        and the wrench balance each cable's own, term by term
-        (:func:`~cdpr_twin.calibrate.balance.cable_jacobian`).
+        shared columns themselves, all at once
+        (:func:`~cdpr_twin.calibrate.tag_views.view_jacobian`), and the wrench balance each
+        cable's own, term by term
+        (:func:`~cdpr_twin.calibrate.wrench_balance.cable_jacobian`).
         """
         c, t, f = self.n_cable_rows, self.n_tag_rows, self.n_force_rows
         views = (view_columns(self.layout) if t else [], lambda x, h: view_jacobian(self, x, h))
-        terms = (cable_columns(self.layout) if f else [],
-                 lambda x, h: cable_jacobian(self, self.model(x), h))  # fmt: skip
+        terms = (
+            cable_columns(self.layout) if f else [],
+            lambda x, h: cable_jacobian(self, self.model(x), h),
+        )
         return [
             (slice(0, c), lambda x: self._cables(self.model(x))),
             (slice(c, c + t), lambda x: self._tags(self.model(x)), views),
@@ -327,8 +333,9 @@ class Problem:
         The detector's intrinsics error is included (when estimated).
         """
         T_cam_platform = inverse(mod.T_platform_cam)[None]
-        return predicted_tags(self, T_cam_platform, mod.T_base_tag[None], mod.intrinsics[None],
-                              mod.T_base_platform)[0]  # fmt: skip
+        return predicted_tags(
+            self, T_cam_platform, mod.T_base_tag[None], mod.intrinsics[None], mod.T_base_platform
+        )[0]
 
     def _tags(self, mod: Model) -> np.ndarray:
         return tag_residuals(self, self.predicted_tags(mod)[None])[0]
@@ -345,12 +352,22 @@ class Problem:
 
         for i in range(L.m):  # a cable's length: its pose, its own exit, anchor, offset, scale
             r = np.flatnonzero(self.rows_i == i)
-            see(r, np.array([c for n in ("exit", "anchor", "offset", "scale")
-                             for c in L.columns(n, i)], dtype=int))  # fmt: skip
+            see(
+                r,
+                np.array(
+                    [c for n in ("exit", "anchor", "offset", "scale") for c in L.columns(n, i)],
+                    dtype=int,
+                ),
+            )
             rows.append(np.repeat(r, 6)), cols.append(pose(self.rows_k[r]).ravel())
-        groups = ((self.n_cable_rows, self.seen, ("camera", "tag", "intrinsics")),
-                  (self.n_cable_rows + self.n_tag_rows, self.force_k,
-                   ("exit", "anchor", "tension_bias", "tension_gain")))  # fmt: skip
+        groups = (
+            (self.n_cable_rows, self.seen, ("camera", "tag", "intrinsics")),
+            (
+                self.n_cable_rows + self.n_tag_rows,
+                self.force_k,
+                ("exit", "anchor", "tension_bias", "tension_gain"),
+            ),
+        )
         for at, ks, names in groups:  # a tag view's, a balance's six rows
             r = at + np.arange(6 * len(ks))
             see(r, np.array([c for n in names for c in L.columns(n)], dtype=int))

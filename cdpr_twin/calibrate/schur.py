@@ -58,7 +58,38 @@ def arrow(N: np.ndarray, n_shared: int) -> Arrow | None:
     return Arrow(N[:s, :s], N[s:, :s].reshape(K, 6, s), D)
 
 
-def _eliminate(a: Arrow, damping: np.ndarray) -> tuple | None:
+@dataclass(frozen=True, eq=False)
+class Elimination:
+    """The pose blocks eliminated from a damped arrow matrix.
+
+    Attributes:
+        D_inv: (K, 6, 6) the damped pose blocks' inverses.
+        X: (K, 6, n_s) D_k⁻¹ C_k.
+        factor: the Schur complement's Cholesky factor (``scipy.linalg.cho_factor``), or
+            ``None`` without shared unknowns.
+    """
+
+    D_inv: np.ndarray
+    X: np.ndarray
+    factor: tuple | None
+
+
+@dataclass(frozen=True, eq=False)
+class ArrowInverse:
+    """What N⁻¹ of an arrow matrix is made of (its pose blocks are D⁻¹ + X S⁻¹ Xᵀ).
+
+    Attributes:
+        S_inv: (n_s, n_s) N⁻¹'s shared block, or ``None`` without shared unknowns.
+        X: (K, 6, n_s) D_k⁻¹ C_k.
+        D_inv: (K, 6, 6) the pose blocks' inverses.
+    """
+
+    S_inv: np.ndarray | None
+    X: np.ndarray
+    D_inv: np.ndarray
+
+
+def _eliminate(a: Arrow, damping: np.ndarray) -> Elimination | None:
     """The damped D's blocks' inverses, X_k = D_k⁻¹ C_k and the factorised Schur complement.
 
     None where the damped matrix is not positive definite.
@@ -73,46 +104,41 @@ def _eliminate(a: Arrow, damping: np.ndarray) -> tuple | None:
         factor = cho_factor(S, lower=True, check_finite=False) if s else None
     except LinAlgError:
         return None
-    return D_inv, X, factor
+    return Elimination(D_inv, X, factor)
 
 
 def damped_step(a: Arrow, g: np.ndarray, damping: np.ndarray) -> np.ndarray | None:
     """δ solving (N + diag(damping)) δ = −g; None if that matrix is not positive definite."""
-    parts = _eliminate(a, damping)
-    if parts is None:
+    e = _eliminate(a, damping)
+    if e is None:
         return None
-    D_inv, X, factor = parts
+    D_inv, X = e.D_inv, e.X
     s, K = a.n_shared, len(a.D)
     g_s, g_p = g[:s], g[s:].reshape(K, 6)
     y = np.einsum("kij,kj->ki", D_inv, g_p)  # D⁻¹ g_p
     d_s = np.zeros(0)
     if s:
-        d_s = cho_solve(factor, g_s - np.einsum("kis,ki->s", a.C, y), check_finite=False)
+        d_s = cho_solve(e.factor, g_s - np.einsum("kis,ki->s", a.C, y), check_finite=False)
     d_p = y - np.einsum("kis,s->ki", X, d_s)
     return -np.concatenate([d_s, d_p.ravel()])
 
 
-def inverse_parts(a: Arrow) -> tuple[np.ndarray | None, np.ndarray, np.ndarray] | None:
-    """What N⁻¹ is made of: (S⁻¹, X, D⁻¹).
-
-    S⁻¹ (n_s, n_s) is N⁻¹'s shared block (None without shared unknowns); X = D⁻¹C
-    (K, 6, n_s) and D⁻¹ (K, 6, 6) give the rest (N⁻¹'s pose blocks are D⁻¹ + X S⁻¹ Xᵀ).
-    None if N is not positive definite.
-    """
-    parts = _eliminate(a, np.zeros(a.n_shared + 6 * len(a.D)))
-    if parts is None:
+def inverse_parts(a: Arrow) -> ArrowInverse | None:
+    """What N⁻¹ is made of; None if N is not positive definite."""
+    e = _eliminate(a, np.zeros(a.n_shared + 6 * len(a.D)))
+    if e is None:
         return None
-    D_inv, X, factor = parts
-    S_inv = cho_solve(factor, np.eye(a.n_shared), check_finite=False) if a.n_shared else None
-    return S_inv, X, D_inv
+    n_s = a.n_shared
+    S_inv = cho_solve(e.factor, np.eye(n_s), check_finite=False) if n_s else None
+    return ArrowInverse(S_inv, e.X, e.D_inv)
 
 
-def leverages(J: csc_matrix, n_shared: int, parts: tuple) -> np.ndarray:
+def leverages(J: csc_matrix, n_shared: int, parts: ArrowInverse) -> np.ndarray:
     """Each row's J_j N⁻¹ J_jᵀ, N = JᵀJ, from :func:`inverse_parts`. Returns (n_rows,).
 
     A row with shared part a and pose-k part p: (a − X_kᵀ p)ᵀ S⁻¹ (a − X_kᵀ p) + pᵀ D_k⁻¹ p.
     """
-    S_inv, X, D_inv = parts
+    S_inv, X, D_inv = parts.S_inv, parts.X, parts.D_inv
     J = csc_matrix(J, copy=True)
     J.eliminate_zeros()  # a stored zero must not name another pose
     a = J[:, :n_shared].toarray()

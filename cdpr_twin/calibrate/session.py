@@ -126,9 +126,13 @@ def calibrate(s: Scenario, n_poses: int = 240, frames: int = 4, workers: int = 1
     _, nominal, _ = build_robot(s.model.file, nominal_path=s.model.nominal)
     try:
         poses = excitation_poses(
-            nominal.geometry, nominal.T_base_tag, nominal.intrinsics, nominal.tag_size,
-            n_poses, s.start_pose,
-        )  # fmt: skip
+            nominal.geometry,
+            nominal.T_base_tag,
+            nominal.intrinsics,
+            nominal.tag_size,
+            n_poses,
+            s.start_pose,
+        )
     except ValueError as exc:
         raise CalibrationError(str(exc)) from None
     chosen = time.perf_counter() - started
@@ -144,8 +148,9 @@ def calibrate(s: Scenario, n_poses: int = 240, frames: int = 4, workers: int = 1
     noise = noise_of(rec, frames)
     problem = Problem(nominal.geometry, nominal.T_base_tag, rec.obs, priors, noise, rec.detector)
     cal, weighting = solve_weighted(problem)
-    return Session(cal, rec, priors, chosen, int(np.count_nonzero(~keep)), weighting.noise,
-                   weighting)  # fmt: skip
+    return Session(
+        cal, rec, priors, chosen, int(np.count_nonzero(~keep)), weighting.noise, weighting
+    )
 
 
 def _fit(P: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -167,10 +172,15 @@ def truth_check(session: Session, nominal_geometry, nominal_T_base_tag) -> dict:
     g = truth.geometry
     out: dict = {}
     for name, a, b, T_cam, T_tag in (
-        ("nominal", nominal_geometry.a_base, nominal_geometry.b_platform,
-         nominal_geometry.T_platform_cam, nominal_T_base_tag),
+        (
+            "nominal",
+            nominal_geometry.a_base,
+            nominal_geometry.b_platform,
+            nominal_geometry.T_platform_cam,
+            nominal_T_base_tag,
+        ),
         ("calibrated", cal.a_base, cal.b_platform, cal.T_platform_cam, cal.T_base_tag),
-    ):  # fmt: skip
+    ):
         e_a = np.linalg.norm(a - g.a_base, axis=1)
         R, fitted = _fit(a, g.a_base)
         e_shape = np.linalg.norm(fitted - g.a_base, axis=1)
@@ -215,6 +225,10 @@ def weighting_report(session: Session) -> dict:
     w = session.weighting
     components = None
     if w is not None:
-        components = {"rounds": list(w.rounds), "settled": w.settled, "note": w.note,
-                      "tag_views_left_out": list(w.left_out)}  # fmt: skip
+        components = {
+            "rounds": list(w.rounds),
+            "settled": w.settled,
+            "note": w.note,
+            "tag_views_left_out": list(w.left_out),
+        }
     return {"noise_model": asdict(session.noise), "variance_components": components}

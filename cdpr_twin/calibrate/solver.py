@@ -32,7 +32,7 @@ import numpy as np
 from scipy.sparse import csc_matrix, diags
 from threadpoolctl import threadpool_limits
 
-from cdpr_twin.calibrate.normal_equations import levenberg_marquardt, shared_covariance
+from cdpr_twin.calibrate.normal_equations import Solution, levenberg_marquardt, shared_covariance
 from cdpr_twin.calibrate.problem import Model, Problem
 from cdpr_twin.calibrate.variance import Weighting, rescaled, variance_factors
 
@@ -150,9 +150,12 @@ def solve(problem: Problem, max_iterations: int = 100, rank_tol: float = 1e-6) -
 
 
 def solve_weighted(
-    problem: Problem, rounds: int = 3, tol: float = 0.05, max_iterations: int = 100,
+    problem: Problem,
+    rounds: int = 3,
+    tol: float = 0.05,
+    max_iterations: int = 100,
     rank_tol: float = 1e-6,
-) -> tuple[Calibration, Weighting]:  # fmt: skip
+) -> tuple[Calibration, Weighting]:
     """Solve, estimate each residual group's noise from its residuals, solve again.
 
     Variance components (:mod:`cdpr_twin.calibrate.variance`): after each solve every
@@ -177,8 +180,9 @@ def solve_weighted(
     started, told = time.perf_counter(), problem.noise
     res = _minimise(problem, max_iterations, None)
     nfev, history, total, settled, note = res.nfev, [], {}, False, ""
-    problem, res, gross, extra = _leave_out_gross_views(problem, res, max_iterations)
-    nfev += extra
+    pruned = _leave_out_gross_views(problem, res, max_iterations)
+    problem, res, gross = pruned.problem, pruned.solution, pruned.left_out
+    nfev += pruned.evaluations
     for k in range(rounds + 1):
         with threadpool_limits(limits=1, user_api="blas"):
             factors = variance_factors(problem, res.jac, res.fun)
@@ -206,11 +210,28 @@ def solve_weighted(
     return replace(cal, nfev=nfev), weighting
 
 
-def _leave_out_gross_views(problem: Problem, res, max_iterations: int) -> tuple:
+@dataclass(frozen=True, eq=False)
+class _Pruned:
+    """A problem's solve once its gross tag views are left out.
+
+    Attributes:
+        problem: the problem without those views.
+        solution: its solution.
+        left_out: the poses whose views were left out, in the order they went.
+        evaluations: the residual evaluations the re-solves took.
+    """
+
+    problem: Problem
+    solution: Solution
+    left_out: list[int]
+    evaluations: int
+
+
+def _leave_out_gross_views(problem: Problem, res: Solution, max_iterations: int) -> _Pruned:
     """Leave out the tag views beyond :data:`GROSS_CHI2`, the worst first, solving after each.
 
     A wrong view pulls the frame and inflates the tags' noise, and smears its error onto
-    honest views: one at a time. Returns (problem, solution, left-out poses, evaluations).
+    honest views: one at a time.
     """
     gross: list[int] = []
     nfev = 0
@@ -221,7 +242,7 @@ def _leave_out_gross_views(problem: Problem, res, max_iterations: int) -> tuple:
         problem = problem.without_views(gross[-1:])
         res = _minimise(problem, max_iterations, res.x)
         nfev += res.nfev
-    return problem, res, gross, nfev
+    return _Pruned(problem, res, gross, nfev)
 
 
 def _tag_errors(problem: Problem, r: np.ndarray) -> np.ndarray:
@@ -230,7 +251,7 @@ def _tag_errors(problem: Problem, r: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", tags, tags)
 
 
-def _minimise(problem: Problem, max_iterations: int, x0: np.ndarray | None):
+def _minimise(problem: Problem, max_iterations: int, x0: np.ndarray | None) -> Solution:
     """Levenberg–Marquardt on ``problem`` from ``x0`` (zeros if None); the raw solution."""
     L = problem.layout
     if problem.n_data + problem.n_prior < L.n:

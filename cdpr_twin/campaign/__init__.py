@@ -22,13 +22,13 @@ from cdpr_twin.campaign.report import report_files
 from cdpr_twin.campaign.spec import Campaign, CampaignError, Task, load_campaign
 from cdpr_twin.campaign.table import RESULTS, ResultTable, load_table
 from cdpr_twin.campaign.worker import run_task
-from cdpr_twin.files.cleanup import sweep_abandoned
 from cdpr_twin.files.transaction import (
     Marker,
     OutputDir,
     OutputDirError,
     Terminated,
     others,
+    sweep_abandoned,
     write_json_atomic,
     writing,
 )

@@ -65,10 +65,18 @@ def deviation_matrix(tasks: dict, rows: list[dict]) -> np.ndarray:
         spec = scenario_from_data(task.data, task.source).truth
         m = len(json.loads(row["summary"])["final_tensions_n"])
         d = spec.draw(m)
-        out.append(np.concatenate([
-            d.exit_offsets.ravel(), d.anchor_offsets.ravel(), d.es_scale - 1.0,
-            d.pulley_radius_offsets, d.camera_offset, d.tag_offset,
-        ]))  # fmt: skip
+        out.append(
+            np.concatenate(
+                [
+                    d.exit_offsets.ravel(),
+                    d.anchor_offsets.ravel(),
+                    d.es_scale - 1.0,
+                    d.pulley_radius_offsets,
+                    d.camera_offset,
+                    d.tag_offset,
+                ]
+            )
+        )
     return np.array(out)
 
 
@@ -183,8 +191,9 @@ def axis_cells(columns: dict, ok: np.ndarray, key: str, factors: list[str], metr
     return cells
 
 
-def _interaction_section(columns: dict, ok: np.ndarray, key: str, others: list[str],
-                         metric: str) -> list[str]:  # fmt: skip
+def _interaction_section(
+    columns: dict, ok: np.ndarray, key: str, others: list[str], metric: str
+) -> list[str]:
     factors = (["block"] if len(_levels(columns["block"][ok])) > 1 else []) + others
     if not factors:
         return []

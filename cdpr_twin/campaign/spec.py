@@ -238,10 +238,16 @@ def _block(source: Path, table: dict, index: int, where: str) -> _Block:
     except CampaignError as exc:  # the campaign's field too: which block names it
         raise _fail(source, f"{where}scenario", str(exc)) from None
     return _Block(
-        str(table.get("name", "main" if not where else f"block{index}")), index, scenario,
-        base, overrides,
-        tuple(a for a in axes if "draw" not in a), random, samples, artefacts,
-    )  # fmt: skip
+        str(table.get("name", "main" if not where else f"block{index}")),
+        index,
+        scenario,
+        base,
+        overrides,
+        tuple(a for a in axes if "draw" not in a),
+        random,
+        samples,
+        artefacts,
+    )
 
 
 def _axes(source: Path, axes: Any, where: str) -> list[dict]:
@@ -319,10 +325,17 @@ def _tasks(source: Path, block: _Block, seed: int, where: str) -> list[Task]:
             if block.samples > 1:
                 params["sample"] = sample
             label = "_".join(f"{k.rsplit('.', 1)[-1]}{_label(v)}" for k, v in params.items())
-            out.append(Task(
-                run_id(data), block.name, f"{block.name}_{label}".rstrip("_"),
-                str(block.scenario), data, params, block.artefacts,
-            ))  # fmt: skip
+            out.append(
+                Task(
+                    run_id(data),
+                    block.name,
+                    f"{block.name}_{label}".rstrip("_"),
+                    str(block.scenario),
+                    data,
+                    params,
+                    block.artefacts,
+                )
+            )
     return out
 
 
@@ -357,8 +370,11 @@ def load_campaign(path: str | Path) -> Campaign:
     else:
         parsed = [_block(source, b, i, f"blocks[{i}].") for i, b in enumerate(blocks)]
     _check_blocks(source, parsed)
-    tasks = [t for i, b in enumerate(parsed) for t in _tasks(source, b, seed,
-             f"blocks[{i}]." if blocks else "")]  # fmt: skip
+    tasks = [
+        t
+        for i, b in enumerate(parsed)
+        for t in _tasks(source, b, seed, f"blocks[{i}]." if blocks else "")
+    ]
     seen: dict[str, str] = {}
     for t in tasks:
         key = run_id(as_read(t.data))  # 0 and 0.0: one value, as the scenario reads both

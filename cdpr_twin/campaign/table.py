@@ -28,8 +28,14 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from cdpr_twin.files.json_format import finite_or_null
-from cdpr_twin.files.transaction import OutputDirError, OutputError, Partial, fsync_dir, writing
+from cdpr_twin.files.transaction import (
+    OutputDirError,
+    OutputError,
+    Partial,
+    finite_or_null,
+    fsync_dir,
+    writing,
+)
 
 PARTS = "parts"
 RESULTS = "results.parquet"
@@ -68,8 +74,14 @@ def flatten(task_fields: dict, summary: dict | None, error: str = "", wall: floa
     goal = s.get("final_error_vs_goal") or {}
     row["final_t_m"] = float(goal.get("translation_m", math.nan))
     row["final_r_deg"] = float(goal.get("rotation_deg", math.nan))
-    keys = ("max_translation_m", "max_rotation_deg", "rms_translation_m", "rms_rotation_deg",
-            "final_translation_m", "final_rotation_deg")  # fmt: skip
+    keys = (
+        "max_translation_m",
+        "max_rotation_deg",
+        "rms_translation_m",
+        "rms_rotation_deg",
+        "final_translation_m",
+        "final_rotation_deg",
+    )
     short = ("max_t_m", "max_r_deg", "rms_t_m", "rms_r_deg", "final_t_m", "final_r_deg")
     for name, e in s.get("estimators", {}).items():
         for k, c in zip(keys, short, strict=True):

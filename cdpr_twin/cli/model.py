@@ -1,7 +1,7 @@
 """The ``cdpr-twin model`` subcommands: build a robot's MJCF, map its wrench-feasible workspace.
 
 ``cdpr-twin model build models/<robot>/robot.toml`` writes ``models/<robot>/<robot>.xml`` and
-``scene.xml`` (through ``mujoco.MjSpec``, :mod:`cdpr_twin.sim.generate`);
+``scene.xml`` (through ``mujoco.MjSpec``, :mod:`cdpr_twin.sim.mjcf_from_robot`);
 ``cdpr-twin model workspace models/<robot>/robot.toml`` samples the wrench-feasible workspace
 (:mod:`cdpr_twin.math.workspace`) and draws it.
 
@@ -50,7 +50,7 @@ def _out_dir(description: Path, out: Path | None) -> Path:
 def _build(args: argparse.Namespace) -> int:
     from cdpr_twin.files.transaction import OutputError
     from cdpr_twin.robot.description import RobotError
-    from cdpr_twin.sim.generate import build_files
+    from cdpr_twin.sim.mjcf_from_robot import build_files
 
     try:
         out = _out_dir(args.description, args.out)
@@ -60,8 +60,11 @@ def _build(args: argparse.Namespace) -> int:
         return 2
     except OSError as exc:  # the directory cannot be reached or created
         where = args.out or Path(args.description).parent
-        print(f"cdpr-twin: error: --out {where}: cannot create it: {exc.strerror or exc}; give "
-              "another directory", file=sys.stderr)  # fmt: skip
+        print(
+            f"cdpr-twin: error: --out {where}: cannot create it: {exc.strerror or exc}; give "
+            "another directory",
+            file=sys.stderr,
+        )
         return 2
     except OutputError as exc:
         print(

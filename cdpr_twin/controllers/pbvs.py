@@ -234,8 +234,11 @@ class PbvsController(Controller):
         tag_err = None
         if end.last_tag is not None:
             dt, dr = pose_distance(end.last_tag.T_cam_tag, self.goal)
-            tag_err = {"translation_m": dt, "rotation_deg": float(np.degrees(dr)),
-                       "detected_at_s": end.last_tag_time}  # fmt: skip
+            tag_err = {
+                "translation_m": dt,
+                "rotation_deg": float(np.degrees(dr)),
+                "detected_at_s": end.last_tag_time,
+            }
         out = {
             "converged": end.status == Status.CONVERGED,
             "final_tag_error": tag_err,

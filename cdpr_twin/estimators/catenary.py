@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdpr_twin.estimators.model import ElasticPulleyModelEstimator
+from cdpr_twin.estimators.model_based import ElasticPulleyModelEstimator
 
 
 def weight_above(geom, T_base_platform: np.ndarray) -> np.ndarray:

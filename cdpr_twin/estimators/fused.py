@@ -94,8 +94,9 @@ class FusedOptions:
     initial_rotation_std: float = option(math.radians(0.2), minimum=0.0, unit="deg")
     drum_scale_std: float = option(0.005, minimum=0.0)
     process_position_std: float = option(1e-3, minimum=0.0, exclusive=True, unit="m")
-    process_rotation_std: float = option(math.radians(0.05), minimum=0.0, exclusive=True,
-                                         unit="deg")  # fmt: skip
+    process_rotation_std: float = option(
+        math.radians(0.05), minimum=0.0, exclusive=True, unit="deg"
+    )
     winch_time_constant: float = option(1.0 / (2.0 * math.pi * 20.0), minimum=0.0, unit="s")
     encoder_quantum: float = option(2.0 * math.pi * 0.02 / 4096, minimum=0.0, unit="m")
     length_noise_std: float = option(2e-6, minimum=0.0, exclusive=True, unit="m")
@@ -175,16 +176,26 @@ class FusedEstimator(Estimator):
         def first(block: slice) -> int:
             return block.start if block.stop > block.start else -1
 
-        self._blocks = np.array([L.corrected, L.drum.start, first(L.exit), first(L.anchor),
-                                 first(L.cam), first(L.intr), L.tag.start])  # fmt: skip
+        self._blocks = np.array(
+            [
+                L.corrected,
+                L.drum.start,
+                first(L.exit),
+                first(L.anchor),
+                first(L.cam),
+                first(L.intr),
+                L.tag.start,
+            ]
+        )
         self._cables = np.array(  # (m, 7): the model estimators' cables, as one array
             _cable_tuples(geometry.a_base, geometry.b_platform, geometry.pulley_radius)
         )
         self._gate1 = fm.chi2_gate(1, o.gate_probability)
         self._gate6 = fm.chi2_gate(6, o.gate_probability)
         self._es = np.broadcast_to(np.asarray(geometry.es, dtype=float), m).copy()
-        self._process_var = np.array([o.process_position_std**2] * 3
-                                     + [o.process_rotation_std**2] * 3)  # fmt: skip
+        self._process_var = np.array(
+            [o.process_position_std**2] * 3 + [o.process_rotation_std**2] * 3
+        )
         self._T_platform_cam = np.array(geometry.T_platform_cam, dtype=float)  # writeable
         self._tag_options = np.array(
             [o.tag_size, o.focal_px, o.pixel_std, o.tag_latency, o.winch_time_constant]
@@ -245,10 +256,16 @@ class FusedEstimator(Estimator):
         twist = np.array(twist, dtype=float)  # a writeable copy: the compiled signature
         lag = o.winch_time_constant * np.abs(twist - self._last_twist)
         self._T = fc.predict(
-            self._T, self.P, twist * dt, np.asarray(rates, dtype=float) * dt,
-            np.asarray(taut, dtype=bool), self._process_var * dt + lag * lag, self._cables,
-            float(o.max_condition), self._blocks,
-        )  # fmt: skip
+            self._T,
+            self.P,
+            twist * dt,
+            np.asarray(rates, dtype=float) * dt,
+            np.asarray(taut, dtype=bool),
+            self._process_var * dt + lag * lag,
+            self._cables,
+            float(o.max_condition),
+            self._blocks,
+        )
         self._last_twist = twist
 
     def _inject(self, dx: np.ndarray) -> None:  # dx: the corrected states' (c,)
@@ -277,14 +294,28 @@ class FusedEstimator(Estimator):
         taut = self._taut(m, o.taut_threshold) if taut is None else np.array(taut, dtype=bool)
         flags = set() if taut.all() else {SLACK_CABLES}
         var = fm.cable_noise_var(
-            m.cable_lengths, np.maximum(m.tensions, 1e-9), self._es, o.encoder_quantum,
-            o.length_noise_std, o.tension_noise_std, o.taut_threshold,
-        )  # fmt: skip
+            m.cable_lengths,
+            np.maximum(m.tensions, 1e-9),
+            self._es,
+            o.encoder_quantum,
+            o.length_noise_std,
+            o.tension_noise_std,
+            o.taut_threshold,
+        )
         readings = np.array([c, self._ref[1], m.cable_lengths - self._ref[0]])
         outcome, outlier, dx = fc.update_cables(
-            self._T, self._T0, self.P, readings, self._rho, var, taut, self._cables,
-            0.5 * o.encoder_quantum, self._gate1, self._blocks,
-        )  # fmt: skip
+            self._T,
+            self._T0,
+            self.P,
+            readings,
+            self._rho,
+            var,
+            taut,
+            self._cables,
+            0.5 * o.encoder_quantum,
+            self._gate1,
+            self._blocks,
+        )
         if outlier:
             flags.add(CABLE_OUTLIER)
         if outcome == fc.CABLES_NONE:
@@ -300,9 +331,18 @@ class FusedEstimator(Estimator):
         if not np.isfinite(z).all():
             return {NON_FINITE_INPUT}
         outcome, self._T_tag, dx = fc.update_tag(
-            self._T, self._T_tag, self._anchored, self.P, z, self._last_twist,
-            self._T_platform_cam, self._tag_options, self._lens, self._gate6, self._blocks,
-        )  # fmt: skip
+            self._T,
+            self._T_tag,
+            self._anchored,
+            self.P,
+            z,
+            self._last_twist,
+            self._T_platform_cam,
+            self._tag_options,
+            self._lens,
+            self._gate6,
+            self._blocks,
+        )
         if outcome == fc.TAG_GATED:
             return {TAG_OUTLIER}
         if outcome == fc.TAG_ANCHORED:
@@ -333,8 +373,12 @@ class FusedEstimator(Estimator):
         if dt > 0:
             moving = twist is not None
             hanging = self._taut(m, self.options.hang_threshold)
-            self.predict(twist if moving else np.zeros(6), dt, m.cable_rates if moving else
-                         np.zeros(self._m), hanging)  # fmt: skip
+            self.predict(
+                twist if moving else np.zeros(6),
+                dt,
+                m.cable_rates if moving else np.zeros(self._m),
+                hanging,
+            )
         flags = self.update_cables(m, self._taut(m, self.options.taut_threshold))
         if self.options.use_tag:
             flags |= self.update_tag(m)

@@ -12,12 +12,12 @@ The functions are compiled on first use and cached on disk (Numba's ``cache=True
 ``__pycache__`` beside this file, or ``NUMBA_CACHE_DIR``): the first process to use them after
 an install compiles them (16–20 s; :func:`warm_up` does it when the filter is built), later ones
 load the machine code (≈ 0.2 s). The algebra is written as loops
-(:mod:`~cdpr_twin.estimators.fused_kernels`' ``mm``, ``inv``, …) rather than NumPy's ``@`` and
+(:mod:`~cdpr_twin.estimators.compiled_kernels`' ``mm``, ``inv``, …) rather than NumPy's ``@`` and
 ``np.linalg``: as fast at these sizes (84 against 94 µs an update), with no BLAS threads, and
 the same numbers whichever BLAS NumPy was built with (it did not shorten the compilation,
 measured 21 s either way). They release the GIL, so a camera's worker thread keeps running
 beside them. The building blocks (SE(3) maps, the pulley
-kernel, a detection's noise) are in :mod:`cdpr_twin.estimators.fused_kernels`.
+kernel, a detection's noise) are in :mod:`cdpr_twin.estimators.compiled_kernels`.
 
 The layout (:class:`cdpr_twin.estimators.fused_models.Layout`) comes as ``blocks``, 7 ints
 indexed by the constants below: the number of leading corrected states, then the first index of
@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdpr_twin.estimators.fused_kernels import (
+from cdpr_twin.estimators.compiled_kernels import (
     add_to,
     adjoint,
     base_direction,
@@ -115,9 +115,15 @@ def moving(step: np.ndarray) -> bool:
 
 @jit
 def transition(
-    T: np.ndarray, step: np.ndarray, rates_dt: np.ndarray, hanging: np.ndarray,
-    cables: np.ndarray, max_condition: float, blocks: np.ndarray, n: int,
-) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    T: np.ndarray,
+    step: np.ndarray,
+    rates_dt: np.ndarray,
+    hanging: np.ndarray,
+    cables: np.ndarray,
+    max_condition: float,
+    blocks: np.ndarray,
+    n: int,
+) -> tuple[np.ndarray, np.ndarray]:
     """The predicted pose T exp(ξΔt) (4, 4) and the transition's pose rows F (6, n).
 
     F's pose block is Ad(exp(−ξΔt)); while the hanging cables' Jacobian A is well conditioned
@@ -157,9 +163,16 @@ def transition(
 
 @jit
 def predict(
-    T: np.ndarray, P: np.ndarray, step: np.ndarray, rates_dt: np.ndarray, hanging: np.ndarray,
-    lag_var: np.ndarray, cables: np.ndarray, max_condition: float, blocks: np.ndarray,
-) -> np.ndarray:  # fmt: skip
+    T: np.ndarray,
+    P: np.ndarray,
+    step: np.ndarray,
+    rates_dt: np.ndarray,
+    hanging: np.ndarray,
+    lag_var: np.ndarray,
+    cables: np.ndarray,
+    max_condition: float,
+    blocks: np.ndarray,
+) -> np.ndarray:
     """Propagate pose and covariance over one step: P ← F P Fᵀ + diag(lag_var), in place.
 
     Args:
@@ -169,7 +182,7 @@ def predict(
         rates_dt: (m,) commanded winch rates × Δt [m].
         hanging: (m,) bool, the cables the platform hangs on.
         lag_var: (6,) process noise added to the pose's diagonal [m², rad²].
-        cables: (m, 7) :func:`~cdpr_twin.estimators.fused_kernels.kernel`'s cables.
+        cables: (m, 7) :func:`~cdpr_twin.estimators.compiled_kernels.kernel`'s cables.
         max_condition: A's largest condition number for the drum and geometry columns.
         blocks: (7,) the layout.
 
@@ -192,9 +205,13 @@ def predict(
 
 @jit
 def cable_rows(
-    T: np.ndarray, T0: np.ndarray, moved: np.ndarray, cables: np.ndarray, blocks: np.ndarray,
+    T: np.ndarray,
+    T0: np.ndarray,
+    moved: np.ndarray,
+    cables: np.ndarray,
+    blocks: np.ndarray,
     n: int,
-) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+) -> tuple[np.ndarray, np.ndarray]:
     """The cable readings' H (m, n) and model motions L(T) − L(T₀) (m,) [m].
 
     ∂/∂δ: the rows at T; ∂/∂δ₀: minus those at T₀; ∂/∂ρ_i: −Δl_i; ∂/∂a_i: R₀u₀ − Ru (F_b);
@@ -220,10 +237,18 @@ def cable_rows(
 
 @jit
 def update_cables(
-    T: np.ndarray, T0: np.ndarray, P: np.ndarray, readings: np.ndarray, rho: np.ndarray,
-    var: np.ndarray, taut: np.ndarray, cables: np.ndarray, half_quantum: float, gate: float,
+    T: np.ndarray,
+    T0: np.ndarray,
+    P: np.ndarray,
+    readings: np.ndarray,
+    rho: np.ndarray,
+    var: np.ndarray,
+    taut: np.ndarray,
+    cables: np.ndarray,
+    half_quantum: float,
+    gate: float,
     blocks: np.ndarray,
-) -> tuple[int, bool, np.ndarray]:  # fmt: skip
+) -> tuple[int, bool, np.ndarray]:
     """Fuse the taut cables' readings since the reference (``fused_models``' cable model).
 
     y_i = c_i − c_i(t₀) (+ q/2 once the count moved) against h_i = L_i(T) − L_i(T₀) − ρ_i Δl_i;
@@ -238,7 +263,7 @@ def update_cables(
         rho: (m,) drum scale errors.
         var: (m,) reading variances [m²].
         taut: (m,) bool, the cables whose readings may be used.
-        cables: (m, 7) :func:`~cdpr_twin.estimators.fused_kernels.kernel`'s cables.
+        cables: (m, 7) :func:`~cdpr_twin.estimators.compiled_kernels.kernel`'s cables.
         half_quantum: half an encoder count [m].
         gate: the χ²(1) gate.
         blocks: (7,) the layout.
@@ -274,9 +299,15 @@ def update_cables(
 
 @jit
 def anchor_tag(
-    T: np.ndarray, P: np.ndarray, z: np.ndarray, lag: np.ndarray, R: np.ndarray,
-    calib: np.ndarray, T_platform_cam: np.ndarray, blocks: np.ndarray,
-) -> np.ndarray:  # fmt: skip
+    T: np.ndarray,
+    P: np.ndarray,
+    z: np.ndarray,
+    lag: np.ndarray,
+    R: np.ndarray,
+    calib: np.ndarray,
+    T_platform_cam: np.ndarray,
+    blocks: np.ndarray,
+) -> np.ndarray:
     """Put the tag in F_b from the first detection, ᵇT_o = T exp(−ξd) ᵖT_c z: (4, 4).
 
     Its error δ_o = J x − n (J: the pose's, the mount's and the calibration's), so its rows of P
@@ -303,10 +334,18 @@ def anchor_tag(
 
 @jit
 def update_tag(
-    T: np.ndarray, T_tag: np.ndarray, anchored: bool, P: np.ndarray, z: np.ndarray,
-    last_twist: np.ndarray, T_platform_cam: np.ndarray, options: np.ndarray, lens: np.ndarray,
-    gate: float, blocks: np.ndarray,
-) -> tuple[int, np.ndarray, np.ndarray]:  # fmt: skip
+    T: np.ndarray,
+    T_tag: np.ndarray,
+    anchored: bool,
+    P: np.ndarray,
+    z: np.ndarray,
+    last_twist: np.ndarray,
+    T_platform_cam: np.ndarray,
+    options: np.ndarray,
+    lens: np.ndarray,
+    gate: float,
+    blocks: np.ndarray,
+) -> tuple[int, np.ndarray, np.ndarray]:
     """Fuse a tag detection z = ᶜT_o, or anchor the tag with the first one; P in place.
 
     The detection is the tag seen at T_lag = T exp(−ξd) (d the frame's age):
@@ -355,9 +394,13 @@ def update_tag(
 
 @jit
 def inject(
-    T: np.ndarray, T0: np.ndarray, T_tag: np.ndarray, rho: np.ndarray, dx: np.ndarray,
+    T: np.ndarray,
+    T0: np.ndarray,
+    T_tag: np.ndarray,
+    rho: np.ndarray,
+    dx: np.ndarray,
     blocks: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Apply a correction dx (c,): pose, start and tag on the right, drums (if corrected) added."""
     drum0, tag0 = blocks[DRUM], blocks[TAG]
     rho_new = rho.copy()
@@ -389,8 +432,19 @@ def warm_up(cables: np.ndarray, n: int, blocks: np.ndarray) -> None:
     P = np.eye(n) * 1e-6
     hanging = np.ones(m, dtype=bool)
     predict(T, P, np.full(6, 1e-3), np.zeros(m), hanging, np.full(6, 1e-9), cables, 1e12, blocks)
-    update_cables(T, T, P, np.zeros((3, m)), np.zeros(m), np.full(m, 1e-6), hanging, cables,
-                  1e-5, 1e300, blocks)  # fmt: skip
+    update_cables(
+        T,
+        T,
+        P,
+        np.zeros((3, m)),
+        np.zeros(m),
+        np.full(m, 1e-6),
+        hanging,
+        cables,
+        1e-5,
+        1e300,
+        blocks,
+    )
     z = np.eye(4)
     z[:3, 3] = [0.01, 0.02, 0.3]
     options, lens = np.array([0.04, 400.0, 1.0, 0.04, 0.008]), np.zeros(4)

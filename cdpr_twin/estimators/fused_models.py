@@ -73,8 +73,14 @@ class Layout:
         The corrected states come first (pose, start, tag, then the drums unless they are
         considered) and the considered ones last, so that an update touches a leading block.
         """
-        sizes = {"tag": 6, "drum": m, "exit": 3 * m * geometry, "anchor": 3 * m * geometry,
-                 "cam": 6 * camera, "intr": 8 * intrinsics}  # fmt: skip
+        sizes = {
+            "tag": 6,
+            "drum": m,
+            "exit": 3 * m * geometry,
+            "anchor": 3 * m * geometry,
+            "cam": 6 * camera,
+            "intr": 8 * intrinsics,
+        }
         start, out = 12, {}
         for name, size in sizes.items():
             out[name] = slice(start, start + size)
@@ -162,8 +168,12 @@ def _lens(xy: np.ndarray, coeffs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     x, y = xy[:, 0], xy[:, 1]
     r2 = x * x + y * y
     a, da = 1.0 + k1 * r2 + k2 * r2 * r2, 2.0 * k1 + 4.0 * k2 * r2  # radial factor, ∂a/∂r² × 2
-    xd = np.column_stack([x * a + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
-                          y * a + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y])  # fmt: skip
+    xd = np.column_stack(
+        [
+            x * a + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
+            y * a + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y,
+        ]
+    )
     D = np.empty((len(xy), 2, 2))
     D[:, 0, 0] = a + x * x * da + 2 * p1 * y + 6 * p2 * x
     D[:, 0, 1] = D[:, 1, 0] = x * y * da + 2 * p1 * x + 2 * p2 * y

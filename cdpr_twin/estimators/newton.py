@@ -3,7 +3,7 @@
 :func:`cdpr_twin.estimators.solvers._newton` (scalar Python: the reference) spends 55–65 µs
 of a model-based update in a few dozen Python-level calls; here the whole solve is one compiled
 call. It performs the same floating-point operations in the same order — the kernel of
-:func:`cdpr_twin.estimators.fused_kernels.kernel`, the scalar ``pose · exp(δ)`` of
+:func:`cdpr_twin.estimators.compiled_kernels.kernel`, the scalar ``pose · exp(δ)`` of
 ``solvers._compose_exp``, LAPACK's ``dgesv`` from the same SciPy library, sums left to
 right — so its poses equal the reference's bit for bit (``tests/test_newton.py``; the golden
 runs of ``tests/test_golden.py`` compare every CSV cell byte for byte).
@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from cdpr_twin.estimators import solvers
-from cdpr_twin.estimators.fused_kernels import exp_coefficients, jit, kernel
+from cdpr_twin.estimators.compiled_kernels import exp_coefficients, jit, kernel
 
 MAIN, FALLBACK = 0, 1
 """Outcomes of :func:`newton`: solved on the main path, or the reference must solve."""
@@ -74,7 +74,7 @@ def newton(cables: np.ndarray, goal: np.ndarray, T0: np.ndarray, max_iterations:
     """Newton solve of lengths(T) = goal from T0: ``solvers._newton``'s main path.
 
     Args:
-        cables: (6, 7) the cables used, as :func:`~cdpr_twin.estimators.fused_kernels.kernel`
+        cables: (6, 7) the cables used, as :func:`~cdpr_twin.estimators.compiled_kernels.kernel`
             takes them (sheave radius 0: a point exit).
         goal: (6,) target lengths [m].
         T0: (4, 4) initial guess.

@@ -15,6 +15,7 @@ Two backends solve the same square system lengths(T) = targets and agree to roun
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -35,6 +36,45 @@ N_USED = 6
 
 Pose = tuple[float, ...]
 """A pose as 12 floats: R row-major (9), then t (3)."""
+
+
+@dataclass(frozen=True, eq=False)
+class PoseSolution:
+    """A platform pose solved from six cable lengths.
+
+    Attributes:
+        T: (4, 4) the pose.
+        residual: the largest |lengths(T) − targets| [m].
+        iterations: Newton steps taken (SciPy: residual evaluations).
+    """
+
+    T: np.ndarray
+    residual: float
+    iterations: int
+
+
+@dataclass(frozen=True, eq=False)
+class WeightedSolution:
+    """A platform pose fitted by weighted least squares to any number (≥ 6) of cable lengths.
+
+    Attributes:
+        T: (4, 4) the pose.
+        residuals: (k,) lengths(T) − targets [m].
+        iterations: Gauss-Newton steps taken (SciPy: residual evaluations).
+        converged: whether the solver met its own stopping test.
+    """
+
+    T: np.ndarray
+    residuals: np.ndarray
+    iterations: int
+    converged: bool
+
+    @property
+    def largest_residual(self) -> float:
+        """Max |residuals| [m]."""
+        return float(np.max(np.abs(self.residuals)))
+
+
 _POSE_IDX = (0, 1, 2, 4, 5, 6, 8, 9, 10, 3, 7, 11)  # from the first 3 rows of T, row-major
 
 
@@ -88,9 +128,17 @@ def _kernel(
 
 
 def exp_terms(
-    vx: float, vy: float, vz: float, wx: float, wy: float, wz: float,
-    th2: float, a: float, b: float, c: float,
-) -> tuple[float, ...]:  # fmt: skip
+    vx: float,
+    vy: float,
+    vz: float,
+    wx: float,
+    wy: float,
+    wz: float,
+    th2: float,
+    a: float,
+    b: float,
+    c: float,
+) -> tuple[float, ...]:
     """exp(d) of a twist d = [v, ω] as 12 floats: its rotation row-major (9), then V·v (3).
 
     dR = I + a[ω]× + b[ω]×², V = I + b[ω]× + c[ω]×², with [ω]×² = ωωᵀ − θ² I and (a, b, c) the
@@ -119,16 +167,19 @@ def _compose_exp(pose: Pose, d: list[float]) -> Pose:
     d00, d01, d02, d10, d11, d12, d20, d21, d22, px, py, pz = terms
     r00, r01, r02, r10, r11, r12, r20, r21, r22, t0, t1, t2 = pose
     return (
-        r00 * d00 + r01 * d10 + r02 * d20, r00 * d01 + r01 * d11 + r02 * d21,
+        r00 * d00 + r01 * d10 + r02 * d20,
+        r00 * d01 + r01 * d11 + r02 * d21,
         r00 * d02 + r01 * d12 + r02 * d22,
-        r10 * d00 + r11 * d10 + r12 * d20, r10 * d01 + r11 * d11 + r12 * d21,
+        r10 * d00 + r11 * d10 + r12 * d20,
+        r10 * d01 + r11 * d11 + r12 * d21,
         r10 * d02 + r11 * d12 + r12 * d22,
-        r20 * d00 + r21 * d10 + r22 * d20, r20 * d01 + r21 * d11 + r22 * d21,
+        r20 * d00 + r21 * d10 + r22 * d20,
+        r20 * d01 + r21 * d11 + r22 * d21,
         r20 * d02 + r21 * d12 + r22 * d22,
         t0 + r00 * px + r01 * py + r02 * pz,
         t1 + r10 * px + r11 * py + r12 * pz,
         t2 + r20 * px + r21 * py + r22 * pz,
-    )  # fmt: skip
+    )
 
 
 def _cable_tuples(
@@ -146,7 +197,7 @@ def solve_fast(
     T0: np.ndarray,
     max_iterations: int = 30,
     tol: float = 1e-12,
-) -> tuple[np.ndarray, float, int]:
+) -> PoseSolution:
     """Newton solve of lengths(T) = targets on SE(3) from T0.
 
     Args:
@@ -159,7 +210,7 @@ def solve_fast(
         tol: stop when every residual is below this [m].
 
     Returns:
-        ``(T, residual, iterations)`` with residual = max |lengths(T) − targets| [m].
+        The pose, its largest length residual and the steps taken.
     """
     return _newton(
         _cable_tuples(a_base, b_platform, pulley_radius),
@@ -178,7 +229,7 @@ def _newton(
     T0: np.ndarray,
     max_iterations: int = 30,
     tol: float = 1e-12,
-) -> tuple[np.ndarray, float, int]:
+) -> PoseSolution:
     pose = _pose(T0)
     target = goal.tolist() if isinstance(goal, np.ndarray) else goal
     lengths, rows = _kernel(cables, pulley, pose)
@@ -207,7 +258,7 @@ def _newton(
         else:
             break
         pose, rows, r, cost = pose_new, rows_new, r_new, cost_new
-    return _matrix(pose), max(map(abs, r)), it
+    return PoseSolution(_matrix(pose), max(map(abs, r)), it)
 
 
 def _pose(T: np.ndarray) -> Pose:
@@ -237,7 +288,7 @@ def gauss_newton(
     T0: np.ndarray,
     max_iterations: int = 30,
     tol: float = 1e-11,
-) -> tuple[np.ndarray, np.ndarray, int, bool]:
+) -> WeightedSolution:
     """Weighted least squares min Σ w_i (l_i(T) − goal_i)² on SE(3), from T0.
 
     Gauss-Newton steps T ← T·exp(δ), (AᵀWA) δ = −AᵀW r, halved while the cost grows.
@@ -252,7 +303,8 @@ def gauss_newton(
         tol: converged when the step's largest component is below this [m, rad].
 
     Returns:
-        ``(T, residuals, iterations, converged)``: the pose, (k,) lengths(T) − goal [m].
+        The pose, its (k,) residuals lengths(T) − goal [m], the steps taken and whether the
+        last step fell below ``tol``.
     """
     pose = _pose(T0)
     sw = np.sqrt(np.asarray(weights, dtype=float))
@@ -261,13 +313,13 @@ def gauss_newton(
     r = np.asarray(lengths) - goal
     cost = float(np.sum((sw * r) ** 2))
     if not math.isfinite(cost):  # e.g. an infinite target or weight: no step, not converged
-        return _matrix(pose), r, 0, False
+        return WeightedSolution(_matrix(pose), r, 0, False)
     for it in range(1, max_iterations + 1):
         x = np.linalg.lstsq(np.asarray(rows) * sw[:, None], -sw * r, rcond=None)[0]
         if not math.isfinite(x @ x):  # huge targets with small weights: a finite cost, no step
-            return _matrix(pose), r, it, False
+            return WeightedSolution(_matrix(pose), r, it, False)
         if np.max(np.abs(x)) < tol:
-            return _matrix(pose), r, it, True
+            return WeightedSolution(_matrix(pose), r, it, True)
         step = 1.0
         for _ in range(30):
             pose_new = _compose_exp(pose, (step * x).tolist())
@@ -278,9 +330,9 @@ def gauss_newton(
                 break
             step *= 0.5
         else:  # no decrease along the step: at the minimum to round-off
-            return _matrix(pose), r, it, step * np.max(np.abs(x)) < tol
+            return WeightedSolution(_matrix(pose), r, it, bool(step * np.max(np.abs(x)) < tol))
         pose, rows, r, cost = pose_new, rows_new, r_new, cost_new
-    return _matrix(pose), r, max_iterations, False
+    return WeightedSolution(_matrix(pose), r, max_iterations, False)
 
 
 def solve_scipy(
@@ -290,7 +342,7 @@ def solve_scipy(
     targets: np.ndarray,
     T0: np.ndarray,
     x0: np.ndarray | None = None,
-) -> tuple[np.ndarray, float, int]:
+) -> PoseSolution:
     """The paper's Algorithm 1 with ``scipy.optimize.least_squares`` (7 unknowns, 7 equations).
 
     Arguments and return value as :func:`solve_fast`; ``x0`` optionally gives the initial
@@ -307,4 +359,4 @@ def solve_scipy(
         x0 = np.concatenate([T0[:3, 3], quat_wxyz_from_matrix(T0[:3, :3])])
     sol = least_squares(residuals, x0, method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15)
     T = transform(matrix_from_quat_wxyz(sol.x[3:]), sol.x[:3])
-    return T, float(np.max(np.abs(sol.fun[:N_USED]))), int(sol.nfev)
+    return PoseSolution(T, float(np.max(np.abs(sol.fun[:N_USED]))), int(sol.nfev))

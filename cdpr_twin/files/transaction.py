@@ -38,6 +38,10 @@ a campaign's, a calibration's and a study's keep them with their own files):
    :class:`OutputError` naming the path and the cause; nothing is renamed and no
    ``summary.json`` is written: what was written stays ``*.partial``.
 
+Beside the transaction: the project's one JSON format (:func:`json_text`: strict RFC 8259, an
+undefined number written ``null``), the atomic writers of single files and figures, and
+:func:`sweep_abandoned`, which tidies the directories of runs that died mid-way.
+
 SIGTERM is turned into :class:`Terminated` (a :class:`KeyboardInterrupt`) by
 :func:`~cdpr_twin.run.interrupts.sigterm_raises`, which the command installs around a run; a run
 handles it as Ctrl-C.
@@ -50,16 +54,40 @@ import errno
 import fcntl
 import fnmatch
 import json
+import math
 import os
 import socket
 import stat
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
-from cdpr_twin.files.json_format import json_text
 from cdpr_twin.files.paths import path_kind
+
+
+# ---------------------------------------------------------------- the project's JSON format
+# Strict RFC 8259 (an undefined number is null), one format for every JSON file written.
+def finite_or_null(data: Any) -> Any:
+    """``data`` with every non-finite float (NaN, ±∞) as ``None``: JSON (RFC 8259) has neither.
+
+    A reader (``jq``, JavaScript, a strict parser) then gets ``null`` where a number is undefined
+    — a deviation never measured, a run that did not reach p1 — instead of a bare ``NaN``.
+    """
+    if isinstance(data, float):
+        return data if math.isfinite(data) else None
+    if isinstance(data, dict):
+        return {k: finite_or_null(v) for k, v in data.items()}
+    if isinstance(data, list | tuple):
+        return [finite_or_null(v) for v in data]
+    return data
+
+
+def json_text(data: dict | list) -> str:
+    """The project's JSON files: RFC 8259 (undefined numbers ``null``), indented, final newline."""
+    return json.dumps(finite_or_null(data), indent=2, sort_keys=False, allow_nan=False) + "\n"
+
 
 LOCK_NAME = ".lock"
 """The lock file in an output directory while a run writes it."""
@@ -658,3 +686,48 @@ def out_path(text: str) -> Path:
     if not text.strip():
         raise argparse.ArgumentTypeError("is empty: give a directory (e.g. runs/my_run)")
     return Path(text)
+
+
+# ------------------------------------------------------------- the directories of dead runs
+# Tidying the run directories of runs that died mid-way (a stopped campaign's or study's).
+def sweep_abandoned(parent: Path, wait: float = 0.0) -> list[Path]:
+    """Tidy the run directories under ``parent`` whose run died (its lock's owner is gone).
+
+    A campaign or study stopped ends its workers mid-run (SIGTERM, then SIGKILL): their run
+    directories keep the lock and the ``*.partial`` files the run had begun. Each is claimed
+    as the next run there would claim it (:class:`~cdpr_twin.files.transaction.OutputDir`: the dead
+    run's lock taken over, its files removed), released, and removed when nothing else is
+    left in it; a live run's directory is not touched.
+
+    Args:
+        parent: the directory of the run directories.
+        wait: up to this long [s], wait for the owners on this host to end (Ray's shutdown
+            does not wait for its workers).
+
+    Returns:
+        The directories tidied.
+    """
+    deadline = time.monotonic() + wait
+    tidied = []
+    for lock in sorted(Path(parent).glob(f"*/{LOCK_NAME}")):
+        if _take(OutputDir(lock.parent), deadline):
+            tidied.append(lock.parent)
+            with contextlib.suppress(OSError):
+                lock.parent.rmdir()  # (only if empty)
+    return tidied
+
+
+def _take(run: OutputDir, deadline: float) -> bool:
+    """Claim and release ``run``'s directory, retrying while its owner lives until ``deadline``."""
+    while True:
+        try:
+            run.claim()
+        except OutputDirError:  # its run is alive (on Ray, maybe still ending)
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.1)
+            continue
+        except OutputError:  # a file that cannot be removed: left as it is
+            return False
+        run.release()
+        return True

@@ -60,11 +60,8 @@ class PulleyState:
         return self.free_length + self.wrap_length
 
 
-def _pulley(a: np.ndarray, r: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Eq. 15-24 on arrays: exit points a (k, 3), radii r (k,), anchor points b (k, 3) in F_b.
-
-    Returns (phi, centre, tangent, free_length, wrap_length, u).
-    """
+def _pulley(a: np.ndarray, r: np.ndarray, b: np.ndarray) -> PulleyState:
+    """Eq. 15-24 on arrays: exit points a (k, 3), radii r (k,), anchor points b (k, 3) in F_b."""
     l_vec = b - a
     phi = np.arctan2(l_vec[:, 1], l_vec[:, 0])  # eq. 20
     x_i = np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], axis=1)
@@ -87,7 +84,7 @@ def _pulley(a: np.ndarray, r: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ..
     tangent[:, 2] += c_z
     with np.errstate(invalid="ignore", divide="ignore"):
         u = (b - tangent) / free[:, None]
-    return phi, n, tangent, free, wrap, u
+    return PulleyState(phi=phi, center=n, tangent=tangent, free_length=free, wrap_length=wrap, u=u)
 
 
 def pulley_lengths(a: np.ndarray, r: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -117,8 +114,8 @@ def pulley_vectors(a: np.ndarray, r: np.ndarray, b: np.ndarray) -> tuple[np.ndar
         vectors from the exit tangent point A'_i toward B_i (a taut cable pulls its anchor
         along −u).
     """
-    _, _, _, free, wrap, u = _pulley(a, r, b)
-    return free + wrap, u
+    s = _pulley(a, r, b)
+    return s.length, s.u
 
 
 def pulley_state(geom: CdprGeometry, T_base_platform: np.ndarray) -> PulleyState:
@@ -132,8 +129,7 @@ def pulley_state(geom: CdprGeometry, T_base_platform: np.ndarray) -> PulleyState
         The :class:`PulleyState`.
     """
     b = anchor_points_base(geom, T_base_platform)
-    phi, n, tangent, free, wrap, u = _pulley(geom.a_base, geom.pulley_radius, b)
-    return PulleyState(phi=phi, center=n, tangent=tangent, free_length=free, wrap_length=wrap, u=u)
+    return _pulley(geom.a_base, geom.pulley_radius, b)
 
 
 def lengths_and_jacobian(
@@ -162,8 +158,8 @@ def lengths_and_jacobian(
         lengths = np.sqrt(np.einsum("ij,ij->i", l_vec, l_vec))
         u = l_vec / lengths[:, None]
     else:
-        _, _, _, free, wrap, u = _pulley(a_base, pulley_radius, b)
-        lengths = free + wrap
+        s = _pulley(a_base, pulley_radius, b)
+        lengths, u = s.length, s.u
     u_p = u @ R
     return lengths, np.hstack([u_p, _cross(b_platform, u_p)])
 

@@ -2,7 +2,7 @@
 
 Quaternion conversions and the pose distance take one pose or any stack (leading axes), one
 implementation each (jaxlie's style); one pose takes a bit-identical fast path in plain floats,
-as the Newton kernels of :mod:`cdpr_twin.estimators.model` do (a test holds them to these).
+as the Newton kernels of :mod:`cdpr_twin.estimators.model_based` do (a test holds them to these).
 
 Conventions (DESIGN §3): homogeneous transforms are 4×4 arrays named ``T_<to>_<from>``;
 twists are ``[v, ω]`` (linear first); quaternions are ``quat_wxyz`` (scalar first, the MuJoCo

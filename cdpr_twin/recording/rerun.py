@@ -25,6 +25,9 @@ Rerun entity paths (they follow the frame tree, DESIGN §9):
 | ``tension`` | measured tensions, one series per cable [N] |
 | ``length`` | encoder (rest) lengths, one series per cable [m] |
 | ``events`` | scenario events (warning) and the robot's faults (error), as a text log |
+
+The recording carries the viewer's default layout (:func:`default_blueprint`): the 3D scene, the
+onboard camera, the deviations and the tensions, each estimator in one colour in both plots.
 """
 
 from __future__ import annotations
@@ -40,7 +43,6 @@ import numpy as np
 from cdpr_twin.files.transaction import OutputError, Partial, writing
 from cdpr_twin.math.se3 import covariance_ellipsoids, quat_xyzw_from_matrix
 from cdpr_twin.recording import watchdog
-from cdpr_twin.recording.blueprint import default_blueprint, robot_label, series_colors
 from cdpr_twin.types import CameraIntrinsics, Measurement, PoseEstimate
 
 SLACK_TENSION = 0.5
@@ -159,8 +161,9 @@ class RerunRecorder:
         corners = np.array(
             [[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])]
         )
-        edges = [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5),
-                 (2, 6), (3, 7)]  # fmt: skip
+        # corner i is at hi in x, y, z where bit 0, 1, 2 of i is set: an edge joins two corners
+        # that differ in one bit (the four edges along x, then along y, then along z)
+        edges = [(i, i ^ bit) for bit in (1, 2, 4) for i in range(8) if not i & bit]
         frame = rr.LineStrips3D([corners[list(e)] for e in edges], colors=[150, 150, 160])
         rec.log("world/frame", frame, static=True)
         exits = rr.Points3D(s.a_base, radii=0.008, colors=[230, 140, 30])
@@ -410,3 +413,60 @@ class RerunRecorder:
         """Finish and give the file its final name."""
         self.finish()
         self.commit()
+
+
+# ------------------------------------------------------------- the viewer's default layout
+PALETTE = (
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (214, 39, 40),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+    (127, 127, 127),
+    (188, 189, 34),
+    (23, 190, 207),
+)
+"""Series colours (RGB), one per estimator in recording order (matplotlib's tab10): each
+estimator keeps its colour in both deviation plots, so one legend reads both."""
+
+
+def robot_label(model_file: Path | None) -> str:
+    """A robot's name from its MJCF scene: ``models/acrobot/scene.xml`` → ``ACROBOT``."""
+    if model_file is None:
+        return "robot"
+    return (model_file.parent.name if model_file.stem == "scene" else model_file.stem).upper()
+
+
+def series_colors(n: int) -> list[tuple[int, int, int]]:
+    """``n`` series colours (RGB 0-255), distinct up to 10 and cycling after."""
+    return [PALETTE[i % len(PALETTE)] for i in range(n)]
+
+
+def default_blueprint(robot: str = "robot"):
+    """The default layout: 3D scene, camera image, deviations and tensions over time.
+
+    Args:
+        robot: the 3D view's title (the robot's name).
+    """
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial3DView(origin="world", name=robot),
+            rrb.Vertical(
+                rrb.Spatial2DView(origin="world/platform/cam", name="onboard camera"),
+                rrb.TimeSeriesView(
+                    origin="deviation/translation_mm", name="estimate − truth: position [mm]"
+                ),
+                rrb.TimeSeriesView(
+                    origin="deviation/rotation_deg", name="estimate − truth: rotation [°]"
+                ),
+                rrb.TimeSeriesView(origin="tension", name="tensions [N]"),
+                row_shares=[3, 2, 2, 2],
+            ),
+            column_shares=[3, 2],
+        ),
+        collapse_panels=True,
+    )

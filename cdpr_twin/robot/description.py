@@ -5,8 +5,8 @@ A description holds every number of one cable robot in SI units, each key naming
 pulleys, platform anchor points, the platform's mass, inertia and box, the cable material, the
 winches, the camera, the tag, the monitor's limits and the viewer's scene. The schema is strict:
 an unknown, missing or badly typed key is a one-line :class:`RobotError` naming the file and the
-field. :mod:`cdpr_twin.sim.generate` turns a :class:`Robot` into MJCF through ``mujoco.MjSpec``;
-this module is numpy + tomllib only.
+field. :mod:`cdpr_twin.sim.mjcf_from_robot` turns a :class:`Robot` into MJCF through
+``mujoco.MjSpec``; this module is numpy + tomllib only.
 """
 
 from __future__ import annotations
@@ -34,9 +34,17 @@ from cdpr_twin.robot.schema import (
 __all__ = ["Camera", "Robot", "RobotError", "Tag", "TensionSensorSpec", "load_robot"]
 
 SECTIONS = (
-    "frame", "cables", "pulleys", "platform", "winches", "tension_sensors", "payload", "camera",
-    "tag", "monitor",
-)  # fmt: skip
+    "frame",
+    "cables",
+    "pulleys",
+    "platform",
+    "winches",
+    "tension_sensors",
+    "payload",
+    "camera",
+    "tag",
+    "monitor",
+)
 OPTIONAL_SECTIONS = ("camera", "tag", "monitor", "scene")
 
 
@@ -151,8 +159,11 @@ class Robot:
 def _simulation(t: _Table) -> dict:
     timestep = t.number("timestep_s", positive=True)
     if not MIN_TIMESTEP <= timestep <= MAX_TIMESTEP:
-        raise t.fail("timestep_s", f"must be in [{MIN_TIMESTEP:g}, {MAX_TIMESTEP:g}] s (stiff "
-                     f"cables diverge above), got {timestep:g}")  # fmt: skip
+        raise t.fail(
+            "timestep_s",
+            f"must be in [{MIN_TIMESTEP:g}, {MAX_TIMESTEP:g}] s (stiff "
+            f"cables diverge above), got {timestep:g}",
+        )
     return {"timestep": timestep, "gravity": t.array("gravity_m_s2", (3,))}
 
 
@@ -170,8 +181,11 @@ def _frame(t: _Table) -> dict:
     if np.any(out["frame_outer_min"] >= out["frame_outer_max"]):
         raise t.fail("outer_min_m", "must be below outer_max_m on every axis")
     if out["floor_height"] > out["frame_min"][2]:  # the workspace cannot reach under the floor
-        raise t.fail("floor_height_m", f"must be at most inner_min_m's z "
-                     f"({out['frame_min'][2]:g} m), got {out['floor_height']:g}")  # fmt: skip
+        raise t.fail(
+            "floor_height_m",
+            f"must be at most inner_min_m's z "
+            f"({out['frame_min'][2]:g} m), got {out['floor_height']:g}",
+        )
     return out
 
 
@@ -285,8 +299,11 @@ def _tag(t: _Table) -> Tag:
     family, tag_id = t.string("family"), t.integer("id")
     if (family, tag_id) != ("tag36h11", 0):  # what the camera's detector looks for
         bad = "family" if family != "tag36h11" else "id"
-        raise t.fail(bad, f"the twin detects tag36h11 id 0 only, got {family} id {tag_id}; "
-                          "use that tag (and its texture, make_tag_texture.py)")  # fmt: skip
+        raise t.fail(
+            bad,
+            f"the twin detects tag36h11 id 0 only, got {family} id {tag_id}; "
+            "use that tag (and its texture, make_tag_texture.py)",
+        )
     return Tag(
         family=family,
         id=tag_id,
@@ -373,8 +390,10 @@ def load_robot(path: str | Path) -> Robot:
         fields[key] = None if t is None else reader(t)
         tables += [t] if t is not None else []
     mon = table("monitor", required=False) or _Table(path, {}, "monitor")
-    for field, key in (("max_speed", "platform_max_speed_m_s"),
-                       ("max_angular_speed", "platform_max_angular_speed_rad_s")):  # fmt: skip
+    for field, key in (
+        ("max_speed", "platform_max_speed_m_s"),
+        ("max_angular_speed", "platform_max_angular_speed_rad_s"),
+    ):
         fields[field] = mon.number(key, math.inf, positive=True, infinite=True)
     scene = table("scene", required=False) or _Table(path, {}, "scene")
     fields.update(_scene(scene, fields["frame_outer_min"], fields["frame_outer_max"]))

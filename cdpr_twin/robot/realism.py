@@ -4,8 +4,7 @@ Each effect is *generated* by the simulation layer (rendered, integrated, quanti
 magnitude from ``models/acrobot/README.md`` (its source named there), and each can be switched
 off. What is robot data — the drum radius, the tension sensors' range, accuracy and
 repeatability — is not here: ``nan`` fields (and ``repeatability_noise``) take it from the
-robot description (``robot.toml`` → the model's ``<numeric>``;
-:func:`cdpr_twin.robot.sensing.for_robot`).
+robot description (``robot.toml`` → the model's ``<numeric>``; :func:`for_robot`).
 Profiles: ``profile = "ideal"`` is the twin before realism, bit for bit. Magnitudes come in two
 kinds, as physics dictates:
 
@@ -14,7 +13,9 @@ kinds, as physics dictates:
 - per run (drawn from the run seed): pixel noise, tension repeatability noise, the homing offset
   of the start pose.
 
-A scenario overrides any field: ``[realism.camera] exposure_s = 0.004``.
+A scenario overrides any field: ``[realism.camera] exposure_s = 0.004``. Every magnitude has an
+upper bound here (``MAX_*``, each with the reason it is the limit), which the scenario's other
+tables (``[truth]``, ``[sensors]``, events) use too.
 """
 
 from __future__ import annotations
@@ -26,18 +27,82 @@ from typing import Any
 import numpy as np
 
 from cdpr_twin.options import OptionError, option
-from cdpr_twin.robot.realism_limits import (
-    MAX_CENTER_ERROR_STD_PX,
-    MAX_DISTORTION_ERROR_STD,
-    MAX_FULL_WELL_E,
-    MAX_HOMING_POSITION_STD,
-    MAX_HOMING_ROTATION_STD,
-    MAX_LATENCY_TICKS,
-    MAX_TENSION_NOISE_STD,
-    TENSION_NOISE_WHY,
-    check_at_most,
-    check_relative_std,
-)
+
+# ---------------------------------------------------------------------------- the limits
+# The largest magnitudes a scenario may ask for, each with the reason it is the limit. Real
+# robots and cameras stay far inside these: beyond them a draw breaks the physics (a
+# non-positive radius), the arithmetic (float32 overflow), the memory, or the detector. The
+# robot's calibration errors ([truth]), the tension sensors' noise ([sensors],
+# [realism.tension]) and a failed sensor's reading are bounded here too.
+MAX_RELATIVE_STD = 0.1
+"""The largest per-robot relative std of a positive quantity (a radius, a focal length, a
+gain): a non-positive draw is then a 10σ event; built and calibrated parts are within 1 %."""
+MAX_FULL_WELL_E = 1e30
+"""The largest full well [e-] the float32 frame arithmetic holds without overflow."""
+MAX_LATENCY_TICKS = 100
+"""The longest camera latency [control ticks] (4 s at 25 Hz)."""
+MAX_CENTER_ERROR_STD_PX = 20.0
+"""The largest per-robot std of the calibrated principal point [px]: calibrations leave
+0.3–1.3 px (``models/acrobot/README.md``), and a 10σ draw stays inside a 640×480 frame."""
+MAX_DISTORTION_ERROR_STD = 0.1
+"""The largest per-robot std of a calibrated distortion coefficient: calibrations leave
+3e-4–7e-3; at 0.1 a 10σ draw moves k1 by 1, a different lens."""
+MAX_HOMING_POSITION_STD = 0.05
+"""The largest homing repeatability [m] per axis: a robot that homes farther off than this
+starts somewhere else (set ``start.pose``); CDPRs home within millimetres."""
+MAX_HOMING_ROTATION_STD = math.radians(5.0)
+"""The largest homing repeatability [rad] per axis (5°; CDPRs home within tenths of one)."""
+
+MAX_POSITION_ERROR_STD = 1.0
+"""The largest per-axis std of a point's calibration error [m] (exit and anchor points, camera
+mount, tag): assembly and calibration leave millimetres (``paper_open_loop``: 12 mm at the exit
+points); a point a metre off is another robot than its description."""
+MAX_ROTATION_ERROR_STD = math.radians(10.0)
+"""The largest per-axis std of a mount's calibration error [rad] (10°): a hand-eye calibration
+and a tag placed by hand are good to 0.3°; at 10° a 3σ draw turns the camera 30° away."""
+MAX_PULLEY_RADIUS_STD = 0.01
+"""The largest std of a sheave's radius [m] (1 cm): sheaves are machined to ±0.2 mm, and a draw
+off by centimetres is another pulley (ACROBOT's sheaves have a 4.5 mm radius)."""
+MAX_TENSION_NOISE_STD = 1000.0
+"""The largest std of a tension reading's noise or bias [N]: sensors repeat to 0.1 % of their
+span or better (ACROBOT 0.01 N of 100 N, COGIRO 5 N of 7 kN); 1 kN is ten times the whole span
+of ACROBOT's sensors, a reading that says nothing of the tension."""
+TENSION_NOISE_WHY = " N (beyond the span of ACROBOT's sensors tenfold: a reading says nothing)"
+"""Why :data:`MAX_TENSION_NOISE_STD` bounds a tension noise, as a message says it."""
+MAX_TENSION_READING = 1e6
+"""The largest force a failed tension sensor may read [N], either way (1 MN): over 150 times
+the top of the largest shipped robot's range (COGIRO's 6 kN); beyond it a reading is no force
+a cable robot's sensor outputs (1e300 was accepted, and read for the rest of the run)."""
+
+
+def check_relative_std(field: str, std: float, what: str) -> None:
+    """Refuse a relative std that could draw a non-positive ``what`` (> :data:`MAX_RELATIVE_STD`).
+
+    Raises:
+        OptionError: naming ``field``.
+    """
+    if std > MAX_RELATIVE_STD:
+        raise OptionError(
+            field,
+            f"must be ≤ {MAX_RELATIVE_STD:g} (a relative std: at {std:g} a draw of 1 + std·z "
+            f"makes the {what} ≤ 0 once in {1 / _tail(1 / std):.3g} robots), got {std:g}",
+        )
+
+
+def check_at_most(field: str, value: float, bound: float, unit_why: str) -> None:
+    """Refuse ``value`` above ``bound``: "must be ≤ {bound}{unit_why}, got {value}".
+
+    Raises:
+        OptionError: naming ``field``.
+    """
+    if value > bound:
+        raise OptionError(field, f"must be ≤ {bound:g}{unit_why}, got {value:g}")
+
+
+def _tail(k: float) -> float:
+    """P(z < −k) for a standard normal z."""
+    return 0.5 * math.erfc(k / math.sqrt(2.0))
+
 
 PROFILES = ("ideal", "acrobot")
 
@@ -144,8 +209,9 @@ class WinchRealism:
 class TensionRealism:
     """Tension-sensor imperfections beyond the per-reading noise ``[sensors] tension_noise_std``.
 
-    Sensor i reads ``(1 + g_i)·τ_i + b_i + n`` (:class:`cdpr_twin.sim.tension.TensionSensors`):
-    b_i and g_i are fixed per robot (truth seed), n is drawn at each reading (run seed).
+    Sensor i reads ``(1 + g_i)·τ_i + b_i + n``
+    (:class:`cdpr_twin.sim.tension_sensors.TensionSensors`): b_i and g_i are fixed per robot
+    (truth seed), n is drawn at each reading (run seed).
 
     How a datasheet maps onto these fields. A stated *accuracy* (the paper's 0.24 N) is a bound
     on the total error, not a standard deviation: accuracy itself is qualitative (JCGM 200:2012,
@@ -368,3 +434,58 @@ def without_source(realism: Realism, source: str) -> Realism:
     if source == "tension_noise":
         return replace(realism, tension=replace(realism.tension, noise_std=0.0))
     raise ValueError(f"unknown source of variation {source!r}; choose one of {RUN_SOURCES}")
+
+
+# ----------------------------------------------------------- the robot's own sensing data
+# What a robot description says of its sensing, filled into a profile: a profile's nan fields
+# (the drum radius, the tension sensors' range and accuracy) and its repeatability_noise take
+# the robot's data (robot.toml → the model's <numeric>).
+@dataclass(frozen=True)
+class RobotSensing:
+    """What a robot description says of its winches and tension sensors (SI units).
+
+    Attributes:
+        drum_radius: the drums' radius [m].
+        tension_range: (min, max) the sensors' calibrated range [N].
+        accuracy: the sensors' accuracy, a bound ±a on the error [N].
+        repeatability: 1σ of their reading noise [N].
+    """
+
+    drum_radius: float
+    tension_range: tuple[float, float]
+    accuracy: float
+    repeatability: float
+
+
+def for_robot(realism: Realism, robot: RobotSensing) -> Realism:
+    """The profile with its robot-data fields (``nan``, ``repeatability_noise``) filled in.
+
+    The accuracy becomes a rectangular bias, std a/√3 (GUM 4.3.7; see :class:`TensionRealism`).
+
+    Raises:
+        OptionError: naming ``realism.tension.range_min``/``range_max`` when the scenario sets
+            one and the range, with the robot's value for the other, does not hold 0 N.
+    """
+    w, t = realism.winch, realism.tension
+    if math.isnan(w.drum_radius):
+        w = replace(w, drum_radius=robot.drum_radius)
+    lo, hi = robot.tension_range
+    filled = {
+        "range_min": lo if math.isnan(t.range_min) else t.range_min,
+        "range_max": hi if math.isnan(t.range_max) else t.range_max,
+        "bias_std": robot.accuracy / math.sqrt(3.0) if math.isnan(t.bias_std) else t.bias_std,
+    }
+    if t.repeatability_noise and math.isnan(t.noise_std):
+        filled["noise_std"] = robot.repeatability
+    low, high = filled["range_min"], filled["range_max"]
+    set_min, set_max = not math.isnan(t.range_min), not math.isnan(t.range_max)
+    # a slack cable reads 0 N: every load cell's range holds it (the model's own range is the
+    # model's data, checked in robot descriptions; a scenario's is checked here)
+    if (set_min or set_max) and not low <= 0.0 < high:
+        given = "range_max" if (set_max and not high > 0.0) or not set_min else "range_min"
+        raise OptionError(
+            f"realism.tension.{given}",
+            f"the readings' range {low:g}…{high:g} N (the robot's {lo:g}…{hi:g} N where not "
+            "set) must hold 0 N, the slack cable's reading, with range_min ≤ 0 < range_max",
+        )
+    return replace(realism, winch=w, tension=replace(t, **filled))

@@ -161,8 +161,10 @@ def tension_sensors(t: _Table) -> TensionSensorSpec:
     """``[tension_sensors]``: range_n, accuracy_n, repeatability_n, location."""
     lo, hi = (float(v) for v in t.array("range_n", (2,)))
     if not lo <= 0.0 < hi:  # a slack cable reads 0 N
-        raise t.fail("range_n", f"must be [min, max] with min ≤ 0 < max (a slack cable's 0 N "
-                     f"in range), got {[lo, hi]}")  # fmt: skip
+        raise t.fail(
+            "range_n",
+            f"must be [min, max] with min ≤ 0 < max (a slack cable's 0 N in range), got {[lo, hi]}",
+        )
     accuracy = t.number("accuracy_n", positive=True)
     repeatability = t.number("repeatability_n", positive=True)
     location = t.string("location")
@@ -191,16 +193,25 @@ def check_inertia(t: _Table, inertia: np.ndarray) -> None:
     else:
         moments = np.asarray(inertia, dtype=float)
     if not np.all(moments > 0):
-        raise t.fail("inertia_kg_m2", f"must be positive definite, its principal moments are "
-                     f"{np.round(moments, 6).tolist()} kg·m²")  # fmt: skip
+        raise t.fail(
+            "inertia_kg_m2",
+            f"must be positive definite, its principal moments are "
+            f"{np.round(moments, 6).tolist()} kg·m²",
+        )
     if np.any(2 * moments > moments.sum() * (1 + 1e-9)):
-        raise t.fail("inertia_kg_m2", f"principal moments {np.round(moments, 6).tolist()} "
-                     "kg·m²: each must be at most the sum of the other two (no rigid body has "
-                     "another inertia)")  # fmt: skip
+        raise t.fail(
+            "inertia_kg_m2",
+            f"principal moments {np.round(moments, 6).tolist()} "
+            "kg·m²: each must be at most the sum of the other two (no rigid body has "
+            "another inertia)",
+        )
 
 
 def check_gravity(t: _Table, gravity: np.ndarray, sag: bool) -> None:
     """Refuse a gravity off the vertical for cables with mass (their catenary hangs along z)."""
     if sag and not hangs_vertically(gravity):
-        raise t.fail("gravity_m_s2", f"must point along -z with cables.sag = true (the cables "
-                     f"hang in vertical planes), got {gravity.tolist()}")  # fmt: skip
+        raise t.fail(
+            "gravity_m_s2",
+            f"must point along -z with cables.sag = true (the cables "
+            f"hang in vertical planes), got {gravity.tolist()}",
+        )

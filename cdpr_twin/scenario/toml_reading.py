@@ -184,9 +184,12 @@ def _read_field(r: OptionReader, f: dataclasses.Field, hint: Any) -> Any:
             value = r.pose(key)
     elif hint is float:
         value = r.number(
-            key, minimum=spec.minimum, exclusive=spec.exclusive, unit=spec.unit,
+            key,
+            minimum=spec.minimum,
+            exclusive=spec.exclusive,
+            unit=spec.unit,
             infinite=spec.infinite,
-        )  # fmt: skip
+        )
         value = math.radians(value) if spec.unit == "deg" else value
     elif hint is bool:
         value = r.boolean(key)
@@ -197,10 +200,15 @@ def _read_field(r: OptionReader, f: dataclasses.Field, hint: Any) -> Any:
     elif origin is tuple and args[0] is float:
         items = r.list_of(key, f"numbers{' in ' + spec.unit if spec.unit else ''}", spec)
         value = tuple(
-            r.number(f"{key}[{i}]", value=x, minimum=spec.minimum, exclusive=spec.exclusive,
-                     unit=spec.unit)
+            r.number(
+                f"{key}[{i}]",
+                value=x,
+                minimum=spec.minimum,
+                exclusive=spec.exclusive,
+                unit=spec.unit,
+            )
             for i, x in enumerate(items)
-        )  # fmt: skip
+        )
         value = tuple(map(math.radians, value)) if spec.unit == "deg" else value
     elif origin is tuple and args[0] is str:
         items = r.list_of(key, "strings", spec)

@@ -49,8 +49,13 @@ def chain_model(l0: float, es: float, rho: float, low, high, n: int) -> mujoco.M
         body = spec.worldbody.add_body(name=f"node{k}", pos=low + (high - low) * k / n)
         for axis in np.eye(3):
             body.add_joint(type=mujoco.mjtJoint.mjJNT_SLIDE, axis=axis)
-        body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.01, 0, 0], mass=rho * l0 / n,
-                      contype=0, conaffinity=0)  # fmt: skip
+        body.add_geom(
+            type=mujoco.mjtGeom.mjGEOM_SPHERE,
+            size=[0.01, 0, 0],
+            mass=rho * l0 / n,
+            contype=0,
+            conaffinity=0,
+        )
         body.add_site(name=f"n{k}")
     for k in range(n):
         t = spec.add_tendon(name=f"seg{k}", stiffness=es * n / l0, springlength=[l0 / n, l0 / n])

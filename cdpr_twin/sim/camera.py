@@ -13,7 +13,7 @@ import numpy as np
 
 from cdpr_twin.math.se3 import matrix_from_quat_wxyz, rot_x, transform
 from cdpr_twin.options import OptionError
-from cdpr_twin.sim import contexts
+from cdpr_twin.sim import gl_contexts
 from cdpr_twin.sim.imaging import lens_margins
 from cdpr_twin.types import CameraIntrinsics
 
@@ -191,7 +191,7 @@ class CameraRenderer:
             )
         try:
             self._renderer = mujoco.Renderer(model, height=h, width=w)
-            self._free = contexts.owned(self, self._renderer)
+            self._free = gl_contexts.owned(self, self._renderer)
         except Exception as exc:
             raise RuntimeError(
                 f"offscreen rendering failed ({exc}). MuJoCo chose its GL backend from "
@@ -248,7 +248,7 @@ class CameraRenderer:
         return self.render(d)
 
     def close(self) -> None:
-        """Free the GL context (dropped unclosed, :mod:`~cdpr_twin.sim.contexts` frees it)."""
+        """Free the GL context (dropped unclosed, :mod:`~cdpr_twin.sim.gl_contexts` frees it)."""
         if self._renderer is not None:
             self._free()
             self._renderer = None

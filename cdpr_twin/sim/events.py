@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
 from cdpr_twin.options import OptionError, option
-from cdpr_twin.robot.realism_limits import MAX_TENSION_READING
+from cdpr_twin.robot.realism import MAX_TENSION_READING
 
 
 class StepHook(Protocol):

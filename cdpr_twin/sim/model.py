@@ -20,7 +20,7 @@ from cdpr_twin.files.paths import path_kind
 from cdpr_twin.math.geometry import CdprGeometry
 from cdpr_twin.math.se3 import matrix_from_quat_wxyz, quat_wxyz_from_matrix, so3_exp, transform
 from cdpr_twin.robot.deviations import TruthDeviations
-from cdpr_twin.robot.sensing import RobotSensing
+from cdpr_twin.robot.realism import RobotSensing
 from cdpr_twin.sim import camera
 from cdpr_twin.sim.occluder import add_occluder
 

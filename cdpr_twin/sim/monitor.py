@@ -200,8 +200,10 @@ class Monitor:
         seen: dict[FaultKind, tuple[str, int]] = {}
         tau = p.tensions
         worst = int(tau.argmax())
-        for kind, limit in ((FaultKind.BREAKING_LOAD, lim.breaking_load),
-                            (FaultKind.SENSOR_RANGE, lim.sensor_max)):  # fmt: skip
+        for kind, limit in (
+            (FaultKind.BREAKING_LOAD, lim.breaking_load),
+            (FaultKind.SENSOR_RANGE, lim.sensor_max),
+        ):
             if tau[worst] > limit:
                 seen[kind] = (f"cable {worst + 1} at {tau[worst]:.1f} N > {limit:g} N", worst + 1)
         self._placement(seen)

@@ -15,13 +15,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from cdpr_twin.math.geometry import CdprGeometry
-from cdpr_twin.robot.realism import Realism, robot_rng, run_rng
-from cdpr_twin.robot.sensing import for_robot
+from cdpr_twin.robot.realism import Realism, for_robot, robot_rng, run_rng
 from cdpr_twin.sim.encoders import Encoders
 from cdpr_twin.sim.model import ModelError, SimulationError, robot_sensing
 from cdpr_twin.sim.onboard_camera import OnboardCamera
 from cdpr_twin.sim.physics import Physics
-from cdpr_twin.sim.tension import TensionSensors
+from cdpr_twin.sim.tension_sensors import TensionSensors
 from cdpr_twin.types import CameraIntrinsics, Command, Measurement
 
 

@@ -9,7 +9,7 @@ the others are kept.
 
 Modules: :mod:`.plan` (which runs, and running them), :mod:`.analysis` (every number, from the
 run files), :mod:`.findings` (the paper's claims and their verdicts), :mod:`.report` (figures
-and ``report.md``), :mod:`.files` (the directory's promises: one study at a time, an earlier
+and ``report.md``), :mod:`.output_dir` (the directory's promises: one study at a time, an earlier
 study's files removed first, every file written whole).
 """
 
@@ -21,8 +21,8 @@ from pathlib import Path
 
 from cdpr_twin.files.transaction import OutputDir, others, write_json_atomic
 from cdpr_twin.study.analysis import accuracy_at_p1, analyse
-from cdpr_twin.study.files import STUDY_FILES, STUDY_MARKER, clear_earlier_study
 from cdpr_twin.study.findings import FINDINGS, Finding, evaluate
+from cdpr_twin.study.output_dir import STUDY_FILES, STUDY_MARKER, clear_earlier_study
 from cdpr_twin.study.plan import (
     Progress,
     RunSpec,
@@ -140,7 +140,7 @@ def reproduce_runs(
 ) -> dict:
     """Claim ``out``, remove an earlier study's files, run ``specs``, write the report.
 
-    The directory's promises are :mod:`.files`': its lock held throughout (a second writer is
+    The directory's promises are :mod:`.output_dir`': its lock held throughout (a second writer is
     refused), the earlier study's report, figures, ``runs.json`` and runs removed before any
     run starts, each file written whole, ``report.md`` last. A stop (Ctrl-C, SIGTERM) ends the
     workers and leaves the runs that finished, without ``runs.json`` or a report, but with

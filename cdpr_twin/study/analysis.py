@@ -18,6 +18,7 @@ from cdpr_twin.math.se3 import pose_distance, pose_from_vector
 from cdpr_twin.recording.timeseries import Timeseries
 from cdpr_twin.study.findings import evaluate
 from cdpr_twin.study.plan import PBVS_SCENARIO
+from cdpr_twin.study.repeatability import PBVS_CONVERGED, is_main, repetition_rms, spread
 from cdpr_twin.study.results import (
     image_noise_vs_distance,
     load_summary,
@@ -27,7 +28,6 @@ from cdpr_twin.study.results import (
     value_at,
 )
 from cdpr_twin.study.robot_numbers import model_physics, payloads, robot_errors
-from cdpr_twin.study.spread import PBVS_CONVERGED, is_main, repetition_rms, spread
 
 
 @dataclass(frozen=True, eq=False)

@@ -211,8 +211,7 @@ def run_study(
         OutputError: ``runs/`` or ``runs.json`` cannot be written.
     """
     from cdpr_twin.campaign.executor import run_local  # the one engine of parallel runs
-    from cdpr_twin.files.cleanup import sweep_abandoned
-    from cdpr_twin.files.transaction import write_json_atomic, writing
+    from cdpr_twin.files.transaction import sweep_abandoned, write_json_atomic, writing
 
     runs_dir = out / "runs"
     with writing(runs_dir):

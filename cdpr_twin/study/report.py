@@ -10,7 +10,7 @@ from cdpr_twin.files.transaction import write_atomic, write_json_atomic
 from cdpr_twin.recording.timeseries import Timeseries
 from cdpr_twin.run.metrics import sample_std
 from cdpr_twin.study.analysis import figure_runs, segment_ends
-from cdpr_twin.study.files import FIGURES
+from cdpr_twin.study.output_dir import FIGURES
 from cdpr_twin.study.results import load_summary, model_estimators
 
 PAPER_PBVS = {

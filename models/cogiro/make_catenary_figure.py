@@ -33,12 +33,19 @@ def main() -> None:
     ax = fig.add_subplot()
     ax.loglog(SEGMENTS, err_low, "o-", label="platform end")
     ax.loglog(SEGMENTS, err_high, "s--", label="pulley end")
-    ax.loglog(SEGMENTS, [err_low[0] * (SEGMENTS[0] / n) ** 2 for n in SEGMENTS], ":", color="grey",
-              label="∝ 1/N²")  # fmt: skip
+    ax.loglog(
+        SEGMENTS,
+        [err_low[0] * (SEGMENTS[0] / n) ** 2 for n in SEGMENTS],
+        ":",
+        color="grey",
+        label="∝ 1/N²",
+    )
     ax.axhline(0.01, color="red", lw=0.8, label="1 %")
     ax.set(xlabel="segments N of the MuJoCo cable", ylabel="|F_MuJoCo − F_catenary| / |F_catenary|")
-    ax.set_title(f"Ø4 mm steel, 17 m span: H = {cat.horizontal:.0f} N, sag {cat.sag * 1e3:.0f} mm",
-                 fontsize=9)  # fmt: skip
+    ax.set_title(
+        f"Ø4 mm steel, 17 m span: H = {cat.horizontal:.0f} N, sag {cat.sag * 1e3:.0f} mm",
+        fontsize=9,
+    )
     ax.set_xticks(SEGMENTS, [str(n) for n in SEGMENTS])
     ax.minorticks_off()
     ax.legend(fontsize=8)

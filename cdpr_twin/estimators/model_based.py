@@ -41,6 +41,8 @@ from cdpr_twin.estimators.selection import (
 )
 from cdpr_twin.estimators.solvers import (
     Backend,
+    PoseSolution,
+    WeightedSolution,
     _cable_tuples,
     _kernel,
     _newton,
@@ -146,12 +148,8 @@ class ModelEstimator(Estimator):
             return lengths
         return lengths + elastic_elongation(lengths, tensions, self.geometry.es, self.tension0)
 
-    def solve(self, targets: np.ndarray, cables: list[int], T0: np.ndarray):
-        """Solve for the pose matching ``targets`` on ``cables`` (indices from 0) from ``T0``.
-
-        Returns:
-            ``(T, residual, iterations)``.
-        """
+    def solve(self, targets: np.ndarray, cables: list[int], T0: np.ndarray) -> PoseSolution:
+        """Solve for the pose matching ``targets`` on ``cables`` (indices from 0) from ``T0``."""
         if self.backend == "fast":
             goal = np.asarray(targets, dtype=float)[cables]
             if self._compiled:  # the same operations compiled; the reference where it must
@@ -159,7 +157,7 @@ class ModelEstimator(Estimator):
                     self._cable_array[cables], goal, T0, 30, 1e-12
                 )
                 if outcome == newton.MAIN:
-                    return T, residual, it
+                    return PoseSolution(T, residual, it)
             return _newton([self._cables[i] for i in cables], self.pulley, goal, T0)
         cables = np.asarray(cables)
         g = self.geometry
@@ -170,22 +168,23 @@ class ModelEstimator(Estimator):
         """Weights 1/σ_i² of every cable in the ``all_taut`` solve (m,) [1/m²]."""
         o = self.options
         sigma = length_sigma(
-            lengths, tensions, self.geometry.es, o.length_noise_std, o.tension_noise_std,
+            lengths,
+            tensions,
+            self.geometry.es,
+            o.length_noise_std,
+            o.tension_noise_std,
             self.elastic,
-        )  # fmt: skip
+        )
         return 1.0 / sigma**2
 
-    def solve_weighted(self, targets, weights, cables: list[int], T0: np.ndarray):
-        """Weighted least squares over ``cables`` (any number ≥ 6) from ``T0``.
-
-        Returns:
-            ``(T, residual, iterations, converged)``, residual the largest |residual| [m].
-        """
+    def solve_weighted(
+        self, targets, weights, cables: list[int], T0: np.ndarray
+    ) -> WeightedSolution:
+        """Weighted least squares over ``cables`` (any number ≥ 6) from ``T0``."""
         idx = np.asarray(cables)
         if self.backend == "fast":
             chosen = [self._cables[i] for i in cables]
-            T, r, it, ok = gauss_newton(chosen, self.pulley, targets[idx], weights[idx], T0)
-            return T, float(np.max(np.abs(r))), it, ok
+            return gauss_newton(chosen, self.pulley, targets[idx], weights[idx], T0)
         g, sw = self.geometry, np.sqrt(weights[idx])
         radii = g.pulley_radius[idx] if self.pulley else None
 
@@ -197,8 +196,7 @@ class ModelEstimator(Estimator):
         x0 = np.concatenate([T0[:3, 3], quat_wxyz_from_matrix(T0[:3, :3])])
         sol = least_squares(residuals, x0, method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15)
         T = transform(matrix_from_quat_wxyz(sol.x[3:]), sol.x[:3])
-        res = float(np.max(np.abs(sol.fun[:-1] / sw)))
-        return T, res, int(sol.nfev), bool(sol.success)
+        return WeightedSolution(T, sol.fun[:-1] / sw, int(sol.nfev), bool(sol.success))
 
     def choose(self, tensions: np.ndarray, taut: np.ndarray) -> tuple[list[int], float]:
         """The cables this update solves on (indices from 0, sorted), by ``selection``.
@@ -237,7 +235,8 @@ class ModelEstimator(Estimator):
         if taut < N_USED:
             return self._held(m, FEW_TAUT_CABLES, cables=used)
         targets = self.corrected_lengths(lengths, tensions)
-        T, residual, iterations = self.solve(targets, cables, self._T)
+        solution = self.solve(targets, cables, self._T)
+        T, residual, iterations = solution.T, solution.residual, solution.iterations
         if not (residual <= self.max_residual and math.isfinite(T.sum())):
             return self._held(
                 m,
@@ -270,10 +269,12 @@ class ModelEstimator(Estimator):
         targets = self.corrected_lengths(lengths, tensions)
         if self.selection == "all_taut":
             w = self.weights(lengths, tensions)
-            T, residual, iterations, ok = self.solve_weighted(targets, w, cables, self._T)
-            ok = ok and residual <= self.options.max_residual_lsq
+            fit = self.solve_weighted(targets, w, cables, self._T)
+            T, residual, iterations = fit.T, fit.largest_residual, fit.iterations
+            ok = fit.converged and residual <= self.options.max_residual_lsq
         else:
-            T, residual, iterations = self.solve(targets, cables, self._T)
+            solution = self.solve(targets, cables, self._T)
+            T, residual, iterations = solution.T, solution.residual, solution.iterations
             ok = residual <= self.max_residual
         if not (ok and math.isfinite(T.sum())):
             return self._held(

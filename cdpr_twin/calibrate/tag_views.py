@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cdpr_twin.calibrate.layout import Layout
+from cdpr_twin.calibrate.parameter_layout import Layout
 
 SHARED = (("camera", 0), ("tag", 6), ("intrinsics", 12))
 """The shared blocks a view depends on, and where each sits in :func:`view_jacobian`'s stack."""

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdpr_twin.calibrate.layout import Layout
+from cdpr_twin.calibrate.parameter_layout import Layout
 from cdpr_twin.math.kinematics import pulley_vectors
 
 TERMS = (("exit", 3), ("anchor", 3), ("tension_bias", 1), ("tension_gain", 1))
@@ -71,10 +71,15 @@ def cable_jacobian(problem, mod, h: float) -> np.ndarray:
     for i in range(L.m):
         # the cable's 8 parameters (exit, anchor, bias, gain), each of the p estimated moved
         # by +h then −h: (2p, 8)
-        base = np.concatenate([mod.a_base[i], mod.b_platform[i],
-                               [mod.tension_bias[i], mod.tension_gain[i]]])  # fmt: skip
-        moved = [at + j for at, (name, w) in zip((0, 3, 6, 7), TERMS, strict=True)
-                 if L.columns(name, i) for j in range(w)]  # fmt: skip
+        base = np.concatenate(
+            [mod.a_base[i], mod.b_platform[i], [mod.tension_bias[i], mod.tension_gain[i]]]
+        )
+        moved = [
+            at + j
+            for at, (name, w) in zip((0, 3, 6, 7), TERMS, strict=True)
+            if L.columns(name, i)
+            for j in range(w)
+        ]
         if not moved:
             continue
         P = np.tile(base, (2 * len(moved), 1))

@@ -189,7 +189,7 @@ def robot_spec(r: Robot) -> mujoco.MjSpec:
     spec.modelname = r.name
     spec.comment = (
         f" {r.name}: generated from robot.toml by `cdpr-twin model build` (cdpr_twin/sim/"
-        "generate.py); do not edit, edit the description. Units: SI, radians. "
+        "mjcf_from_robot.py); do not edit, edit the description. Units: SI, radians. "
     )
     spec.compiler.degree = False
     spec.compiler.autolimits = True

@@ -161,9 +161,13 @@ def base_direction(rows: np.ndarray, T: np.ndarray, i: int, a: int) -> float:
 # ---------------------------------------------------------------------------------- tag
 @jit
 def tag_noise(
-    z: np.ndarray, tag_size: float, focal_px: float, pixel_std: float, lens: np.ndarray,
+    z: np.ndarray,
+    tag_size: float,
+    focal_px: float,
+    pixel_std: float,
+    lens: np.ndarray,
     calibration: bool,
-) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+) -> tuple[np.ndarray, np.ndarray]:
     """A detection's noise covariance (6, 6) and calibration Jacobian ∂n/∂δk (6, 8).
 
     ``fused_models.tag_covariance`` (pinhole) and ``tag_calibration_jacobian`` (through the

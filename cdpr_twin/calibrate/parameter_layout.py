@@ -5,9 +5,16 @@ from __future__ import annotations
 import numpy as np
 
 BLOCKS = (
-    "exit", "anchor", "offset", "scale", "tension_bias", "tension_gain", "camera", "tag",
+    "exit",
+    "anchor",
+    "offset",
+    "scale",
+    "tension_bias",
+    "tension_gain",
+    "camera",
+    "tag",
     "intrinsics",
-)  # fmt: skip
+)
 """The shared parameter blocks, in the order they sit in the parameter vector."""
 
 PER_CABLE = {"exit": 3, "anchor": 3, "offset": 1, "scale": 1, "tension_bias": 1, "tension_gain": 1}
@@ -28,12 +35,19 @@ class Layout:
     """
 
     def __init__(
-        self, m: int, n_poses: int, priors, with_intrinsics: bool = False,
+        self,
+        m: int,
+        n_poses: int,
+        priors,
+        with_intrinsics: bool = False,
         with_statics: bool = False,
-    ) -> None:  # fmt: skip
+    ) -> None:
         sizes = {name: m * w for name, w in PER_CABLE.items()} | dict(camera=6, tag=6, intrinsics=8)
-        possible = {"intrinsics": with_intrinsics, "tension_bias": with_statics,
-                    "tension_gain": with_statics}  # fmt: skip
+        possible = {
+            "intrinsics": with_intrinsics,
+            "tension_bias": with_statics,
+            "tension_gain": with_statics,
+        }
         self.m, self.n_poses, self.blocks = m, n_poses, {}
         at = 0
         for name in BLOCKS:
