@@ -15,7 +15,9 @@ import pyarrow.parquet as pq
 import pytest
 
 from cdpr_twin.campaign import CampaignError, load_campaign, load_table, run_campaign
+from cdpr_twin.campaign.table import read_parquet
 from cdpr_twin.cli import main
+from cdpr_twin.files.transaction import OutputDirError
 from cdpr_twin.recording.timeseries import Timeseries
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -346,7 +348,9 @@ def test_the_paper_study_campaign_is_what_reproduce_runs():
     from cdpr_twin.scenario.loading import scenario_from_data
     from cdpr_twin.study.plan import plan, spec_scenario
 
-    tasks = load_campaign(Path(__file__).resolve().parents[2] / "campaigns" / "paper_study.toml").tasks
+    tasks = load_campaign(
+        Path(__file__).resolve().parents[2] / "campaigns" / "paper_study.toml"
+    ).tasks
     specs = plan()
     assert len(tasks) == len(specs) == 45
     planned = {(s.kind, s.in_loop, s.seed): _canonical(spec_scenario(s)) for s in specs}
@@ -395,3 +399,28 @@ def test_the_table_follows_the_campaign_order_whatever_order_runs_end_in(tmp_pat
     table.gather(ids)
     got = load_table(tmp_path).column("run_id").to_pylist()
     assert got == [ids[0], ids[2], ids[3], "000000000000000a"]  # (3: not run yet; a: last)
+
+
+def test_a_damaged_part_of_a_campaign_table_is_a_one_line_error(tmp_path):
+    parts = tmp_path / "parts"
+    parts.mkdir()
+    (parts / "part-00000.parquet").write_bytes(b"PAR1 not really parquet")
+    with pytest.raises(OutputDirError, match=r"part-00000\.parquet is not a readable Parquet"):
+        load_table(tmp_path)
+    with pytest.raises(OutputDirError, match="delete it and run with --resume"):
+        read_parquet(parts / "part-00000.parquet", ["run_id"])
+
+
+def test_a_campaign_names_a_shipped_scenario_as_run_does(tmp_path):
+    from cdpr_twin.campaign import CampaignError, load_campaign
+
+    axes = '[[axes]]\nkey = "controller.gain"\nvalues = [0.2, 0.4]\n'
+    by_path = tmp_path / "by_path.toml"
+    by_path.write_text(f'name = "g"\nscenario = "{ROOT}/scenarios/paper_pbvs.toml"\n{axes}')
+    by_name = tmp_path / "by_name.toml"
+    by_name.write_text(f'name = "g"\nscenario = "paper_pbvs"\n{axes}')
+    ids = [[t.run_id for t in load_campaign(p).tasks] for p in (by_path, by_name)]
+    assert ids[0] == ids[1] and len(ids[0]) == 2  # the same runs
+    by_name.write_text(f'name = "g"\nscenario = "paper_pbv"\n{axes}')
+    with pytest.raises(CampaignError, match=r"scenario: no scenario named 'paper_pbv'; choose one"):
+        load_campaign(by_name)

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from cdpr_twin.scenario.loading import load_scenario
+
 ROOT = Path(__file__).resolve().parents[2]
 OPEN_LOOP = (ROOT / "scenarios" / "paper_open_loop.toml").read_text()
 
@@ -191,3 +193,18 @@ def test_a_reader_that_goes_away_ends_the_command_quietly_with_sigpipes_status(u
     err = proc.stderr.read()
     assert proc.wait(timeout=120) == 141, err
     assert err == ""
+
+
+def test_a_run_says_when_its_duration_is_rounded_or_its_viewer_cannot_open(monkeypatch):
+    from cdpr_twin.cli.tools import run_notes
+
+    s = load_scenario("paper_open_loop")
+    assert run_notes(s.with_overrides(duration=1.04), spawn=False) == []
+    [note] = run_notes(s.with_overrides(duration=0.059), spawn=False)
+    assert note == "duration 0.059 s runs 1 control ticks of 0.04 s, 0.04 s"
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    [note] = run_notes(s, spawn=True)
+    assert note.startswith("--spawn: no display")
+    monkeypatch.setenv("DISPLAY", ":0")
+    assert run_notes(s, spawn=True) == []

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from conftest import paper_pose
 
+from cdpr_twin.estimators.base import NON_FINITE_INPUT
 from cdpr_twin.plugins import make_estimator
 from cdpr_twin.sim import Twin
 from cdpr_twin.types import Command, Measurement
@@ -67,3 +68,20 @@ def test_lengths_no_pose_can_give_are_held_not_converged(at_p1, selection):
     assert not out.valid and "not_converged" in out.flags
     assert out.residual > 1e-3  # [m]: what was left, reported
     np.testing.assert_array_equal(out.T_base_platform, paper_pose("p1"))  # held
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["control", "image", "model_simple", "model_elastic", "model_pulley", "model_elastic_pulley"],
+)
+def test_every_estimator_flags_a_nan_measurement_time_the_same_way(name, twin):
+    twin.reset(paper_pose("p1"))
+    good = twin.sense()
+    est = make_estimator(name, twin.nominal_geometry)
+    est.reset(paper_pose("p1"))
+    first = est.update(good)
+    bad = Measurement(float("nan"), good.cable_lengths, good.tensions)
+    e = est.update(bad)
+    assert not e.valid and NON_FINITE_INPUT in e.flags
+    np.testing.assert_array_equal(e.T_base_platform, first.T_base_platform)
+    assert est.update(good).T_base_platform is not None  # and it carries on

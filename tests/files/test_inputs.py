@@ -13,11 +13,13 @@ import sys
 import tomllib
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from cdpr_twin.cli import main
 from cdpr_twin.files import inputs as input_files
 from cdpr_twin.files.inputs import MAX_ARRAY_ITEMS, MAX_NESTING, MAX_TOML_BYTES
+from cdpr_twin.scenario.loading import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 OPEN_LOOP = (
@@ -211,3 +213,33 @@ def test_a_long_unknown_key_is_elided(tmp_path, capfd):
     assert main(_argv("run", path, tmp_path)) == 2
     line = _one_line(capfd)
     assert "unknown field" in line and "… (100000 characters)" in line and len(line) < 1000
+
+
+def test_a_file_saved_with_a_byte_order_mark_reads_as_without_it(tmp_path):
+    # before: "not valid TOML: Invalid statement (at line 1, column 1)", the mark invisible
+    # in an editor; now a scenario, a robot description and a campaign read as without it
+    from dataclasses import replace
+
+    from cdpr_twin import resources
+    from cdpr_twin.campaign import load_campaign
+    from cdpr_twin.robot.description import load_robot
+
+    def marked(source: Path, to: Path, text: str | None = None) -> Path:
+        to.parent.mkdir(exist_ok=True)
+        to.write_text("\ufeff" + (text or source.read_text(encoding="utf-8")), encoding="utf-8")
+        assert to.read_bytes()[:3] == b"\xef\xbb\xbf"
+        return to
+
+    scenario = ROOT / "scenarios" / "paper_open_loop.toml"
+    read = load_scenario(marked(scenario, tmp_path / "scenarios" / scenario.name))
+    assert repr(read) == repr(replace(load_scenario(scenario), source=read.source))
+    robot = resources.models_dir() / "acrobot" / "robot.toml"
+    (tmp_path / "assets").symlink_to(robot.parent / "assets")  # its tag texture, beside it
+    read = load_robot(marked(robot, tmp_path / "robot.toml"))
+    plain = load_robot(robot)
+    assert read.name == plain.name and read.mass == plain.mass
+    assert np.array_equal(read.exit_points, plain.exit_points)
+    campaign = ROOT / "campaigns" / "paper_study.toml"
+    text = campaign.read_text(encoding="utf-8").replace("../scenarios/", f"{ROOT}/scenarios/")
+    tasks = load_campaign(marked(campaign, tmp_path / "campaigns" / "c.toml", text)).tasks
+    assert [t.run_id for t in tasks] == [t.run_id for t in load_campaign(campaign).tasks]

@@ -430,3 +430,41 @@ def test_a_scenario_name_too_long_for_its_directory_leaves_nothing_then_again(
         left = sorted(p.name for p in tmp_path.iterdir())
         assert left == sorted(["long.toml", "slow_25.toml", *kept])
     assert list((tmp_path / "runs").iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("marker", "command"),
+    [
+        ("summary.json", "reproduce"),  # a single run's directory: reproduce emptied it
+        ("campaign.json", "reproduce"),
+        ("runs.json", "campaign"),  # a study's: a campaign overwrote its report.md
+        ("runs.json", "run"),
+        ("summary.json", "calibrate"),  # a run's: calibrate deleted its files
+        ("campaign.json", "calibrate"),
+        ("calibration.json", "run"),
+        ("calibrated_robot.toml", "campaign"),
+        ("calibration.json", "reproduce"),
+    ],
+)
+def test_a_command_refuses_another_commands_directory(tmp_path, capsys, marker, command):
+    from cdpr_twin.cli import main
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / marker).write_text("{}\n")
+    (out / "report.md").write_text("someone's report\n")
+    campaign = tmp_path / "c.toml"
+    campaign.write_text(
+        f'name = "c"\nscenario = "{ROOT}/scenarios/paper_open_loop.toml"\n\n'
+        '[overrides]\n"sensors.camera" = false\nduration = 0.2\n'
+    )
+    argv = {
+        "reproduce": ["reproduce", "--out", str(out), "--duration", "0.2", "--runs-scale", "0.01"],
+        "campaign": ["campaign", str(campaign), "--out", str(out)],
+        "run": ["run", "paper_open_loop", "--out", str(out), "--duration", "0.2", "--no-camera"],
+        "calibrate": ["calibrate", "paper_open_loop", "--out", str(out), "--poses", "12"],
+    }[command]
+    assert main(argv) == 2
+    assert f"holds another command's outputs ({marker})" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == sorted([marker, "report.md"])
+    assert (out / "report.md").read_text() == "someone's report\n"

@@ -15,6 +15,9 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
+from cdpr_twin.cli.tools import live_url
 from cdpr_twin.recording import rerun as record
 
 RERUN = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
@@ -127,3 +130,11 @@ def test_a_server_that_does_not_listen_delays_the_end_of_a_run_only_briefly(tmp_
     assert {"/world/platform", "/tension", "/world/estimates/fused"} <= _entities(
         tmp_path / "out" / "recording.rrd", env
     )
+
+
+@pytest.mark.parametrize(
+    "address", ["0", "99999", "host:70000", "rerun+http://host:0/proxy", "rerun://host:70000/proxy"]
+)
+def test_a_port_out_of_range_is_refused(address):
+    with pytest.raises(ValueError, match="not a TCP port"):
+        live_url(address)

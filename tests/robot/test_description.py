@@ -6,6 +6,7 @@ for its texture path) in tests/fixtures/acrobot_handwritten/.
 
 import re
 import shutil
+import tomllib
 from operator import attrgetter
 from pathlib import Path
 
@@ -15,11 +16,14 @@ import pytest
 from conftest import A_BASE, B_PLATFORM, random_workspace_poses
 
 from cdpr_twin import MODELS_DIR
+from cdpr_twin.campaign.spec import set_dotted
 from cdpr_twin.cli import main
 from cdpr_twin.robot.description import RobotError, load_robot
+from cdpr_twin.scenario.loading import ScenarioError, scenario_from_data
 from cdpr_twin.sim import Physics
 from cdpr_twin.sim.generate import build_files, model_texts
 
+ROOT = Path(__file__).resolve().parents[2]
 FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
 HANDWRITTEN = FIXTURES / "acrobot_handwritten" / "scene.xml"
 ACROBOT = MODELS_DIR / "acrobot" / "robot.toml"
@@ -332,3 +336,25 @@ def test_a_robot_description_given_as_the_model_says_to_build_it(capsys):
     assert main(["demo", "--model", str(ACROBOT)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"cdpr-twin model build {ACROBOT}" in err
+
+
+def test_a_directory_given_for_a_description_is_called_a_directory(tmp_path):
+    # before: "not found" for a directory that is there (model.nominal, a robot description)
+    from cdpr_twin.robot.description import RobotError, load_robot
+
+    with pytest.raises(ScenarioError, match=r": model\.nominal: .* is a directory; give a robot"):
+        _pbvs(**{"model.nominal": str(tmp_path)})
+    with pytest.raises(ScenarioError, match=r": model\.nominal: .*nothing\.toml not found"):
+        _pbvs(**{"model.nominal": str(tmp_path / "nothing.toml")})
+    with pytest.raises(RobotError, match=r": a directory, not a robot description; give its"):
+        load_robot(tmp_path)
+    with pytest.raises(RobotError, match=r"nothing\.toml: robot description not found"):
+        load_robot(tmp_path / "nothing.toml")
+
+
+def _pbvs(**changes):
+    source = ROOT / "scenarios" / "paper_pbvs.toml"
+    data = tomllib.loads(source.read_text())
+    for key, value in changes.items():
+        set_dotted(data, key, value)
+    return scenario_from_data(data, source)

@@ -5,13 +5,16 @@ changes neither the status the run records nor the exit code.
 """
 
 import json
+import os
 import signal
 
 import pytest
+from conftest import EARLIER_SUMMARY
 
 from cdpr_twin.files.transaction import Terminated
 from cdpr_twin.run import runner
 from cdpr_twin.run.interrupts import interruption
+from cdpr_twin.run.runner import run
 from cdpr_twin.scenario.loading import load_scenario
 
 
@@ -157,3 +160,106 @@ def test_a_tick_held_by_two_signals_escapes_as_the_first(first, second, code, st
         signal.raise_signal(first)  # held: the tick is being recorded
         signal.raise_signal(second)  # a second signal: the stop escapes at once
     assert isinstance(stop.value, Terminated) == (first == signal.SIGTERM)
+
+
+def test_a_second_ctrl_c_while_a_stopped_run_saves_cannot_leave_it_half_saved(
+    tmp_path, monkeypatch
+):
+    from cdpr_twin.recording import sinks as recorders
+
+    close = recorders.Recorders.close
+
+    def close_under_fire(self, summary, commit=True):
+        os.kill(os.getpid(), signal.SIGINT)  # the impatient user's second Ctrl-C
+        return close(self, summary, commit)
+
+    def stop(fraction, t):
+        raise KeyboardInterrupt  # the first Ctrl-C, at the first tick
+
+    monkeypatch.setattr(recorders.Recorders, "close", close_under_fire)
+    s = load_scenario("paper_open_loop").with_overrides(duration=0.2, camera=False)
+    with pytest.raises(KeyboardInterrupt):
+        run(s, tmp_path / "out", progress=stop)
+    files = sorted(p.name for p in (tmp_path / "out").iterdir())
+    assert files == ["recording.rrd", "summary.json", "timeseries.csv"]
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["status"] == "interrupted"
+
+
+def test_a_stop_before_the_run_claims_its_directory_does_not_claim_an_earlier_runs_files(
+    tmp_path, monkeypatch, capsys
+):
+    from cdpr_twin.cli import main
+    from cdpr_twin.files.transaction import Terminated
+    from cdpr_twin.run import runner
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "summary.json").write_text(EARLIER_SUMMARY % "terminated")  # an earlier run's
+    os.utime(out / "summary.json", (0, 0))
+
+    def prepare(scenario):
+        raise Terminated()  # SIGTERM while the robot is being built
+
+    monkeypatch.setattr(runner, "prepare", prepare)
+    assert main(["run", "paper_open_loop", "--out", str(out), "--no-camera"]) == 143
+    err = capsys.readouterr().err
+    assert "terminated before this run saved any output" in err and "partial" not in err
+
+
+def test_a_signal_during_a_completed_runs_save_is_delivered_once_the_files_are_whole(
+    tmp_path, monkeypatch
+):
+    from cdpr_twin.recording import sinks as recorders
+
+    close = recorders.Recorders.close
+
+    def close_under_fire(self, summary, commit=True):
+        os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C just as the finished run saves
+        return close(self, summary, commit)
+
+    monkeypatch.setattr(recorders.Recorders, "close", close_under_fire)
+    s = load_scenario("paper_open_loop").with_overrides(duration=0.2, camera=False)
+    with pytest.raises(KeyboardInterrupt):  # held off, not lost
+        run(s, tmp_path / "out")
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["status"] == "completed"
+    assert not list((tmp_path / "out").glob("*.partial")) and not (tmp_path / "out/.lock").exists()
+
+
+def test_a_sigterm_as_the_run_ends_says_its_outputs_are_complete(tmp_path, monkeypatch, capsys):
+    from cdpr_twin.cli import main
+    from cdpr_twin.recording import sinks as recorders
+
+    close = recorders.Recorders.close
+
+    def close_under_fire(self, summary, commit=True):
+        os.kill(os.getpid(), signal.SIGTERM)  # the supervisor's stop, just as the run saves
+        return close(self, summary, commit)
+
+    monkeypatch.setattr(recorders.Recorders, "close", close_under_fire)
+    out = tmp_path / "out"
+    argv = ["run", "paper_open_loop", "--out", str(out), "--duration", "0.2", "--no-camera"]
+    assert main(argv) == 143
+    assert f"terminated as the run ended (completed): its outputs in {out} are complete" in (
+        capsys.readouterr().err
+    )
+    assert json.loads((out / "summary.json").read_text())["status"] == "completed"
+
+
+def test_a_held_signal_of_another_kind_than_the_stop_under_way_is_delivered():
+    from cdpr_twin.files.transaction import Terminated
+    from cdpr_twin.run.interrupts import shielded, sigterm_raises
+
+    with sigterm_raises(), pytest.raises(Terminated):  # a pool worker told to stop while it
+        try:  # saves a run stopped by Ctrl-C: the SIGTERM must still end it
+            raise KeyboardInterrupt
+        finally:
+            with shielded():
+                os.kill(os.getpid(), signal.SIGTERM)
+    with pytest.raises(KeyboardInterrupt) as stop:  # a second Ctrl-C: absorbed by the first
+        try:
+            raise KeyboardInterrupt("first")
+        finally:
+            with shielded():
+                os.kill(os.getpid(), signal.SIGINT)
+    assert str(stop.value) == "first"

@@ -128,3 +128,11 @@ def test_a_tag_occlusion_without_a_camera_is_dropped_and_said_and_changes_nothin
     assert (tmp_path / "hidden" / "timeseries.csv").read_bytes() == (
         tmp_path / "plain" / "timeseries.csv"
     ).read_bytes()
+
+
+def test_an_event_the_run_does_not_reach_is_listed_in_the_summary():
+    s = load_scenario("fault_cable_break").with_overrides(duration=0.2, camera=False)
+    summary = run(s, None).summary
+    assert "events" not in summary
+    [pending] = summary["events_not_reached"]
+    assert (pending["kind"], pending["due_s"], pending["cable"]) == ("cable_break", 26.0, 2)

@@ -8,6 +8,7 @@ from conftest import paper_pose, random_workspace_poses
 
 from cdpr_twin.math import kinematics as kin
 from cdpr_twin.math import se3
+from cdpr_twin.sim import SimulationError, Twin
 
 
 def _mujoco_pull_directions(twin):
@@ -215,3 +216,16 @@ def test_model_files_step_without_warnings():
             t.advance(1.0, np.zeros(8))
             assert all(w.number == 0 for w in t.data.warning), path.name
             assert np.all(np.isfinite(t.data.qpos))
+
+
+def test_a_closed_twin_neither_steps_nor_senses():
+    twin = Twin(camera=False, tension_noise_std=0.0)
+    twin.reset(paper_pose("p1"))
+    twin.close()
+    for act in (
+        lambda: twin.advance(0.04, np.zeros(8)),
+        twin.sense,
+        lambda: twin.reset(paper_pose("p1")),
+    ):
+        with pytest.raises(SimulationError, match="closed"):
+            act()

@@ -1,18 +1,15 @@
-"""Inputs that used to pass silently (issue 13, item 4): each is now a clear error or flag."""
+"""Scenario files read and checked: a value that would hang a run, do nothing or name a file
+wrongly is refused in one line naming the file and the field."""
 
+import tomllib
 from pathlib import Path
 
-import numpy as np
 import pytest
-from conftest import paper_pose
 
-from cdpr_twin.estimators.base import NON_FINITE_INPUT
-from cdpr_twin.plugins import make_estimator
-from cdpr_twin.scenario.loading import ScenarioError, load_scenario
-from cdpr_twin.sim import SimulationError, Twin
-from cdpr_twin.types import Measurement
+from cdpr_twin.campaign.spec import set_dotted
+from cdpr_twin.scenario.loading import ScenarioError, load_scenario, scenario_from_data
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 OPEN_LOOP = (ROOT / "scenarios" / "paper_open_loop.toml").read_text()
 
 
@@ -72,31 +69,17 @@ def test_a_run_shorter_than_one_control_period_is_refused_on_the_command_line():
         s.with_overrides(duration=0.001)
 
 
-def test_a_closed_twin_neither_steps_nor_senses():
-    twin = Twin(camera=False, tension_noise_std=0.0)
-    twin.reset(paper_pose("p1"))
-    twin.close()
-    for act in (
-        lambda: twin.advance(0.04, np.zeros(8)),
-        twin.sense,
-        lambda: twin.reset(paper_pose("p1")),
-    ):
-        with pytest.raises(SimulationError, match="closed"):
-            act()
+def test_an_unknown_optional_field_lists_the_fields_it_could_be():
+    source = ROOT / "scenarios" / "paper_open_loop.toml"
+    data = tomllib.loads(source.read_text())
+    set_dotted(data, "realism.camera.exposure_ms", 4.0)  # was: "known fields here: none"
+    with pytest.raises(ScenarioError, match=r"exposure_ms: unknown field; known .*exposure_s"):
+        scenario_from_data(data, source)
 
 
-@pytest.mark.parametrize(
-    "name",
-    ["control", "image", "model_simple", "model_elastic", "model_pulley", "model_elastic_pulley"],
-)
-def test_every_estimator_flags_a_nan_measurement_time_the_same_way(name, twin):
-    twin.reset(paper_pose("p1"))
-    good = twin.sense()
-    est = make_estimator(name, twin.nominal_geometry)
-    est.reset(paper_pose("p1"))
-    first = est.update(good)
-    bad = Measurement(float("nan"), good.cable_lengths, good.tensions)
-    e = est.update(bad)
-    assert not e.valid and NON_FINITE_INPUT in e.flags
-    np.testing.assert_array_equal(e.T_base_platform, first.T_base_platform)
-    assert est.update(good).T_base_platform is not None  # and it carries on
+def test_a_typo_in_model_lists_the_optional_fields_too():
+    source = ROOT / "scenarios" / "paper_open_loop.toml"
+    data = tomllib.loads(source.read_text())
+    set_dotted(data, "model.nomnal", "x.toml")
+    with pytest.raises(ScenarioError, match=r"model\.nomnal: unknown field; .*nominal"):
+        scenario_from_data(data, source)
