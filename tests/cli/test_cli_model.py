@@ -6,7 +6,15 @@ import errno
 import os
 from pathlib import Path
 
+import pytest
+from conftest import ENOSPC
+
+from cdpr_twin import cli
+from cdpr_twin.robot.description import load_robot
+from cdpr_twin.sim.generate import model_texts
+
 ROOT = Path(__file__).resolve().parents[2]
+ACROBOT = ROOT / "models" / "acrobot" / "robot.toml"
 
 
 def test_model_build_into_an_unreachable_directory_is_one_line(tmp_path, monkeypatch, capsys):
@@ -26,3 +34,150 @@ def test_model_build_into_an_unreachable_directory_is_one_line(tmp_path, monkeyp
     err = capsys.readouterr().err.strip()
     assert "locked: Permission denied; check its permissions" in err and "\n" not in err
     assert list(tmp_path.iterdir()) == []
+
+
+def _error(capsys) -> str:
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert "Traceback" not in err
+    return err
+
+
+def test_model_build_on_a_full_disk_renames_nothing(tmp_path, full_disk, capsys):
+    out = tmp_path / "built"
+    out.mkdir()
+    for name in ("acrobot.xml", "scene.xml"):  # an earlier build's files: kept as they were
+        (out / name).write_text("old")
+    robot_xml, _ = model_texts(load_robot(ACROBOT), out)
+    full_disk(len(robot_xml.encode()) + 4096)  # the robot fits, the scene is cut at 4 KiB
+    code = cli.main(["model", "build", str(ACROBOT), "--out", str(out)])
+    assert code == 1
+    err = _error(capsys)
+    assert "scene.xml" in err and ENOSPC in err
+    assert sorted(p.name for p in out.iterdir()) == ["acrobot.xml", "scene.xml"]  # no partial
+    assert all((out / n).read_text() == "old" for n in ("acrobot.xml", "scene.xml"))
+
+
+def test_model_build_on_a_full_disk_leaves_no_file_in_a_new_directory(tmp_path, full_disk, capsys):
+    out = tmp_path / "new"
+    full_disk(10_000)
+    assert cli.main(["model", "build", str(ACROBOT), "--out", str(out)]) == 1
+    assert ENOSPC in _error(capsys)
+    assert list(out.iterdir()) == []
+
+
+def test_model_build_bad_out_is_a_one_line_error(tmp_path, monkeypatch, capsys):
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    for out, words in ((afile, "not a directory"), (afile / "sub", "cannot create")):
+        assert cli.main(["model", "build", str(ACROBOT), "--out", str(out)]) == 2
+        assert words in _error(capsys)
+    readonly = tmp_path / "readonly"
+    readonly.mkdir()
+    real = os.access
+    monkeypatch.setattr(os, "access", lambda p, m, **k: Path(p) != readonly and real(p, m, **k))
+    assert cli.main(["model", "build", str(ACROBOT), "--out", str(readonly)]) == 2
+    assert "cannot write there" in _error(capsys)
+    assert afile.read_text() == "x" and list(readonly.iterdir()) == []
+
+
+@pytest.fixture
+def no_sampling(monkeypatch):
+    """Sampling the workspace fails the test: bad input must be refused before it."""
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the workspace was sampled before the input was checked")
+
+    monkeypatch.setattr("cdpr_twin.math.workspace.sample_workspace", refuse)
+
+
+@pytest.mark.parametrize(
+    ("spacing", "words"),
+    [
+        ("0", "finite number > 0"),
+        ("-0.1", "finite number > 0"),
+        ("nan", "finite number > 0"),
+        ("inf", "finite number > 0"),
+        ("5", "give less than 2.4 m"),
+        ("1e-6", "give at least"),
+    ],
+)
+def test_workspace_bad_spacing_is_refused_before_sampling(
+    spacing, words, tmp_path, no_sampling, capsys
+):
+    out = tmp_path / "ws.png"
+    code = cli.main(["model", "workspace", str(ACROBOT), "--spacing", spacing, "--out", str(out)])
+    assert code == 2
+    err = _error(capsys)
+    assert err.startswith("cdpr-twin: error: --spacing") and words in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("out", "words"),
+    [
+        ("nodir/ws.png", "nodir does not exist"),
+        ("afile/ws.png", "afile is not a directory"),
+        ("ws.txt", "cannot write a figure as .txt"),
+        ("ws", "without an extension"),
+        (".", "is a directory"),
+    ],
+)
+def test_workspace_bad_out_is_refused_before_sampling(out, words, tmp_path, no_sampling, capsys):
+    (tmp_path / "afile").write_text("x")
+    code = cli.main(["model", "workspace", str(ACROBOT), "--out", str(tmp_path / out)])
+    assert code == 2
+    err = _error(capsys)
+    assert "--out" in err and words in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
+
+
+@pytest.mark.parametrize(
+    ("flag", "why"), [(0, "Permission denied"), (os.ST_RDONLY, "Read-only file system")]
+)
+def test_workspace_out_in_an_unwritable_directory_is_refused_before_sampling(
+    flag, why, tmp_path, monkeypatch, no_sampling, capsys
+):
+    """Before, the sampling ran (~40 s at the default spacing), then the figure's write failed
+    (exit 1, "free some space"). As root chmod forbids nothing: the OS's answer is patched."""
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    real_access, real_statvfs = os.access, os.statvfs
+    monkeypatch.setattr(os, "access", lambda p, mode: Path(p) != ro and real_access(p, mode))
+    stat = real_statvfs(tmp_path)
+    fake = os.statvfs_result((*stat[:8], stat.f_flag | flag, stat.f_namemax))
+    monkeypatch.setattr(os, "statvfs", lambda p: fake if Path(p) == ro else real_statvfs(p))
+    code = cli.main(["model", "workspace", str(ACROBOT), "--out", str(ro / "ws.png")])
+    assert code == 2
+    assert _error(capsys) == (
+        f"cdpr-twin: error: --out {ro / 'ws.png'}: cannot write in {ro} ({why}); "
+        "give another directory"
+    )
+    assert list(ro.iterdir()) == []
+
+
+def test_workspace_figure_on_a_full_disk_keeps_the_earlier_one(tmp_path, monkeypatch, capsys):
+    out = tmp_path / "ws.png"
+    out.write_bytes(b"earlier figure")
+
+    def savefig(self, fname, **kwargs):  # 4 KiB of the figure fit, then the disk is full
+        with open(fname, "wb") if isinstance(fname, str | os.PathLike) else fname as f:
+            f.write(b"\x89PNG" + bytes(4092))
+        raise OSError(errno.ENOSPC, ENOSPC)
+
+    monkeypatch.setattr("matplotlib.figure.Figure.savefig", savefig)
+    code = cli.main(["model", "workspace", str(ACROBOT), "--spacing", "0.6", "--out", str(out)])
+    assert code == 1
+    err = _error(capsys)
+    assert "ws.png" in err and ENOSPC in err
+    assert out.read_bytes() == b"earlier figure"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ws.png"]  # no partial
+
+
+def test_workspace_writes_a_whole_figure(tmp_path, capsys):
+    out = tmp_path / "ws.svg"
+    code = cli.main(["model", "workspace", str(ACROBOT), "--spacing", "0.6", "--out", str(out)])
+    assert code == 0, capsys.readouterr().err
+    assert "grid points wrench-feasible" in capsys.readouterr().out
+    assert out.read_text().rstrip().endswith("</svg>")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ws.svg"]

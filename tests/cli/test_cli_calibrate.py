@@ -1,7 +1,8 @@
-"""``cdpr-twin calibrate`` never destroys its own input and leaves nothing running when killed.
+"""``cdpr-twin calibrate`` refuses bad input in one line before any work, never destroys its own
+input and leaves nothing running when killed.
 
-Before (found by a review): ``--out`` naming the folder of the scenario's ``[model] nominal``
-(refining a calibration in place) cleared that folder first — the description the calibration
+Before: ``--out`` naming the folder of the scenario's ``[model] nominal`` (refining a
+calibration in place) cleared that folder first — the description the calibration
 starts from and its report were gone, and the command then said "robot description not
 found"; and a calibration killed with SIGKILL left its two worker processes recording for
 minutes, holding the command's output pipe open.
@@ -15,11 +16,16 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 from conftest import children, group_alive, outlived_by_its_group, pool_threads
 
+from cdpr_twin import cli
+from cdpr_twin.calibrate.solver import CalibrationError
 from cdpr_twin.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
+OPEN_LOOP = (ROOT / "scenarios" / "paper_open_loop.toml").read_text()
+START = "pose = [0.112, -0.032, 0.301, -12, -10, 0]"
 
 
 def test_out_on_the_nominal_descriptions_folder_is_refused_and_nothing_is_touched(
@@ -96,3 +102,74 @@ def test_a_failed_recording_waits_for_its_pools_thread_before_the_error_leaves(m
         _in_processes(items, 2, None, 1)
     assert pool_threads() == []
     assert multiprocessing.active_children() == []
+
+
+def _error(capsys) -> str:
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert "Traceback" not in err
+    return err
+
+
+@pytest.fixture
+def no_recording(monkeypatch):
+    """Recording (a worker process, or in this one) fails the test."""
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the recording started before the input was checked")
+
+    monkeypatch.setattr("cdpr_twin.calibrate.acquire.ProcessPoolExecutor", refuse)
+    monkeypatch.setattr("cdpr_twin.calibrate.session.record", refuse)
+
+
+def test_calibrate_start_outside_the_frame_is_refused_as_run_refuses_it(
+    tmp_path, no_recording, capsys
+):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(OPEN_LOOP.replace(START, "pose = [0, 0, 5.0, 0, 0, 0]"))
+    out = tmp_path / "cal"
+    args = ["calibrate", str(bad), "--poses", "12", "--workers", "2", "--out", str(out)]
+    assert cli.main(args) == 2
+    err = _error(capsys)
+    assert "start.pose" in err and "outside the frame" in err
+    assert not out.exists()
+    assert cli.main(["run", str(bad), "--out", str(tmp_path / "run")]) == 2
+    assert _error(capsys).split("error: ", 1)[1] == err.split("error: ", 1)[1]
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "says"),
+    [
+        ("--frames", "0", "--frames (readings averaged per pose) must be within 1…1000, got 0"),
+        ("--frames", "-1", "--frames (readings averaged per pose) must be within 1…1000, got -1"),
+        ("--frames", "1001", "must be within 1…1000, got 1001"),
+        ("--poses", "11", "--poses must be within 12…10000, got 11"),
+        ("--poses", "100000000", "--poses must be within 12…10000"),  # was: 900 MB, no word
+    ],
+)
+def test_calibrate_counts_out_of_range_are_refused(
+    option, value, says, tmp_path, no_recording, capsys
+):
+    out = tmp_path / "cal"
+    args = ["calibrate", "paper_open_loop", "--poses", "12", option, value]
+    assert cli.main([*args, "--out", str(out)]) == 2
+    assert says in _error(capsys)
+    assert not out.exists()
+
+
+def test_calibrate_failing_before_writing_leaves_no_directory_it_made(
+    tmp_path, monkeypatch, capsys
+):
+    def fail(*args, **kwargs):
+        raise CalibrationError("the tag was never detected at the excitation poses")
+
+    monkeypatch.setattr("cdpr_twin.calibrate.session.calibrate", fail)
+    out = tmp_path / "runs" / "cal"
+    assert cli.main(["calibrate", "paper_open_loop", "--poses", "12", "--out", str(out)]) == 2
+    assert "never detected" in _error(capsys)
+    assert not (tmp_path / "runs").exists()  # neither it nor the parent it made
+    mine = tmp_path / "mine"  # a directory the user made is kept, with what it held
+    mine.mkdir()
+    (mine / "notes.txt").write_text("x")
+    assert cli.main(["calibrate", "paper_open_loop", "--poses", "12", "--out", str(mine)]) == 2
+    assert sorted(p.name for p in mine.iterdir()) == ["notes.txt"]
