@@ -1,7 +1,11 @@
 """Campaigns: validated before they run, the same table from local processes and from Ray, each
-row equal to its run's own summary.json, resumable after a kill, stoppable with a valid table."""
+row equal to its run's own summary.json, resumable after a kill, stoppable with a valid table.
+
+A campaign's directory is its own: a run's directory is not taken (nor a campaign's by a run),
+a resume never mixes two campaigns into one table, and an empty ``--out`` is refused."""
 
 import json
+import math
 import os
 import shutil
 import signal
@@ -424,3 +428,134 @@ def test_a_campaign_names_a_shipped_scenario_as_run_does(tmp_path):
     by_name.write_text(f'name = "g"\nscenario = "paper_pbv"\n{axes}')
     with pytest.raises(CampaignError, match=r"scenario: no scenario named 'paper_pbv'; choose one"):
         load_campaign(by_name)
+
+
+def _campaign(tmp_path: Path, name: str, duration: float, camera: bool, seeds=(1,)) -> Path:
+    path = tmp_path / f"{name}.toml"
+    path.write_text(
+        f'name = "{name}"\nscenario = "{ROOT}/scenarios/paper_open_loop.toml"\n\n'
+        f'[overrides]\n"sensors.camera" = {str(camera).lower()}\nduration = {duration}\n\n'
+        f'[[axes]]\nkey = "seed"\nvalues = {list(seeds)}\n'
+    )
+    return path
+
+
+def _run_files(directory: Path) -> dict[str, bytes]:
+    directory.mkdir(parents=True, exist_ok=True)
+    files = {"summary.json": b'{"status": "completed"}\n', "timeseries.csv": b"time\n0\n"}
+    for name, content in files.items():
+        (directory / name).write_bytes(content)
+    return files
+
+
+def test_a_campaign_refuses_a_runs_directory_and_leaves_the_run_intact(tmp_path, capsys):
+    files = _run_files(tmp_path / "a_run")
+    src = _campaign(tmp_path, "tiny", 0.2, camera=False)
+    for extra in ([], ["--resume"]):
+        assert main(["campaign", str(src), "--out", str(tmp_path / "a_run"), *extra]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "holds another command's outputs" in err and "\n" not in err
+    assert {p.name: p.read_bytes() for p in (tmp_path / "a_run").iterdir()} == files
+
+
+def test_a_run_refuses_a_campaigns_directory(tmp_path, capsys):
+    out = tmp_path / "a_campaign"
+    out.mkdir()
+    (out / "campaign.json").write_text('{"campaign": "x"}\n')
+    argv = ["run", "paper_open_loop", "--out", str(out), "--duration", "0.08", "--no-camera"]
+    assert main(argv) == 2
+    assert "holds another command's outputs (campaign.json)" in capsys.readouterr().err
+    assert [p.name for p in out.iterdir()] == ["campaign.json"]
+
+
+def test_resuming_with_another_campaign_is_refused_and_the_table_kept(tmp_path):
+    first = load_campaign(_campaign(tmp_path, "first", 0.2, camera=False))
+    out = tmp_path / "out"
+    assert run_campaign(first, out, workers=1)["ran_now"] == 1
+    table = load_table(out).to_pylist()
+    other = load_campaign(_campaign(tmp_path, "other", 0.12, camera=False, seeds=(1, 2)))
+    assert {t.run_id for t in other.tasks}.isdisjoint(t.run_id for t in first.tasks)
+    with pytest.raises(OutputDirError, match=r"does not have .* mix them into one table"):
+        run_campaign(other, out, workers=1, resume=True)
+    assert load_table(out).to_pylist() == table
+    # the same campaign with one more run resumes: the old rows are its own
+    grown = load_campaign(_campaign(tmp_path, "first", 0.2, camera=False, seeds=(1, 2)))
+    assert run_campaign(grown, out, workers=1, resume=True)["ran_now"] == 1
+    assert len(pq.read_table(out / "results.parquet")) == 2
+
+
+def test_an_empty_out_is_refused_not_taken_for_the_current_directory(tmp_path, capsys, monkeypatch):
+    src = _campaign(tmp_path, "tiny", 0.2, camera=False)
+    monkeypatch.chdir(tmp_path)  # were it taken, the campaign would write here
+    with pytest.raises(SystemExit) as exit_:
+        main(["campaign", str(src), "--out", ""])
+    assert exit_.value.code == 2 and "--out: is empty" in capsys.readouterr().err
+
+
+NAN_ESTIMATOR = """
+import numpy as np
+from cdpr_twin import plugins
+from cdpr_twin.estimators.base import NO_INPUTS, Estimator
+from cdpr_twin.types import PoseEstimate
+
+
+@plugins.register
+class Broken(Estimator):
+    name = "broken"
+
+    def update(self, measurement, inputs=NO_INPUTS):
+        self._check_reset()
+        return PoseEstimate(measurement.time, np.full((4, 4), np.nan))
+"""
+
+
+def test_an_estimator_that_never_estimates_has_no_deviation_and_wins_nothing(tmp_path):
+    # before: max and RMS deviations of 0 over no estimate at all, and in a campaign's report
+    # the broken estimator "deviated least" in every run
+    (tmp_path / "broken.py").write_text(NAN_ESTIMATOR)
+    text = (ROOT / "scenarios" / "paper_open_loop.toml").read_text()
+    text = text.replace('name = "paper_open_loop"', 'name = "broken"\nplugins = ["broken.py"]')
+    text = text.replace('passive = ["image", ', 'passive = ["broken", "image", ')
+    (tmp_path / "broken.toml").write_text(text)
+    src = tmp_path / "c.toml"
+    src.write_text(
+        f'name = "c"\nscenario = "{tmp_path / "broken.toml"}"\n\n[overrides]\n'
+        '"sensors.camera" = false\nduration = 0.2\n\n[[axes]]\nkey = "seed"\nvalues = [1, 2]\n'
+    )
+    out = tmp_path / "out"
+    assert main(["campaign", str(src), "--out", str(out)]) == 0
+    rows = load_table(out).to_pylist()
+    for row in rows:
+        broken = json.loads(row["summary"])["estimators"]["broken"]
+        assert broken["invalid_updates"] == 6  # the start and five ticks, none finite
+        assert broken["max_translation_m"] is None and broken["rms_translation_m"] is None
+        assert math.isnan(row["est.broken.rms_t_m"]) and row["est.model_simple.rms_t_m"] > 0
+    report = (out / "report.md").read_text()
+    assert "| model_simple |" in report and "| broken |" not in report
+
+
+def test_a_resume_that_cannot_write_its_table_leaves_no_stale_table(tmp_path, monkeypatch):
+    """A full disk at the end of a resume left results.parquet (and campaign.json) describing
+    the runs before it under their final names; now they go when new runs start, and the next
+    --resume writes them from the parts."""
+    from cdpr_twin.campaign import table as table_mod
+    from cdpr_twin.files.transaction import OutputError
+
+    out = tmp_path / "out"
+    two = load_campaign(_campaign(tmp_path, "grow", 0.2, camera=False, seeds=(1, 2)))
+    assert run_campaign(two, out, workers=1)["ran_now"] == 2
+    (out / "report.md").write_text("the report of 2 runs\n")
+    three = load_campaign(_campaign(tmp_path, "grow", 0.2, camera=False, seeds=(1, 2, 3)))
+
+    def disk_full(self, order=()):
+        raise OutputError(out / "results.parquet.partial", "No space left on device")
+
+    with monkeypatch.context() as m:
+        m.setattr(table_mod.ResultTable, "gather", disk_full)
+        with pytest.raises(OutputError):
+            run_campaign(three, out, workers=1, resume=True)
+    assert not (out / "results.parquet").exists() and not (out / "report.md").exists()
+    assert json.loads((out / "campaign.json").read_text())["status"] == "running"
+    again = run_campaign(three, out, workers=1, resume=True)
+    assert again["ran_now"] == 0 and again["status"] == "completed"
+    assert sorted(load_table(out).column("seed").to_pylist()) == [1, 2, 3]

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from cdpr_twin.campaign import load_campaign
 from cdpr_twin.campaign.spec import INT64, MAX_RUNS
 from cdpr_twin.cli import main
 
@@ -181,3 +182,70 @@ def test_an_override_of_a_table_an_axis_varies_within_keeps_both(tmp_path):
     cams = [t.data["realism"]["camera"] for t in tasks]
     assert [c["exposure_s"] for c in cams] == [0.004, 0.008]
     assert all(c["focal_error_std"] == 0.003 and c["center_error_std_px"] == 0.5 for c in cams)
+
+
+def test_a_waypoint_outside_the_frame_through_an_axis_is_refused_before_any_run(tmp_path):
+    from cdpr_twin.campaign import CampaignError
+
+    p1, p0 = [0.284, -0.197, 0.08, 0, 0, 0], [0.1, 0.0, 0.3, 0, 0, 0]
+    good, bad = [p1, [0.284, -0.197, 0.25, 0, 0, 0], p0], [p1, [0.284, -0.197, 2.5, 0, 0, 0], p0]
+    path = tmp_path / "axis.toml"
+    path.write_text(
+        f'name = "axis"\nscenario = "{ROOT}/scenarios/paper_open_loop.toml"\n\n'
+        f'[[axes]]\nkey = "controller.waypoints"\nvalues = [{good}, {bad}]\n'
+    )
+    with pytest.raises(CampaignError, match=r"waypoints\[1\].* is outside the frame"):
+        load_campaign(path)  # was: a failed row, after the runs before it had run
+
+
+@pytest.mark.parametrize(
+    ("text", "where"),
+    [  # each was a traceback (KeyError, ValueError, OverflowError) while drawing
+        ('[[axes]]\nkey = "seed"\ndraw = "choice"\n', r"axes\[0\]\.values: .*needs values"),
+        ('[[axes]]\nkey = "seed"\ndraw = "normal"\nmean = 1\nstd = -1\n', r"std: must be > 0"),
+        (
+            '[[axes]]\nkey = "seed"\ndraw = "integers"\nlow = 1\nhigh = 1e20\n',
+            r"high \(seed\): .*64-bit",
+        ),
+        (
+            '[[axes]]\nkey = "seed"\ndraw = "integers"\nlow = 0.5\nhigh = 9\n',
+            r"low \(seed\): .*64-bit",
+        ),
+        (
+            '[[axes]]\nkey = "truth.exit_point_std"\n'
+            'draw = "uniform"\nlow = -1e308\nhigh = 1e308\n',
+            r"high: high − low must be a finite",
+        ),
+    ],
+)
+def test_a_random_axis_that_cannot_be_drawn_is_a_one_line_error(tmp_path, text, where):
+    from cdpr_twin.campaign import CampaignError
+
+    path = tmp_path / "c.toml"
+    path.write_text('name = "c"\n' + SCENARIO + text)
+    with pytest.raises(CampaignError, match=where):
+        load_campaign(path)
+
+
+@pytest.mark.parametrize(
+    "key", ["samples = 3", "smaples = 3", 'artefacts = "bogus"', SCENARIO.strip()]
+)
+def test_top_level_run_keys_beside_blocks_are_refused_not_ignored(tmp_path, key):
+    """They were ignored: a typo'd ``samples`` ran one run where three were meant."""
+    from cdpr_twin.campaign import CampaignError
+
+    path = tmp_path / "c.toml"
+    path.write_text(f'name = "c"\n{key}\n\n[[blocks]]\nname = "b"\n{SCENARIO}')
+    with pytest.raises(CampaignError, match="not allowed beside"):
+        load_campaign(path)
+
+
+@pytest.mark.parametrize("name", ["..", ".", "a\\\\b"])
+def test_a_campaign_name_that_is_not_a_plain_directory_name_is_refused(tmp_path, name):
+    """``..`` was accepted: the default output runs/.. is the current directory."""
+    from cdpr_twin.campaign import CampaignError
+
+    path = tmp_path / "c.toml"
+    path.write_text(f'name = "{name}"\n' + SCENARIO)
+    with pytest.raises(CampaignError, match="plain name"):
+        load_campaign(path)

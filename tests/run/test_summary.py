@@ -6,12 +6,13 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from cdpr_twin import plugins
 from cdpr_twin.campaign.table import flatten
 from cdpr_twin.cli import main
 from cdpr_twin.estimators.base import NO_INPUTS, Estimator
-from cdpr_twin.run.metrics import NON_FINITE_ESTIMATE
+from cdpr_twin.run.metrics import NON_FINITE_ESTIMATE, DeviationTrack
 from cdpr_twin.types import PoseEstimate
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -58,3 +59,17 @@ def test_an_undefined_number_is_null_in_summary_json_and_nan_in_the_table(tmp_pa
     assert math.isnan(row["est.lost_midway.final_t_m"])
     assert row["est.lost_midway.max_t_m"] == lost["max_translation_m"] > 0
     assert _strict_json(row["summary"])["estimators"]["lost_midway"]["final_rotation_deg"] is None
+
+
+def test_a_nan_estimate_is_counted_invalid_not_dropped_from_the_deviations():
+    track = DeviationTrack()
+    T = np.eye(4)
+    track.add(PoseEstimate(0.04, T), (0.001, 0.002))
+    track.add(PoseEstimate(0.08, np.full((4, 4), np.nan)), (math.nan, math.nan))
+    track.add(PoseEstimate(0.12, T), (0.003, 0.001))
+    s = track.summary()
+    assert s["invalid_updates"] == 1 and s["flags"] == {NON_FINITE_ESTIMATE: 1}
+    assert s["max_translation_m"] == 0.003 and s["max_translation_time_s"] == 0.12
+    assert s["rms_translation_m"] == pytest.approx(math.sqrt((0.001**2 + 0.003**2) / 2))
+    track.add(PoseEstimate(0.16, np.full((4, 4), np.nan)), (math.nan, math.nan))
+    assert math.isnan(track.summary()["final_translation_m"])  # the last estimate: none
