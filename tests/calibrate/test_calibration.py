@@ -1,4 +1,4 @@
-"""Self-calibration (issue 11 item 3): the solver against synthetic truth, and one robot end to end.
+"""Self-calibration: the solver against synthetic truth, and one robot end to end.
 
 The synthetic data are generated here from a drawn robot with the elastic pulley model written
 out independently (rest length = E·S·l / (E·S + τ), encoder l0 = c + (1 + s)·e), not by the

@@ -1,8 +1,8 @@
-"""``--resume`` refuses to mix two versions of a file the runs read (from a review).
+"""``--resume`` refuses to mix two versions of a file the runs read.
 
 A run's id hashes its resolved scenario, not the files it names: before, a campaign resumed
 after its ``[model] nominal`` description was replaced ran the new runs on the new robot model
-and the old ones stayed on the old (0.6 mm against 9.46 mm at p1, measured by the review), in
+and the old ones stayed on the old (0.6 mm against 9.46 mm at p1), in
 one table, with the same ``nominal_model`` path and no warning.
 """
 

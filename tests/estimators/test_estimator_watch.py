@@ -1,4 +1,4 @@
-"""The estimators' input watches hold on every path (a review's findings).
+"""The estimators' input watches hold on every path.
 
 Before: with ``selection = "best_conditioned"`` or ``"all_taut"`` the model estimators computed
 the encoder-mismatch and stuck-tension flags and dropped them (a 1 cm encoder jump gave a
@@ -56,7 +56,7 @@ def test_fused_holds_on_a_non_finite_command_and_goes_on_after_it(at_p1):
 
 @pytest.mark.parametrize("selection", ["most_tensioned", "best_conditioned", "all_taut"])
 def test_lengths_no_pose_can_give_are_held_not_converged(at_p1, selection):
-    # a review's surviving mutant: nothing failed with the residual check removed. Truth: one
+    # nothing failed with the residual check removed. Truth: one
     # cable 1 m longer than at p1 with the others unchanged is no pose of the robot (its chord
     # would leave the frame), so no solve can bring the residual down
     geometry, m0 = at_p1

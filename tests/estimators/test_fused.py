@@ -1,4 +1,4 @@
-"""Est. 7, ``fused`` (issue 11): consistency against the twin's ground truth, and its cases.
+"""Est. 7, ``fused``: consistency against the twin's ground truth, and its cases.
 
 The Monte Carlo: 50 runs of the paper's open-loop path (its first 4 s, camera off: the cables
 and the commanded twist only), each on a robot built to the nominal model whose per-robot

@@ -1,4 +1,4 @@
-"""Cable selection of the model-based estimators (issue 11): ``best_conditioned``, ``all_taut``.
+"""Cable selection of the model-based estimators: ``best_conditioned``, ``all_taut``.
 
 Where the paper's rule jumps. On today's twin the open-loop run has no ill-conditioned
 most-tensioned set (condition number ≤ 26 with the ``acrobot`` profile, ≤ 203 with ``ideal``,

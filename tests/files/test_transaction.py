@@ -1,4 +1,4 @@
-"""Output transactions (issue 13): one run owns its directory, final names belong to one run and
+"""Output transactions: one run owns its directory, final names belong to one run and
 are whole, ``summary.json`` is the commit marker, SIGTERM is handled like Ctrl-C, a failed write
 is a one-line error that leaves ``*.partial`` only; bad ``--out``/scenario/duration: exit 2."""
 

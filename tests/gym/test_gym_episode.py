@@ -1,4 +1,4 @@
-"""An episode's end as a training loop meets it (from a review of the environment).
+"""An episode's end as a training loop meets it.
 
 Before: a lost (NaN) estimate put NaN in ``pose_estimate`` — outside ``observation_space`` —
 and ended the episode one step late; ``step()`` after a termination or truncation carried on

@@ -48,7 +48,7 @@ def test_catenary_limits_and_the_issues_numbers():
     cat = solve_catenary(chord / 1.001, ES, 1e-9, math.hypot(*HIGH[:2]), HIGH[2])
     assert cat.tension_low == pytest.approx(ES * 0.001, rel=1e-6)
     assert cat.sag < 1e-9
-    # issue 10: a 17.6 m level cable at 1 kN sags ≈ 23 mm and its arc is ≈ 0.08 mm over the chord
+    # a 17.6 m level cable at 1 kN sags ≈ 23 mm and its arc is ≈ 0.08 mm over the chord
     w, span = RHO * 9.81, 17.6
     lo, hi = span * (1 - 2e-3), span
     for _ in range(60):  # the unstretched length that gives 1 kN horizontal tension

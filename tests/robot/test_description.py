@@ -1,4 +1,4 @@
-"""Robot descriptions and MJCF generated from them through MjSpec (issue 10, items 1-2).
+"""Robot descriptions and MJCF generated from them through MjSpec.
 
 The truth for ACROBOT is the hand-written model the generated one replaced, kept verbatim (but
 for its texture path) in tests/fixtures/acrobot_handwritten/.
@@ -116,7 +116,7 @@ def test_the_description_carries_acrobots_numbers():
         0.01,
         "anchor",
     )
-    cogiro = load_robot(MODELS_DIR / "cogiro" / "robot.toml")  # issue 10's numbers
+    cogiro = load_robot(MODELS_DIR / "cogiro" / "robot.toml")
     assert (cogiro.drum_radius, cogiro.max_payload, cogiro.sag) == (0.0675, 500.0, True)
     assert tuple(cogiro.tension_range) == (100.0, 5000.0)
 
@@ -169,7 +169,7 @@ def _edited(tmp_path: Path, old: str, new: str) -> Path:
         ('texture = "assets/tag36h11_00000.png"', 'texture = "nope.png"', "tag.texture"),
         ('texture = "assets/tag36h11_00000.png"', 'texture = "robot.toml"', "tag.texture"),
         ('texture = "assets/tag36h11_00000.png"', 'texture = "a\\u0000.png"', "tag.texture"),
-        # a review found each below built, or failed with a trace or MuJoCo's nameless error
+        # each below once built, or failed with a trace or MuJoCo's nameless error
         ("timestep_s = 0.0005", "timestep_s = 1.0", "simulation.timestep_s"),  # diverged
         ("gravity_m_s2 = [0.0, 0.0, -9.81]", "gravity_m_s2 = [true, 0.0, -9.81]",
          "simulation.gravity_m_s2"),  # read as [1, 0, -9.81]

@@ -1,4 +1,4 @@
-"""Tension sensors, homing repeatability and the PBVS goal taught by showing (issue 9, items 4-6).
+"""Tension sensors, homing repeatability and the PBVS goal taught by showing.
 
 Statistical tolerances: a sample std of N Gaussian values has relative standard error
 1/√(2(N − 1)) and a sample mean has standard error σ/√N; bounds below are ≥ 4 such errors

@@ -1,6 +1,6 @@
 """A run stopped anywhere in a tick leaves files that all end at the same recorded tick.
 
-Before (found by a review): a Ctrl-C or SIGTERM landing during the physics' advance left
+Before: a Ctrl-C or SIGTERM landing during the physics' advance left
 ``summary.json`` describing that mid-tick state (``simulated_time_s`` half a tick past the CSV's
 last row, ``final_pose`` up to 2.35 mm from it), a state no file recorded; one landing inside the
 recording of a tick left it in ``timeseries.csv`` but not in ``recording.rrd``.
@@ -88,7 +88,7 @@ def test_a_stop_while_a_tick_is_recorded_leaves_it_in_every_file(tmp_path, monke
 
 
 def test_an_event_fired_after_the_last_recorded_tick_is_not_reported_fired(tmp_path, monkeypatch):
-    # a review: cable 3 cut at 0.45 s inside the advance a stop cut short (0.44 → 0.48 s): the
+    # cable 3 cut at 0.45 s inside the advance a stop cut short (0.44 → 0.48 s): the
     # summary listed the break while its final tensions were those of an intact cable 3
     import json
 
@@ -109,7 +109,7 @@ def test_an_event_fired_after_the_last_recorded_tick_is_not_reported_fired(tmp_p
 
 
 def test_a_stop_held_by_the_shield_leaves_even_when_the_body_raises_and_a_second_escapes():
-    # a review: a SIGTERM held during a tick whose recording then raised was lost (exit 1, not
+    # a SIGTERM held during a tick whose recording then raised was lost (exit 1, not
     # 143); and a body that hangs could only be stopped by SIGKILL
     from cdpr_twin.run.interrupts import shielded
 

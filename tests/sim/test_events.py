@@ -112,7 +112,7 @@ def test_bad_events_are_errors_naming_the_field(tmp_path, event, field):
 
 
 def test_a_tag_occlusion_without_a_camera_is_dropped_and_said_and_changes_nothing(tmp_path):
-    # before (a review): accepted, reported as fired in summary.json, and its occluder body
+    # before: accepted, reported as fired in summary.json, and its occluder body
     # moved the physics by ~1e-12 m. Truth: the same run without the event, byte for byte
     text = OPEN_LOOP.replace("duration = 25.0", "duration = 1.0")
     text = text.replace('"../models/', f'"{ROOT}/models/')

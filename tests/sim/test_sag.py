@@ -157,7 +157,7 @@ def _irvine_tension(p, i: int, ls: float) -> float:
 
 
 def test_a_heavy_cable_pulls_on_across_its_chords_length_and_ends_hold_its_weight(cogiro_at_rest):
-    # Before (a review): a span 24 µm longer than its 8.7 m chord pulled 0 N on B_1, 1e-6
+    # Before: a span 24 µm longer than its 8.7 m chord pulled 0 N on B_1, 1e-6
     # shorter 105 N: the catenary was dropped where MuJoCo's straight cable goes slack. Truth:
     # continuity across the chord's length, and beyond it Irvine's equations solved by scipy.
     p = cogiro_at_rest.physics
@@ -190,7 +190,7 @@ def test_cables_with_mass_refuse_a_gravity_off_the_vertical():
 
 
 def test_a_heavy_cable_hanging_beyond_its_chord_is_slack_to_the_monitor():
-    # a review: once hanging cables report their catenary's pull, the monitor counted CoGiRo's
+    # once hanging cables report their catenary's pull, the monitor counted CoGiRo's
     # paid-out cables taut (20-45 N each) and its loss of constraint never fired. Truth:
     # MuJoCo's own cable force, 0 for a cable longer than its path
     from cdpr_twin.sim import build_robot

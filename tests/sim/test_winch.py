@@ -1,4 +1,4 @@
-"""Winch servos and encoders against analytic truth (issue 9, item 3).
+"""Winch servos and encoders against analytic truth.
 
 The velocity loop ṙ = clip((u − r)/τ, ±a), τ = 1/(2π f), is checked through the physics
 (``build_robot(winch=…)`` and ``advance``) against the textbook closed forms of a first-order
@@ -300,7 +300,7 @@ def test_the_drum_radius_and_the_sensors_spec_are_the_robots():
     assert (t.range_min, t.range_max, t.noise_std) == (-25.0, 75.0, 0.01)
     assert t.bias_std == 0.24 / math.sqrt(3.0)  # a ±0.24 N bound, rectangular (GUM 4.3.7)
     cogiro, _, _ = build_robot("cogiro")
-    assert cogiro.winch.drum_radius == 0.0675  # issue 10
+    assert cogiro.winch.drum_radius == 0.0675
 
 
 @pytest.mark.parametrize("set_to", ["truth", "half-way"])
