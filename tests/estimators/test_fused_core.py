@@ -1,8 +1,8 @@
 """The fused filter's compiled arithmetic computes what the reference formulations compute.
 
 :mod:`cdpr_twin.estimators.fused_core` and :mod:`~cdpr_twin.estimators.fused_kernels` redo,
-compiled, the per-update arithmetic whose reference is
-:mod:`cdpr_twin.estimators.fused_models`, :mod:`cdpr_twin.math.se3` and
+compiled, the per-update arithmetic whose reference is ``reference_fused.py`` (beside this
+file), :mod:`cdpr_twin.estimators.fused_models`, :mod:`cdpr_twin.math.se3` and
 :func:`cdpr_twin.math.kinematics.lengths_and_jacobian` (NumPy). Each compiled stage is held here to
 that reference on random and on ACROBOT's inputs, to round-off (the products are summed in
 another order): the SE(3) maps, the pulley kernel (and its Jacobian against finite
@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import reference_fused as reference
 from conftest import paper_pose
 
 from cdpr_twin.estimators import fused_core as fc
@@ -115,7 +116,7 @@ def test_the_joseph_update_is_the_reference(n, k, c):
         P = random_covariance(rng, n, 1.0)
         H, r = rng.normal(size=(k, n)), rng.normal(size=k)
         R = random_covariance(rng, k, 1.0) + 0.1 * np.eye(k)
-        dx, P_ref, nis = fm.joseph_update(P, H, R, r, c)
+        dx, P_ref, nis = reference.joseph_update(P, H, R, r, c)
         P_got = P.copy()
         got, got_nis = fc.joseph_update(P_got, H, R, r, c)
         assert close(got, dx[:c], 1e-10) and not dx[c:].any()
@@ -132,7 +133,7 @@ def test_the_detection_noise_and_calibration_jacobian_are_the_reference():
         z = se3.transform(R, np.array([*rng.normal(size=2) * 0.05, rng.uniform(0.08, 0.6)]))
         lens = rng.normal(size=4) * [0.2, 0.08, 0.002, 0.002]
         cov, M = fk.tag_noise(z, 0.04, 415.69, 1.3, lens, True)
-        assert close(cov, fm.tag_covariance(z, 0.04, 415.69, 1.3), 1e-9)
+        assert close(cov, reference.tag_covariance(z, 0.04, 415.69, 1.3), 1e-9)
         assert close(M, fm.tag_calibration_jacobian(z, 0.04, 415.69, lens), 1e-9)
         assert not fk.tag_noise(z, 0.04, 415.69, 1.3, lens, False)[1].any()
 
@@ -153,7 +154,7 @@ def _blocks(layout):
 
 
 def _geometry_columns(layout, rows, T):
-    return fm.geometry_rows(layout, rows, T[:3, :3])
+    return reference.geometry_rows(layout, rows, T[:3, :3])
 
 
 @pytest.mark.parametrize("conditioned", [True, False])
@@ -233,7 +234,7 @@ def test_the_cable_update_is_the_reference(twin, layout):
             assert outcome == fc.CABLES_NONE and np.array_equal(P_got, P)
             continue
         used += 1
-        dx_ref, P_ref, _ = fm.joseph_update(P, H[use], np.diag(var[use]), r[use], c)
+        dx_ref, P_ref, _ = reference.joseph_update(P, H[use], np.diag(var[use]), r[use], c)
         assert outcome == fc.CABLES_USED
         assert close(dx, dx_ref[:c], 1e-9) and close(P_got, P_ref, 1e-10)
     assert used >= 10
@@ -253,7 +254,7 @@ def test_the_tag_update_and_anchoring_are_the_reference(layout):
         T, last = random_pose(rng, 0.3), rng.normal(size=6) * 0.02
         z = se3.transform(se3.so3_exp(rng.normal(size=3) * 0.2), np.array([0.01, -0.02, 0.4]))
         lag = last * options[3]
-        R = fm.tag_covariance(z, 0.04, 415.69, 1.0)
+        R = reference.tag_covariance(z, 0.04, 415.69, 1.0)
         R += np.diag((options[4] * np.abs(last)) ** 2 + 1e-12)
         calib = fm.tag_calibration_jacobian(z, 0.04, 415.69, lens)
         # anchoring: ᵇT_o = T exp(−ξd) ᵖT_c z, its rows J P, its block J P Jᵀ + R
@@ -280,13 +281,13 @@ def test_the_tag_update_and_anchoring_are_the_reference(layout):
         z2 = z @ se3.se3_exp(rng.normal(size=6) * 1e-3)
         P_got[:6, :6] += np.diag(rng.uniform(1e-8, 1e-6, 6))
         P2 = P_got.copy()
-        R = fm.tag_covariance(z2, 0.04, 415.69, 1.0)
+        R = reference.tag_covariance(z2, 0.04, 415.69, 1.0)
         R += np.diag((options[4] * np.abs(last)) ** 2 + 1e-12)
         calib = fm.tag_calibration_jacobian(z2, 0.04, 415.69, lens)
         outcome, _, dx = fc.update_tag(
             T, T_tag, True, P2, z2, last, T_pc, options, lens, gate, blocks
         )
-        r, H_pose, z_hat = fm.tag_residual(T, T_tag, T_pc, z2, lag)
+        r, H_pose, z_hat = reference.tag_residual(T, T_tag, T_pc, z2, lag)
         H = np.zeros((6, layout.n))
         H[:, fm.POSE], H[:, t] = H_pose, np.eye(6)
         if cam0 >= 0:
@@ -296,7 +297,7 @@ def test_the_tag_update_and_anchoring_are_the_reference(layout):
         if r @ np.linalg.solve(S, r) > gate:
             assert outcome == fc.TAG_GATED and np.array_equal(P2, P_got)
             continue
-        dx_ref, P_ref, _ = fm.joseph_update(P_got, H, R, r, c)
+        dx_ref, P_ref, _ = reference.joseph_update(P_got, H, R, r, c)
         assert outcome == fc.TAG_USED
         assert close(dx, dx_ref[:c], 1e-8) and close(P2, P_ref, 1e-9)
         fused += 1

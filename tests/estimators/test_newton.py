@@ -1,7 +1,7 @@
 """The compiled Newton solve (``estimators.newton``) equals the scalar reference bit for bit.
 
 The reference, ``solvers._newton``, is itself held to SciPy's least squares and to the truth
-in ``test_estimators_model.py``; here the two are compared on the same inputs with ``==`` on
+in ``test_model_estimators.py``; here the two are compared on the same inputs with ``==`` on
 every float: starts near the root (the estimators' case), far ones (step halving), the straight
 and pulley kernels, and the systems where the compiled solve hands over to the reference.
 """

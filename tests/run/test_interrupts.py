@@ -27,8 +27,8 @@ def _through_compiled_code(stop: KeyboardInterrupt) -> SystemError:
 
 
 def test_sigterm_raised_inside_a_compiled_call_ends_the_run_terminated(tmp_path, monkeypatch):
-    # truth: the status a SIGTERM gets anywhere else (tests/test_outputs.py), and the exit the
-    # command maps Terminated to; here it surfaces as the SystemError seen in a CI run
+    # truth: the status a SIGTERM gets anywhere else (tests/files/test_transaction.py), and the
+    # exit the command maps Terminated to; here it surfaces as the SystemError seen in a CI run
     real, calls = runner.RunSetup.estimate, []
 
     def estimate(self, m):
