@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from cdpr_twin.campaign import load_campaign
+from cdpr_twin.campaign import CampaignError, load_campaign
 from cdpr_twin.campaign.spec import INT64, MAX_RUNS
 from cdpr_twin.cli import main
 
@@ -249,3 +249,17 @@ def test_a_campaign_name_that_is_not_a_plain_directory_name_is_refused(tmp_path,
     path.write_text(f'name = "{name}"\n' + SCENARIO)
     with pytest.raises(CampaignError, match="plain name"):
         load_campaign(path)
+
+
+def test_a_campaign_refuses_what_its_runs_would_before_any_starts(tmp_path):
+    scenario = ROOT / "scenarios" / "paper_open_loop.toml"
+    base = f'scenario = "{scenario}"\n[overrides]\nduration = 0.2\n'
+    for axis, match in (
+        ('key = "realism.camera.exposure_s"\nvalues = [0.004, 0.05]', "exposure_s: 0.05 s"),
+        ('key = "truth.exit_point_std"\nvalues = [0, 0.0]', "are identical"),
+        ('key = "controller.durations"\nvalues = [[10, 5, 10], [10.0, 5.0, 10.0]]', "identical"),
+    ):
+        path = tmp_path / "c.toml"
+        path.write_text(base + "\n[[axes]]\n" + axis + "\n")
+        with pytest.raises(CampaignError, match=match):
+            load_campaign(path)

@@ -181,3 +181,32 @@ def test_workspace_writes_a_whole_figure(tmp_path, capsys):
     assert "grid points wrench-feasible" in capsys.readouterr().out
     assert out.read_text().rstrip().endswith("</svg>")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ws.svg"]
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "problem"),
+    [
+        ("tension_range_n = [2.0, 75.0]", "tension_range_n = [2.0, 2.5]",
+         "platform.home_pose: no tension distribution with 2.0 N ≤ τ ≤ 2.5 N"),
+        # before: the frame's message without the file or the field
+        ("home_pose = [0.112,", "home_pose = [5.0,", "platform.home_pose: reset pose at position"),
+        # before: "quaternion [0. 0. 0. 0.] is zero or not finite", no file or field
+        ("quat_wxyz = [0.0, 0.0, 0.0, 1.0]", "quat_wxyz = [0.0, 0.0, 0.0, 0.0]",
+         "camera.quat_wxyz: must be a non-zero quaternion"),
+    ],
+)  # fmt: skip
+def test_what_model_build_refuses_names_the_description_and_field(
+    tmp_path, capsys, old, new, problem
+):
+    import shutil
+
+    from cdpr_twin.cli import main
+
+    shutil.copytree(ROOT / "models" / "acrobot", tmp_path / "robot")
+    desc = tmp_path / "robot" / "robot.toml"
+    text = desc.read_text()
+    assert old in text
+    desc.write_text(text.replace(old, new, 1))
+    assert main(["model", "build", str(desc), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{desc}: {problem}" in err

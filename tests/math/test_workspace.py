@@ -105,3 +105,15 @@ def test_a_scenario_waypoint_outside_the_wrench_feasible_workspace_is_a_one_line
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "controller.waypoints[1]" in err and "wrench-feasible" in err
     assert str(path) in err and not out.exists()
+
+
+def test_a_vanishing_workspace_spacing_is_an_error_without_warnings():
+    import warnings
+
+    from cdpr_twin.math.workspace import spacing_problem
+    from cdpr_twin.sim import Twin
+
+    geom = Twin(camera=False).nominal_geometry
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert "gives inf grid points" in spacing_problem(geom, 1e-300)

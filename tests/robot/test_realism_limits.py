@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from cdpr_twin.cli import main
+from cdpr_twin.plugins import OptionError
 from cdpr_twin.robot import realism as rl
 from cdpr_twin.scenario.loading import ScenarioError, load_scenario
 from cdpr_twin.types import CameraIntrinsics
@@ -256,3 +257,13 @@ def test_minus_zero_in_a_truth_std_is_zero(tmp_path, capsys, line):
     argv = ["run", str(path), "--duration", "0.08", "--no-camera", "--out", str(out)]
     assert main(argv) == 0, capsys.readouterr().err
     assert "error" not in capsys.readouterr().err
+
+
+def test_the_relative_std_bound_keeps_negative_draws_beyond_10_sigma():
+    from cdpr_twin.robot.realism import WinchRealism
+    from cdpr_twin.robot.realism_limits import MAX_RELATIVE_STD
+
+    WinchRealism(drum_radius_error_std=MAX_RELATIVE_STD)
+    with pytest.raises(OptionError, match=r"once in 20\.9 robots"):  # P(z < −1/0.6) = 0.0478
+        WinchRealism(drum_radius_error_std=0.6)
+    assert 0.5 * math.erfc(1 / MAX_RELATIVE_STD / math.sqrt(2)) < 1e-22

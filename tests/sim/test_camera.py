@@ -5,6 +5,7 @@ import pytest
 from conftest import paper_pose
 
 from cdpr_twin.math import se3
+from cdpr_twin.sim import camera
 from cdpr_twin.vision import detection as vision
 
 
@@ -73,3 +74,15 @@ def test_tag_out_of_view_is_reported_as_none(camera_twin):
     camera_twin.reset(se3.pose_from_vector([-0.2, 0.2, 0.3, 0, 0, 0]))
     m = camera_twin.sense()
     assert m.image is not None and m.tag is None
+
+
+def test_frames_the_buffer_or_the_memory_cannot_hold_are_refused(monkeypatch):
+    camera.check_frame_size(640, 480, 4)
+    with pytest.raises(ValueError, match=r"17000×480 px: more than an offscreen buffer .* resolu"):
+        camera.check_frame_size(17000, 480)
+    with pytest.raises(ValueError, match=r"16000×12000 px.*supersample"):
+        camera.check_frame_size(640, 480, 25)
+    monkeypatch.setattr(camera, "_available_memory", lambda: 2_000_000_000)
+    camera.check_frame_size(640, 480, 6)  # 1.8 GB of images
+    with pytest.raises(ValueError, match=r"about 3\.1 GB of images .* than the 2\.0 GB"):
+        camera.check_frame_size(640, 480, 8)
