@@ -1,5 +1,8 @@
-"""Shared fixtures: the paper's poses and twins of the nominal robot."""
+"""Shared fixtures: the paper's poses, twins of the nominal robot, a disk that fills up."""
 
+import builtins
+import errno
+import io
 import os
 from collections import Counter
 from pathlib import Path
@@ -170,3 +173,53 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
     slow = Counter(module(it) for it in items if it.get_closest_marker("slow") is not None)
     items.sort(key=lambda it: -slow[module(it)])  # a stable sort: the rest keeps its order
+
+
+ENOSPC = "No space left on device"
+
+
+class _FullFile:
+    """A file on a disk with ``budget[0]`` bytes free: what does not fit raises ENOSPC."""
+
+    def __init__(self, f, budget: list[int]) -> None:
+        self._f, self._budget = f, budget
+
+    def write(self, data):
+        room = self._budget[0]
+        if len(data) > room:
+            self._f.write(data[:room])
+            self._f.flush()
+            self._budget[0] = 0
+            raise OSError(errno.ENOSPC, ENOSPC)
+        self._budget[0] -= len(data)
+        return self._f.write(data)
+
+    def __getattr__(self, name):
+        return getattr(self._f, name)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._f.close()
+
+
+@pytest.fixture
+def full_disk(monkeypatch):
+    """``full_disk(n)``: from now on the disk takes ``n`` more bytes (``open`` and sendfile)."""
+
+    def fill(free: int) -> None:
+        real, budget = io.open, [free]
+
+        def fake_open(file, mode="r", *args, **kwargs):
+            f = real(file, mode, *args, **kwargs)
+            return _FullFile(f, budget) if any(c in mode for c in "wax+") else f
+
+        def fake_sendfile(*args):
+            raise OSError(errno.ENOSPC, ENOSPC)
+
+        monkeypatch.setattr(io, "open", fake_open)
+        monkeypatch.setattr(builtins, "open", fake_open)
+        monkeypatch.setattr(os, "sendfile", fake_sendfile)
+
+    return fill

@@ -34,10 +34,24 @@ def site(tmp_path_factory):
     )
     target = tmp / "site"
     proc = subprocess.run(
-        [sys.executable, "-m", "pip", "install", "--disable-pip-version-check", "-q",
-         "--no-deps", "--no-build-isolation", "--no-index", "--target", str(target), str(src)],
-        capture_output=True, text=True, timeout=300,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "--disable-pip-version-check",
+            "-q",
+            "--no-deps",
+            "--no-build-isolation",
+            "--no-index",
+            "--target",
+            str(target),
+            str(src),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stderr
     assert list(target.glob("cdpr_twin_tiny_plugin-*.dist-info"))
     return target
@@ -47,8 +61,12 @@ def _cli(site: Path, cwd: Path, *args: str) -> subprocess.CompletedProcess:
     env = {**os.environ, "MUJOCO_GL": "egl", "PYTHONPATH": str(site)}
     return subprocess.run(
         [sys.executable, "-m", "cdpr_twin", *args],
-        capture_output=True, text=True, cwd=cwd, env=env, timeout=300,
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        env=env,
+        timeout=300,
+    )
 
 
 def test_an_installed_estimator_runs_by_name_in_a_scenario(site, tmp_path):
@@ -57,8 +75,9 @@ def test_an_installed_estimator_runs_by_name_in_a_scenario(site, tmp_path):
     scenario = tmp_path / "with_plugin.toml"
     scenario.write_text(text.replace('passive = ["', 'passive = ["start_pose", "', 1))
     out = tmp_path / "out"
-    proc = _cli(site, tmp_path, "run", str(scenario), "--duration", "2", "--no-camera",
-                "--out", str(out))  # fmt: skip
+    proc = _cli(
+        site, tmp_path, "run", str(scenario), "--duration", "2", "--no-camera", "--out", str(out)
+    )
     assert proc.returncode == 0, proc.stderr
     assert "start_pose" in proc.stdout  # in the end-of-run table
     summary = json.loads((out / "summary.json").read_text())

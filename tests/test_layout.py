@@ -66,3 +66,14 @@ def test_the_sim_layer_defaults_mujoco_gl_to_egl():
 def test_figures_do_not_switch_the_matplotlib_backend():
     modules, _ = _loaded_after("import cdpr_twin.study.figures")
     assert "matplotlib.pyplot" not in modules
+
+
+def test_the_tests_mirror_the_package():
+    # each folder of tests/ is a layer of the package, and pytest imports every test file under
+    # its own name (no __init__.py): two files of one name would shadow each other
+    tests = ROOT / "tests"
+    layers = {p.name for p in PACKAGE.iterdir() if (p / "__init__.py").is_file()}
+    folders = {p.name for p in tests.iterdir() if p.is_dir() and list(p.glob("test_*.py"))}
+    assert folders <= layers, folders - layers
+    names = [p.name for p in tests.rglob("test_*.py")]
+    assert len(names) == len(set(names)), sorted(n for n in names if names.count(n) > 1)

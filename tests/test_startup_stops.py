@@ -148,3 +148,17 @@ def test_a_signal_while_the_interpreter_ends_does_not_change_the_exit_code(tmp_p
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 0, err
     assert "paper_open_loop" in out and err == ""
+
+
+def test_ctrl_c_while_a_command_starts_is_one_line_not_a_traceback(monkeypatch, capsys):
+    """Ctrl-C before a command's own handling (its imports, reading the scenario) printed a
+    KeyboardInterrupt traceback."""
+    from cdpr_twin.cli import main
+    from cdpr_twin.scenario import loading as scenario
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(scenario, "load_scenario", interrupted)
+    assert main(["run", "paper_open_loop", "--duration", "0.2"]) == 130
+    assert capsys.readouterr().err == "cdpr-twin run: interrupted\n"

@@ -80,9 +80,15 @@ def test_the_wheel_carries_every_package_the_robots_and_the_scenarios(installed)
 def test_the_installed_wheel_runs_a_scenario_by_name_from_an_empty_directory(installed):
     venv, _, env, work = installed
     proc = _call(
-        venv / "bin" / "cdpr-twin", "run", "paper_open_loop", "--duration", "1", "--no-camera",
-        cwd=work, env=env,
-    )  # fmt: skip
+        venv / "bin" / "cdpr-twin",
+        "run",
+        "paper_open_loop",
+        "--duration",
+        "1",
+        "--no-camera",
+        cwd=work,
+        env=env,
+    )
     summary = json.loads((work / "runs" / "paper_open_loop" / "summary.json").read_text())
     assert summary["status"] == "completed" and summary["simulated_time_s"] == pytest.approx(1.0)
     assert "paper_open_loop: completed after 1.00 s simulated" in proc.stdout, proc.stdout
@@ -96,7 +102,7 @@ def test_the_installed_wheel_builds_the_acrobot_by_name(installed):
     venv, _, env, work = installed
     code = (
         "import cdpr_twin, numpy as np\n"
-        "from cdpr_twin import se3\n"
+        "from cdpr_twin.math import se3\n"
         "from cdpr_twin.sim import Twin\n"
         "with Twin(robot='acrobot') as twin:\n"
         "    twin.reset(se3.pose_from_vector([0.284, -0.197, 0.08, 0, 0, 0]))\n"

@@ -96,7 +96,7 @@ def tighten(physics, sensors, geom, T: np.ndarray, timeout: float = 8.0) -> int:
         geom: the nominal geometry.
         T: (4, 4) the commanded pose.
         timeout: [s]; 8 s reels in up to 16 mm of slack (robot 19, its exit points 12 mm off,
-            needed 7.3 s at one of the six poses of ``tests/test_calibration_drive.py``).
+            needed 7.3 s at one of the six poses of ``tests/calibrate/test_calibrate_drive.py``).
 
     It ends once every cable reads at least :data:`TIGHTEN_TARGET` (or, where the robot
     cannot hold that, the greatest least tension less 0.1 N) and none is :data:`SPREAD` or

@@ -2,10 +2,10 @@
 
 Numba versions of :mod:`cdpr_twin.math.se3`, :func:`cdpr_twin.math.kinematics.lengths_and_jacobian`
 and
-:func:`cdpr_twin.estimators.fused_models.tag_covariance` /
-:func:`~cdpr_twin.estimators.fused_models.tag_calibration_jacobian` (the references, NumPy),
-for :mod:`cdpr_twin.estimators.fused_core`; ``tests/test_fused_core.py`` holds each to its
-reference.
+:func:`~cdpr_twin.estimators.fused_models.tag_calibration_jacobian` and the detection's noise
+covariance (the references, NumPy: ``fused_models`` and ``tests/estimators/reference_fused.py``),
+for :mod:`cdpr_twin.estimators.fused_core`; ``tests/estimators/test_fused_core.py`` holds each
+to its reference.
 """
 
 from __future__ import annotations
@@ -170,7 +170,7 @@ def tag_noise(
 ) -> tuple[np.ndarray, np.ndarray]:
     """A detection's noise covariance (6, 6) and calibration Jacobian ∂n/∂δk (6, 8).
 
-    ``fused_models.tag_covariance`` (pinhole) and ``tag_calibration_jacobian`` (through the
+    ``reference_fused.tag_covariance`` (pinhole) and ``tag_calibration_jacobian`` (through the
     calibrated lens (k1, k2, p1, p2)); the Jacobian is zeros when ``calibration`` is False.
     """
     h = 0.5 * tag_size

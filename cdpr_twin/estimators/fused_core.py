@@ -5,8 +5,9 @@ NumPy's per-call overhead (about a microsecond a call, a few hundred calls an up
 the arithmetic: 420–465 µs an update as the paper scenarios configure it. Here each stage —
 prediction, cable update, tag update — is one compiled call on the filter's arrays. The
 equations are those of :mod:`cdpr_twin.estimators.fused_models` (the reference formulations,
-NumPy) and :mod:`cdpr_twin.math.se3`; ``tests/test_fused_core.py`` holds every function here to
-them (round-off apart: the products are summed in another order).
+NumPy, with ``tests/estimators/reference_fused.py``) and :mod:`cdpr_twin.math.se3`;
+``tests/estimators/test_fused_core.py`` holds every function here to them (round-off apart: the
+products are summed in another order).
 
 The functions are compiled on first use and cached on disk (Numba's ``cache=True``, in
 ``__pycache__`` beside this file, or ``NUMBA_CACHE_DIR``): the first process to use them after
@@ -66,7 +67,8 @@ def joseph_update(
     """Joseph-form update in place with the states from c on considered (Schmidt).
 
     P⁺ = P − K(HP) − (HP)ᵀKᵀ + K S Kᵀ on the leading c rows and columns (K's other rows are
-    zero), the leading block symmetrised; ``fused_models.joseph_update`` is the reference.
+    zero), the leading block symmetrised; the tests' ``reference_fused.joseph_update`` is the
+    reference.
 
     Args:
         P: (n, n) covariance, symmetric; overwritten with the posterior.

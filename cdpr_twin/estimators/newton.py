@@ -5,8 +5,8 @@ of a model-based update in a few dozen Python-level calls; here the whole solve 
 call. It performs the same floating-point operations in the same order — the kernel of
 :func:`cdpr_twin.estimators.compiled_kernels.kernel`, the scalar ``pose · exp(δ)`` of
 ``solvers._compose_exp``, LAPACK's ``dgesv`` from the same SciPy library, sums left to
-right — so its poses equal the reference's bit for bit (``tests/test_newton.py``; the golden
-runs of ``tests/test_golden.py`` compare every CSV cell byte for byte).
+right — so its poses equal the reference's bit for bit (``tests/estimators/test_newton.py``;
+the golden runs of ``tests/test_golden.py`` compare every CSV cell byte for byte).
 
 Where the reference leaves its main path (a singular or non-finite system, where it takes
 NumPy's least-squares step or stops), this solve says so and the caller runs the reference

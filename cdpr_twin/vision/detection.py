@@ -203,7 +203,7 @@ class TagDetector:
             the tag each side), the whole frame when the tag is not found well inside it.
             Cheaper, and equal to a whole-frame search to ≤ 3e-4 px (typically 1e-5), not bit
             for bit: AprilTag's quad fit sums coordinates the window shifts
-            (``tests/test_tag_search.py``).
+            (``tests/vision/test_tag_search.py``).
     """
 
     def __init__(

@@ -7,7 +7,7 @@ holds the same codes that pupil-apriltags detects.
 The image is PLATE_CELLS × PLATE_CELLS cells: the tag's 8 × 8 black-bordered code (the 4 cm
 "tag size" that pose estimation uses) centred on white, so that the plate geom (7 cm wide in
 scene.xml) shows the code 4 cm wide. Upright in the file = +y of the base frame up when the
-plate is seen from above (checked by tests/test_camera.py against detection).
+plate is seen from above (checked by tests/sim/test_camera.py against detection).
 """
 
 from pathlib import Path
