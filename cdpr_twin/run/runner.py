@@ -56,7 +56,8 @@ class RunSetup:
         nominal: what the robot's software believes (:class:`cdpr_twin.sim.NominalRobot`).
         estimators: by name, in recording order (the in-loop one first).
         order: the names in update order (inputs before the estimators that read them).
-        controller: the controller.
+        controller: the controller, or ``None``: the caller commands every tick (a
+            calibration's tour).
         goal_pose: (4, 4) the controller's goal, or ``None``.
         events: the scenario's timed events, hooked into the physics.
         monitor: the robot's plausibility monitor (:class:`cdpr_twin.sim.Monitor`), hooked
@@ -74,7 +75,7 @@ class RunSetup:
     nominal: object
     estimators: dict[str, Estimator]
     order: tuple[str, ...]
-    controller: Controller
+    controller: Controller | None
     goal_pose: np.ndarray | None
     events: EventSchedule
     monitor: object = None
