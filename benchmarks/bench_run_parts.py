@@ -1,15 +1,16 @@
-"""Where one control tick of a camera-less run goes (issue 12, item 5), against physics alone.
+"""Where one control tick of a camera-less run goes, against physics alone.
 
 Run: ``python benchmarks/bench_run_parts.py [--repeats 3] [--realism ideal|acrobot]``.
 
 It runs ``paper_open_loop`` with the camera off through the real runner, timing each part of
-every tick with ``perf_counter`` around the runner's own calls (nothing else changes):
-physics (``Physics.advance`` of one period: MuJoCo's ``mj_step`` blocks, the swivel refreshes,
-the step hooks such as the fault monitor), the sensor read, each estimator's ``update``, and
-the recording (metrics, CSV and Rerun rows, events and the monitor's tick check). The
-baseline, measured in the same run: the twin alone stepping the same period at zero rates
-(``bench_scenarios.physics_only``). The ratio the issue asks for, run / physics alone, is
-physics-alone µs per tick divided by the run's µs per tick.
+every tick with ``perf_counter`` around the calls of :meth:`cdpr_twin.run.episode.Episode.step`
+(nothing else changes): physics (``Physics.advance`` of one period: MuJoCo's ``mj_step``
+blocks, the swivel refreshes, the step hooks such as the fault monitor), the sensor read, each
+estimator's ``update``, the tick's record (the events fired, the monitor's look, the
+``TickRecord`` and its deviations, sinks excluded), and each sink (the metrics, the CSV and
+Rerun rows, the summary's tally). The baseline, measured in the same run: the twin alone
+stepping the same period at zero rates (``bench_scenarios.physics_only``). The ratio, run /
+physics alone, is physics-alone µs per tick divided by the run's µs per tick.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from pathlib import Path
 
 import cdpr_twin.sim  # noqa: F401  (defaults MUJOCO_GL=egl before mujoco is imported)
 from cdpr_twin.recording import sinks as recorders
-from cdpr_twin.run import metrics, runner
+from cdpr_twin.run import episode, metrics, runner, summary
 from cdpr_twin.scenario.loading import load_scenario
 from cdpr_twin.sim import physics, sensors
 
@@ -70,9 +71,10 @@ def measure(realism: str) -> tuple[dict[str, float], int, float]:
     undo = [
         _timed(physics.Physics, "advance", "physics (advance)", acc),
         _timed(sensors.Sensors, "read", "sensor read", acc),
-        _timed(metrics.RunMetrics, "add", "record: deviations", acc),
-        _timed(recorders.Recorders, "tick", "record: CSV + Rerun rows", acc),
-        _timed(runner, "_marks", "record: events + monitor", acc),
+        _timed(metrics.RunMetrics, "add", "sink: metrics", acc),
+        _timed(recorders.Recorders, "add", "sink: CSV + Rerun rows", acc),
+        _timed(summary.Tally, "add", "sink: summary tally", acc),
+        _timed(episode.Episode, "_record", "record: events, monitor, tick", acc),
     ]
     original_estimate = runner.RunSetup.estimate
     runner.RunSetup.estimate = _estimate_timed(acc)
@@ -100,6 +102,9 @@ def main() -> None:
     runs = [measure(args.realism) for _ in range(args.repeats)]
     loop_us = statistics.median(r[2] for r in runs)
     parts = {k: statistics.median(r[0][k] for r in runs) for k in runs[0][0]}
+    # the record's time includes its sinks': each part counted once
+    sinks = sum(us for k, us in parts.items() if k.startswith("sink: "))
+    parts["record: events, monitor, tick"] -= sinks
     print(f"paper_open_loop, camera off, realism {args.realism}: median of {args.repeats} runs")
     print(f"physics alone (baseline): {base_us:7.0f} µs per tick ({base_rtf:.1f}× real time)")
     print(f"the run's loop:          {loop_us:7.0f} µs per tick → {base_us / loop_us:.2f}× physics")

@@ -38,7 +38,9 @@ from cdpr_twin.calibrate.excitation import tag_in_view
 from cdpr_twin.calibrate.problem import Detector, Observations
 from cdpr_twin.campaign.executor import abandon, exit_with
 from cdpr_twin.math.se3 import so3_exp, so3_log, transform
+from cdpr_twin.run.episode import Episode, start
 from cdpr_twin.run.homing_and_teaching import homing
+from cdpr_twin.run.runner import RunSetup
 from cdpr_twin.scenario.loading import Scenario, ScenarioError
 
 SETTLE = 0.6
@@ -167,9 +169,7 @@ class _Segment:
 
 
 def _read(
-    physics,
-    sensors,
-    period: float,
+    episode: Episode,
     frames: int,
     wait: int,
     look: bool,
@@ -179,23 +179,31 @@ def _read(
     """Rest, tighten, then average ``frames`` readings.
 
     Tightening only after a move (``moved_to``: the pose commanded, in the nominal
-    ``geometry``); the camera's readings only if ``look``.
+    ``geometry``); the camera's readings only if ``look``. Each reading is taken, and then
+    the robot rests a control period (the tick's two halves in the order a reading is held).
     """
+    physics, period = episode.setup.physics, episode.period
     rest = np.zeros(physics.n_cables)
     if moved_to is not None:
-        physics.advance(round(SWING / period) * period, rest)
-        drive.tighten(physics, sensors, geometry, moved_to)
+        episode.advance(round(SWING / period) * period, rest)
+        drive.tighten_with(
+            episode.advance,
+            lambda: episode.read(render=False).measurement.tensions,
+            physics.timestep,
+            geometry,
+            moved_to,
+        )
     settle = round(SETTLE / period) * period
-    physics.advance(settle - period * look, rest)
+    episode.advance(settle - period * look, rest)
     if look:  # the camera records the states of its exposures from the tick before its reads
-        _exposures(sensors, True)
-        physics.advance(period, rest)
+        _exposures(episode.setup.sensors, True)
+        episode.advance(period, rest)
     for _ in range(wait if look else 0):
-        sensors.read(None)
-        physics.advance(period, rest)
+        episode.read()
+        episode.advance(period, rest)
     enc, ten, tags, ok = [], [], [], None
     for _ in range(frames):
-        m = sensors.read(None, render=look)
+        m = episode.read(render=look).measurement
         enc.append(m.cable_lengths)
         ten.append(m.tensions)
         clipped = m.tensions_clipped if m.tensions_clipped is not None else False
@@ -203,8 +211,8 @@ def _read(
         ok = good if ok is None else ok & good
         if m.tag is not None:
             tags.append(m.tag.T_cam_tag)
-        physics.advance(period, rest)
-    _exposures(sensors, False)
+        episode.advance(period, rest)
+    _exposures(episode.setup.sensors, False)
     return Reading(np.mean(enc, axis=0), np.mean(ten, axis=0), ok, _mean_pose(tags))
 
 
@@ -325,19 +333,13 @@ def _build(s: Scenario) -> tuple:
     return physics, nominal
 
 
-def _reset_at_start(s: Scenario, physics, settle_time: float) -> None:
-    """Home: the true robot at the start pose moved by the homing offset (as a run does).
+def _start_error(s: Scenario, offset, exc: Exception) -> ScenarioError:
+    """The start pose refused: outside the frame, or no tension distribution holds it there.
 
-    Raises:
-        ScenarioError: it is outside the frame or no tension distribution holds it there
-            (``cdpr-twin run``'s message for the same file).
+    The message is ``cdpr-twin run``'s for the same file.
     """
-    offset, true_start = homing(s)
-    try:
-        physics.reset(true_start, settle_time=settle_time)
-    except ValueError as exc:  # outside the frame, or an InfeasibleTensionError
-        where = "start.pose" if offset is None else "start.pose (moved by its homing offset)"
-        raise ScenarioError(f"{s.source}: {where}: {exc}") from None
+    where = "start.pose" if offset is None else "start.pose (moved by its homing offset)"
+    return ScenarioError(f"{s.source}: {where}: {exc}")
 
 
 def check(s: Scenario) -> None:
@@ -351,7 +353,11 @@ def check(s: Scenario) -> None:
     """
     _refuse_what_it_cannot_use(s)
     physics, _ = _build(s)
-    _reset_at_start(s, physics, settle_time=0.0)
+    offset, true_start = homing(s)
+    try:
+        physics.reset(true_start, settle_time=0.0)
+    except ValueError as exc:  # outside the frame, or an InfeasibleTensionError
+        raise _start_error(s, offset, exc) from None
 
 
 def _refuse_what_it_cannot_use(s: Scenario) -> None:
@@ -380,6 +386,7 @@ def _worker_start(parent: int) -> None:
 def _segment(index: int, poses: list[np.ndarray], s: Scenario, frames: int) -> _Segment:
     """Record one segment of the tour (the ``index``-th, through ``poses``) from homing."""
     from cdpr_twin.sim import Sensors
+    from cdpr_twin.sim.events import EventSchedule
 
     physics, nominal = _build(s)
     period = s.model.control_period
@@ -396,23 +403,40 @@ def _segment(index: int, poses: list[np.ndarray], s: Scenario, frames: int) -> _
         robot_seed=s.truth.seed,
         period=period,
     )
-    g = nominal.geometry
+    offset, true_start = homing(s)
+    # no controller: the tour commands every move; no estimator, no event
+    setup = RunSetup(
+        scenario=s,
+        physics=physics,
+        sensors=sensors,
+        nominal=nominal,
+        estimators={},
+        order=(),
+        controller=None,
+        goal_pose=None,
+        events=EventSchedule((), physics, sensors),
+        true_start=true_start,
+        homing_offset=offset,
+    )
+    episode, g = Episode(setup), nominal.geometry
     try:
-        _reset_at_start(s, physics, settle_time=0.3)
-        sensors.home(s.start_pose)
+        try:
+            start(setup)  # the true robot homed at the start pose, as a run homes it
+        except ValueError as exc:  # outside the frame, or an InfeasibleTensionError
+            raise _start_error(s, offset, exc) from None
         _exposures(sensors, False)
         rows, truth, here = [], [], s.start_pose
         # the first segment first reads where the encoders were homed, as the robot stands
         stops = [(here, False)] * (index == 0) + [(T, True) for T in poses]
         for T, moved in stops:
             if moved:
-                drive.move(physics, g, here, T, period)
+                drive.move(episode, g, here, T, period)
             look = tag_in_view(
                 g, nominal.T_base_tag, nominal.intrinsics, nominal.tag_size, T, VIEW_MARGIN
             )
             wait = s.realism.camera.latency_ticks
             moved_to = T if moved else None
-            rows.append(_read(physics, sensors, period, frames, wait, look, g, moved_to))
+            rows.append(_read(episode, frames, wait, look, g, moved_to))
             truth.append(np.array(physics.T_base_platform))
             here = T
         detector, intrinsics_error = _detector(sensors.camera, nominal.tag_size, s.realism)
@@ -420,7 +444,7 @@ def _segment(index: int, poses: list[np.ndarray], s: Scenario, frames: int) -> _
         tension_sensors = (t.bias_std, t.gain_error_std, sensors.tension.noise_std)
         bias, gain = sensors.tension.bias.copy(), sensors.tension.gain_error.copy()
     finally:
-        sensors.close()
+        setup.close()
     return _Segment(
         index=index,
         readings=rows,

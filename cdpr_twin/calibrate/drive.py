@@ -6,6 +6,8 @@ length changes, the tightening from the tension readings and the nominal model's
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy.linalg import null_space
 from scipy.optimize import linprog
@@ -50,8 +52,12 @@ TIGHTEN_RATE = 50.0
 within 40 µm of reeling (at 25 Hz, 80 µm: newtons more, which unload its neighbours)."""
 
 
-def move(physics, geom, T_from: np.ndarray, T_to: np.ndarray, period: float) -> None:
+def move(robot, geom, T_from: np.ndarray, T_to: np.ndarray, period: float) -> None:
     """Drive open loop along a quintic line, rates from the nominal lengths' changes.
+
+    ``robot`` is what advances with the rates: a calibration's
+    :class:`~cdpr_twin.run.episode.Episode`, or a bare :class:`~cdpr_twin.sim.Physics`
+    (both have ``advance(duration, cable_rates)``); nothing is read on the way.
 
     Each cable changes by the nominal model's length change along the line: the correction the
     last pose needed (what tightening reeled in or let out there, against the nominal lengths)
@@ -68,11 +74,18 @@ def move(physics, geom, T_from: np.ndarray, T_to: np.ndarray, period: float) -> 
     lengths = cable_lengths(geom, T_from, "pulley")
     for k in range(1, n + 1):
         nxt = cable_lengths(geom, seg.pose(k * period), "pulley")
-        physics.advance(period, (nxt - lengths) / period)
+        robot.advance(period, (nxt - lengths) / period)
         lengths = nxt
 
 
-def tighten(physics, sensors, geom, T: np.ndarray, timeout: float = 8.0) -> int:
+def tighten_with(
+    advance: Callable[[float, np.ndarray], None],
+    read_tensions: Callable[[], np.ndarray],
+    timestep: float,
+    geom,
+    T: np.ndarray,
+    timeout: float = 8.0,
+) -> int:
     """Bring every cable to at least :data:`TIGHTEN_TARGET`, from the tension readings.
 
     The true robot differs from the model, so after an open-loop move some cables hang slack
@@ -91,8 +104,10 @@ def tighten(physics, sensors, geom, T: np.ndarray, timeout: float = 8.0) -> int:
       :data:`TIGHTEN_GAIN` of the way per tick (the winches' lag delivers the rest later).
 
     Args:
-        physics: the simulated robot.
-        sensors: its sensors (the tension readings are all this uses of the robot).
+        advance: runs the winches at the given rates [m/s] for the given time [s] (a
+            calibration's ``Episode.advance``, or ``Physics.advance``).
+        read_tensions: reads the tension sensors now, (m,) [N] (all this reads of the robot).
+        timestep: the physics' time step [s] (the loop's period is a whole number of them).
         geom: the nominal geometry.
         T: (4, 4) the commanded pose.
         timeout: [s]; 8 s reels in up to 16 mm of slack (robot 19, its exit points 12 mm off,
@@ -109,11 +124,11 @@ def tighten(physics, sensors, geom, T: np.ndarray, timeout: float = 8.0) -> int:
         The loop's ticks before it ended: 0 if the cables already read so, ``-1`` if they
         did not at the timeout.
     """
-    dt = physics.timestep * max(1, round(1.0 / TIGHTEN_RATE / physics.timestep))
+    dt = timestep * max(1, round(1.0 / TIGHTEN_RATE / timestep))
     N = null_space(jacobian(geom, T, "base", "pulley").T)  # (m, m − 6) internal forces
     k = geom.es / cable_lengths(geom, T, "pulley")  # [N/m]
     for tick in range(round(timeout / dt)):
-        tau = sensors.read(None, render=False).tensions
+        tau = read_tensions()
         slack = tau < SLACK
         if slack.any():
             rates = np.where(slack, -TIGHTEN_SPEED, 0.0)
@@ -123,8 +138,31 @@ def tighten(physics, sensors, geom, T: np.ndarray, timeout: float = 8.0) -> int:
                 return tick
             rates = -TIGHTEN_GAIN * change / k / dt
             rates *= min(1.0, TIGHTEN_SPEED / np.abs(rates).max())
-        physics.advance(dt, rates)
+        advance(dt, rates)
     return -1
+
+
+def tighten(physics, sensors, geom, T: np.ndarray, timeout: float = 8.0) -> int:
+    """:func:`tighten_with` on a bare simulated robot and its sensors (no run around them).
+
+    Args:
+        physics: the simulated robot (:class:`~cdpr_twin.sim.Physics`).
+        sensors: its sensors (the tension readings, without the camera, are all it reads).
+        geom: the nominal geometry.
+        T: (4, 4) the commanded pose.
+        timeout: [s].
+
+    Returns:
+        As :func:`tighten_with`.
+    """
+    return tighten_with(
+        physics.advance,
+        lambda: sensors.read(None, render=False).tensions,
+        physics.timestep,
+        geom,
+        T,
+        timeout,
+    )
 
 
 def _internal_forces(N: np.ndarray, tau: np.ndarray, aim: float, hi: float) -> tuple:

@@ -13,6 +13,7 @@ never MuJoCo, never ground truth.
 from __future__ import annotations
 
 import enum
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from types import MappingProxyType
@@ -107,7 +108,7 @@ class EncoderWatch:
         else:  # the oldest drops out; the rows stay in time order (the same sum, bit for bit)
             self._diffs[:-1] = self._diffs[1:]
         self._diffs[self._n - 1] = diff
-        total = self._diffs[: self._n].sum(axis=0)
+        total = np.add.reduce(self._diffs[: self._n], axis=0)
         return tuple((np.abs(total) > self.threshold).nonzero()[0].tolist())
 
 
@@ -158,6 +159,9 @@ class Estimator(ABC):
     """Whether its estimates carry a covariance (recorded in ``timeseries.csv`` and Rerun)."""
     watches: ClassVar[SensorWatch] = SensorWatch.NONE
     """The sensor watches :meth:`update` runs before :meth:`_step` (their flags reach it)."""
+    _watch_encoders: ClassVar[bool] = False
+    _watch_tensions: ClassVar[bool] = False
+    """``watches``' two members as booleans, set with the class (read every tick)."""
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         """Refuse a ``watches`` that is no :class:`SensorWatch`; excuse ``update()`` overriders.
@@ -171,6 +175,8 @@ class Estimator(ABC):
                 f"{cls.__name__}: watches must be a SensorWatch (e.g. SensorWatch.ENCODERS | "
                 f"SensorWatch.TENSIONS, or SensorWatch.NONE), got {cls.watches!r}"
             )
+        cls._watch_encoders = SensorWatch.ENCODERS in cls.watches
+        cls._watch_tensions = SensorWatch.TENSIONS in cls.watches
         if cls.update is not Estimator.update and getattr(cls._step, "__isabstractmethod__", False):
             # Written against the older interface: its update() does the whole job, so it
             # needs no _step. Set here, before ABCMeta lists the abstract methods left.
@@ -202,10 +208,14 @@ class Estimator(ABC):
         ``ENCODER_MISMATCH`` while an encoder disagrees with its commands; ``TENSION_STUCK``
         while a tension sensor reads a constant.
         """
+        return self._seen(m, SensorWatch.ENCODERS in watches, SensorWatch.TENSIONS in watches)
+
+    def _seen(self, m: Measurement, encoders: bool, tensions: bool) -> frozenset[str]:
+        """:meth:`_watch_flags` with the watches as two booleans (the class's, known ahead)."""
         flags = set()
-        if SensorWatch.ENCODERS in watches and self._encoders.check(m):
+        if encoders and self._encoders.check(m):
             flags.add(ENCODER_MISMATCH)
-        if SensorWatch.TENSIONS in watches and self._tensions.check(m.tensions):
+        if tensions and self._tensions.check(m.tensions):
             flags.add(TENSION_STUCK)
         return frozenset(flags)
 
@@ -258,10 +268,13 @@ class Estimator(ABC):
         Raises:
             RuntimeError: :meth:`reset` was never called.
         """
-        self._check_reset()
-        if (held := self._bad_time(measurement)) is not None:
-            return held
-        watch_flags = self._watch_flags(measurement, self.watches)
+        # the checks inline, their methods called only when they fail: every tick, every
+        # estimator
+        if not self._ready:
+            self._check_reset()
+        if not math.isfinite(measurement.time):
+            return self._bad_time(measurement)
+        watch_flags = self._seen(measurement, self._watch_encoders, self._watch_tensions)
         return self._step(measurement, inputs, watch_flags)
 
     @abstractmethod

@@ -292,7 +292,7 @@ class FusedEstimator(Estimator):
             self._ref = (m.cable_lengths.copy(), c)
             return set()
         taut = self._taut(m, o.taut_threshold) if taut is None else np.array(taut, dtype=bool)
-        flags = set() if taut.all() else {SLACK_CABLES}
+        flags = set() if np.logical_and.reduce(taut) else {SLACK_CABLES}
         var = fm.cable_noise_var(
             m.cable_lengths,
             np.maximum(m.tensions, 1e-9),
@@ -368,7 +368,8 @@ class FusedEstimator(Estimator):
             m.tensions,
             *(v for v in (twist, m.cable_rates) if v is not None),
         ]
-        if not all(np.isfinite(v).all() for v in readings):  # (no command yet: no twist, rates)
+        # (no command yet: no twist, rates)
+        if not all(np.logical_and.reduce(np.isfinite(v)) for v in readings):
             return self._held(m, NON_FINITE_INPUT, covariance=self.P[fm.POSE, fm.POSE])
         if dt > 0:
             moving = twist is not None

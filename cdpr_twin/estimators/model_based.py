@@ -222,7 +222,8 @@ class ModelEstimator(Estimator):
         """One pass of Algorithm 1's loop (lines 7-12), with the chosen cable selection."""
         m = measurement
         lengths, tensions = m.cable_lengths, m.tensions
-        if not math.isfinite(float(lengths.sum() + tensions.sum())):  # NaN/inf propagate
+        # NaN/inf propagate (np.add.reduce: the sum ndarray.sum() computes, without its wrapper)
+        if not math.isfinite(float(np.add.reduce(lengths) + np.add.reduce(tensions))):
             return self._held(m, NON_FINITE_INPUT)
         tl = tensions.tolist()
         if self.selection != "most_tensioned":
@@ -237,7 +238,7 @@ class ModelEstimator(Estimator):
         targets = self.corrected_lengths(lengths, tensions)
         solution = self.solve(targets, cables, self._T)
         T, residual, iterations = solution.T, solution.residual, solution.iterations
-        if not (residual <= self.max_residual and math.isfinite(T.sum())):
+        if not (residual <= self.max_residual and math.isfinite(np.add.reduce(T, axis=None))):
             return self._held(
                 m,
                 NOT_CONVERGED,
@@ -276,7 +277,7 @@ class ModelEstimator(Estimator):
             solution = self.solve(targets, cables, self._T)
             T, residual, iterations = solution.T, solution.residual, solution.iterations
             ok = residual <= self.max_residual
-        if not (ok and math.isfinite(T.sum())):
+        if not (ok and math.isfinite(np.add.reduce(T, axis=None))):
             return self._held(
                 m,
                 NOT_CONVERGED,

@@ -11,9 +11,14 @@ An :class:`Episode` owns a prepared run (:class:`~cdpr_twin.run.runner.RunSetup`
     tick = TickRecord(...)                # what happened, the truth beside it
     for sink in sinks: sink.add(tick)     # time series, Rerun, metrics, summary
 
+A step's two halves are also there alone: :meth:`~Episode.advance` (the winches run, physics
+steps, nothing is read) and :meth:`~Episode.read` (sense, estimate, record, without moving).
+A calibration holds its readings with them: it reads, then rests a control period, and moves,
+rests and tightens between its readings without reading.
+
 The runner (:func:`cdpr_twin.run.runner.run`), the Gymnasium environment, campaign workers
-(through the runner) and the calibration's readings drive this object; sinks only consume the
-:class:`~cdpr_twin.types.TickRecord` it returns.
+(through the runner), the NEES study and the calibration's acquisition drive this object;
+sinks only consume the :class:`~cdpr_twin.types.TickRecord` it returns.
 """
 
 from __future__ import annotations
@@ -58,12 +63,9 @@ class Episode:
         encoders are homed, and the controller and estimators reset, at the nominal start pose
         (:func:`start`). Events due at t = 0 act before the first read.
         """
-        setup = self.setup
-        start(setup)
+        start(self.setup)
         self.ticks = 0
-        setup.events.fire(0.5 * setup.physics.timestep)
-        m = setup.sensors.read(None)
-        return self._record(m, setup.estimate(m), None)
+        return self.read()
 
     def step(self, command: Command | None = None) -> TickRecord:
         """One control tick: command, actuate and simulate, sense, estimate, record.
@@ -76,21 +78,56 @@ class Episode:
             The tick's record (also given to every sink).
 
         Raises:
-            ValueError: the command's rates are refused by the winches (the state unchanged).
+            ValueError: the command's rates are refused by the winches (the state unchanged),
+                or no command is given to an episode without a controller.
             SimulationError: the simulation diverged.
         """
-        setup, physics, last = self.setup, self.setup.physics, self.last
+        setup, last = self.setup, self.last
         if command is None:
+            if setup.controller is None:
+                raise ValueError("this episode has no controller: pass each tick's command")
             in_loop = last.estimates[setup.scenario.estimators.in_loop]
             command = setup.controller.command(
                 self.ticks * self.period, self.period, in_loop, last.measurement
             )
         # the winches run for one period; events and the monitor act between physics steps
-        physics.advance(self.period, command.cable_rates)
+        self.advance(self.period, command.cable_rates)
         self.ticks += 1
-        # what is due at the tick's end acts before its read (a hook fires before a chunk)
+        return self.read(command)
+
+    def advance(self, duration: float, cable_rates) -> None:
+        """Run the winches at ``cable_rates`` for ``duration`` with nothing read.
+
+        The first half of :meth:`step`; alone, the robot moving or resting between readings
+        that are not control ticks (a calibration's moves, rests and tightening).
+
+        Args:
+            duration: how long [s]; a whole number of physics steps.
+            cable_rates: (m,) winch rates dl0/dt [m/s] (positive pays cable out).
+
+        Raises:
+            ValueError: the rates or duration are refused (the state unchanged).
+            SimulationError: the simulation diverged.
+        """
+        # events and the monitor act inside, between physics steps (their hooks)
+        self.setup.physics.advance(duration, cable_rates)
+
+    def read(self, command: Command | None = None, render: bool | None = None) -> TickRecord:
+        """Sense, estimate and record now, without moving: the second half of :meth:`step`.
+
+        Events due now act first (a hook fires before a physics chunk, so what is due at the
+        end of the last one has not acted yet).
+
+        Args:
+            command: the command that led here (carried in the measurement), or ``None``.
+            render: read the camera; ``None``: when the sensors have it on.
+
+        Returns:
+            The record (also given to every sink).
+        """
+        setup, physics = self.setup, self.setup.physics
         setup.events.fire(physics.time + 0.5 * physics.timestep)
-        m = setup.sensors.read(command)
+        m = setup.sensors.read(command, render)
         return self._record(m, setup.estimate(m), command)
 
     def _record(
@@ -98,7 +135,8 @@ class Episode:
     ) -> TickRecord:
         """What happened during the tick, beside the truth; given to every sink."""
         setup, physics = self.setup, self.setup.physics
-        plan = setup.controller.planned_pose(m.time)  # (a plugin's code: outside the shield)
+        # (a plugin's code: outside the shield)
+        plan = None if setup.controller is None else setup.controller.planned_pose(m.time)
         events = tuple(setup.events.take())
         faults = ()
         if setup.monitor is not None:
@@ -146,7 +184,8 @@ def start(setup) -> None:
     s = setup.scenario
     setup.physics.reset(s.start_pose if setup.true_start is None else setup.true_start)
     setup.sensors.home(s.start_pose)
-    setup.controller.reset(s.start_pose)
+    if setup.controller is not None:
+        setup.controller.reset(s.start_pose)
     for est in setup.estimators.values():
         est.reset(s.start_pose, 0.0)
     if setup.monitor is not None:

@@ -114,6 +114,8 @@ def deviations(
     estimates: dict[str, PoseEstimate], T_true: np.ndarray
 ) -> dict[str, tuple[float, float]]:
     """Each estimate's distance from the true pose: (translation [m], rotation [rad]), by name."""
+    if not estimates:  # (a calibration's episode runs no estimator)
+        return {}
     dts, drs = pose_distance(
         np.array([e.T_base_platform for e in estimates.values()]), T_true[None]
     )

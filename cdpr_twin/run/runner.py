@@ -56,7 +56,8 @@ class RunSetup:
         nominal: what the robot's software believes (:class:`cdpr_twin.sim.NominalRobot`).
         estimators: by name, in recording order (the in-loop one first).
         order: the names in update order (inputs before the estimators that read them).
-        controller: the controller.
+        controller: the controller, or ``None``: the caller commands every tick (a
+            calibration's tour).
         goal_pose: (4, 4) the controller's goal, or ``None``.
         events: the scenario's timed events, hooked into the physics.
         monitor: the robot's plausibility monitor (:class:`cdpr_twin.sim.Monitor`), hooked
@@ -74,7 +75,7 @@ class RunSetup:
     nominal: object
     estimators: dict[str, Estimator]
     order: tuple[str, ...]
-    controller: Controller
+    controller: Controller | None
     goal_pose: np.ndarray | None
     events: EventSchedule
     monitor: object = None
@@ -82,16 +83,20 @@ class RunSetup:
     homing_offset: np.ndarray | None = None
     shown_view: np.ndarray | None = None
 
+    def __post_init__(self) -> None:
+        # each estimator's inputs read once: estimate() runs every tick, for every estimator
+        self._plan = tuple((name, self.estimators[name]) for name in self.order)
+        self._needs = {name: est.inputs for name, est in self._plan}
+
     def estimate(self, m: Measurement) -> dict[str, PoseEstimate]:
         """Update every estimator (in dependency order); returns estimates in recording order."""
         out: dict[str, PoseEstimate] = {}
+        needs = self._needs
         # loops, not comprehensions: this runs every tick, for every estimator
-        for name in self.order:
-            est = self.estimators[name]
-            needs = est.inputs
-            if needs:
+        for name, est in self._plan:
+            if needs[name]:
                 inputs = {}
-                for n in needs:
+                for n in needs[name]:
                     inputs[n] = out[n]
                 out[name] = est.update(m, inputs)
             else:

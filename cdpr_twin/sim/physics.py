@@ -288,7 +288,7 @@ class Physics:
 
     def _check_state(self) -> None:
         d, bad = self.data, divergence(self.data)
-        if bad or not math.isfinite(d.qpos.sum() + d.qvel.sum()):
+        if bad or not math.isfinite(np.add.reduce(d.qpos) + np.add.reduce(d.qvel)):
             raise SimulationError(
                 f"the simulation diverged at t = {d.time:.4f} s (MuJoCo warnings: {bad or 'none'});"
                 " lower the timestep or the commanded cable rates"

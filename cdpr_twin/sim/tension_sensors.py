@@ -85,7 +85,7 @@ class TensionSensors:
             lo, hi = self.realism.range_min, self.realism.range_max
             clipped = (tensions <= lo) | (tensions >= hi)
             tensions = np.clip(tensions, lo, hi)
-        if self._failed.any():  # (a copy: the caller's array is never written)
+        if np.logical_or.reduce(self._failed):  # (a copy: the caller's array is never written)
             tensions = np.where(self._failed, self._stuck, tensions)
         self._last = tensions
         return tensions, clipped

@@ -185,11 +185,11 @@ def checked_rates(rates: np.ndarray, n: int, lo: np.ndarray, hi: np.ndarray) -> 
     rates = np.array(rates, dtype=float)
     if rates.shape != (n,):
         raise ValueError(f"cable_rates must have shape ({n},), got {rates.shape}")
-    if not math.isfinite(rates.sum()):
+    if not math.isfinite(np.add.reduce(rates)):
         raise ValueError(
             f"cable_rates must be finite, got {rates.tolist()} (NaN or inf from the controller?)"
         )
-    if (rates < lo).any() or (rates > hi).any():
+    if np.logical_or.reduce(rates < lo) or np.logical_or.reduce(rates > hi):
         out = [f"{r:.3g}" for r in rates]  # (significant digits: a tiny range stays legible)
         raise WinchLimitError(
             f"cable rates [{', '.join(out)}] m/s exceed the winches' range "
@@ -208,7 +208,9 @@ def check_lengths(l0_end: np.ndarray, act_range: np.ndarray) -> None:
     Raises:
         WinchLimitError: when a length leaves the range.
     """
-    if np.any(l0_end < act_range[:, 0]) or np.any(l0_end > act_range[:, 1]):
+    if np.logical_or.reduce(l0_end < act_range[:, 0]) or np.logical_or.reduce(
+        l0_end > act_range[:, 1]
+    ):
         raise WinchLimitError(
             f"these rates would run winch lengths to {np.round(l0_end, 4)} m, "
             f"outside the winch range {act_range[0].tolist()} m"

@@ -17,7 +17,8 @@ import numpy as np
 
 from cdpr_twin.math.se3 import inverse, se3_log
 from cdpr_twin.robot.deviations import DeviationSpec
-from cdpr_twin.run.runner import prepare, start
+from cdpr_twin.run.episode import Episode
+from cdpr_twin.run.runner import prepare
 from cdpr_twin.scenario.loading import Scenario
 
 
@@ -60,33 +61,29 @@ def nominal_robot(scenario: Scenario, robot_seed: int) -> Scenario:
 
 
 def run_errors(scenario: Scenario, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Run a scenario and return one estimator's errors and covariances at every tick.
+    """Run a scenario's episode and return one estimator's errors and covariances at every tick.
+
+    Every tick of the run, from its start (tick 0) to its duration, whatever the controller
+    says of being done (a run would end there) or a fault.
 
     Returns:
         ``(times (K,), errors (K, 6), covariances (K, 6, 6))``.
     """
     setup = prepare(scenario)
     try:
-        s, physics, controller = scenario, setup.physics, setup.controller
-        period, in_loop = s.model.control_period, s.estimators.in_loop
-        start(setup)
-        m = setup.sensors.read(None)
-        estimates = setup.estimate(m)
-        times, errors, covs = [], [], []
-        for k in range(round(s.duration / period) + 1):
-            e = estimates[name]
-            times.append(m.time)
-            errors.append(se3_log(inverse(e.T_base_platform) @ physics.T_base_platform))
-            covs.append(e.covariance)
-            if k == round(s.duration / period):
-                break
-            command = controller.command(k * period, period, estimates[in_loop], m)
-            physics.advance(period, command.cable_rates)
-            m = setup.sensors.read(command)
-            estimates = setup.estimate(m)
+        episode = Episode(setup)
+        ticks = [episode.reset()]
+        for _ in range(round(scenario.duration / scenario.model.control_period)):
+            ticks.append(episode.step())
     finally:
         setup.close()
-    return np.array(times), np.array(errors), np.array(covs)
+    estimates = [t.estimates[name] for t in ticks]
+    errors = [
+        se3_log(inverse(e.T_base_platform) @ t.T_base_platform)
+        for e, t in zip(estimates, ticks, strict=True)
+    ]
+    times = [t.time for t in ticks]
+    return np.array(times), np.array(errors), np.array([e.covariance for e in estimates])
 
 
 def monte_carlo(scenario: Scenario, name: str, runs: int, first_seed: int = 1) -> NeesResult:
