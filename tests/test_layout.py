@@ -34,6 +34,9 @@ def test_ruff_lint_and_format_are_clean():
 def test_no_formatting_is_switched_off_to_save_lines():
     # a `# fmt: skip` is kept only for a numeric table that reads better aligned, and says so
     for path in [*PACKAGE.rglob("*.py"), *ROOT.glob("tests/**/*.py")]:
+        if path == Path(__file__):
+            # this test names the markers it looks for
+            continue
         for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
             if "# fmt: skip" in line or "# fmt: off" in line:
                 assert "aligned" in line, f"{path.relative_to(ROOT)}:{number}"
