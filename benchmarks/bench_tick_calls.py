@@ -2,11 +2,11 @@
 
 Run: ``python benchmarks/bench_tick_calls.py [--ticks 20] [--show-files]``.
 
-It runs ``paper_open_loop`` (camera off) and ``paper_pbvs`` (camera in the loop) through the
-public ``run`` with a profiler (``sys.setprofile``) on, and cuts the stream of Python calls at
-the run's own progress callback, which the runner calls once after every tick. For the ticks
-after the first ten (start-up and the first detections excluded) it prints, per tick, the
-median of:
+It runs ``paper_open_loop`` (``ideal``, camera off; and as shipped: ``acrobot`` realism, camera
+on) and ``paper_pbvs`` (``ideal``, camera in the loop) through the public ``run`` with a
+profiler (``sys.setprofile``) on, and cuts the stream of Python calls at the run's own progress
+callback, which the runner calls once after every tick. For the ticks after the first ten
+(start-up and the first detections excluded) it prints, per tick, the median of:
 
 - ``calls``: Python function calls (builtins and C functions not counted);
 - ``functions``: distinct Python functions called;
@@ -35,9 +35,11 @@ from cdpr_twin.scenario.loading import load_scenario
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = str(ROOT / "cdpr_twin")
 SCENARIOS = {
-    "paper_open_loop (no camera)": ("paper_open_loop", {"camera": False}),
-    "paper_pbvs (camera in the loop)": ("paper_pbvs", {}),
+    "paper_open_loop, ideal, no camera": ("paper_open_loop", "ideal", {"camera": False}),
+    "paper_open_loop as shipped": ("paper_open_loop", None, {}),
+    "paper_pbvs, ideal": ("paper_pbvs", "ideal", {}),
 }
+"""Label → (scenario, realism profile or ``None`` for the scenario's own, overrides)."""
 
 
 @dataclass
@@ -79,9 +81,11 @@ class TickProfiler:
             tick.switches += 1
 
 
-def profile(name: str, overrides: dict, ticks: int) -> list[Tick]:
+def profile(name: str, realism: str | None, overrides: dict, ticks: int) -> list[Tick]:
     """The ticks of a run of ``ticks`` + 10 ticks of the scenario ``name``, after the tenth."""
-    scenario = load_scenario(name).with_realism("ideal")
+    scenario = load_scenario(name)
+    if realism is not None:
+        scenario = scenario.with_realism(realism)
     period = scenario.model.control_period
     scenario = scenario.with_overrides(duration=(ticks + 10) * period, **overrides)
     profiler = TickProfiler()
@@ -105,8 +109,8 @@ def main() -> None:
         f"{'scenario':34s} {'calls':>7s} {'functions':>9s} {'files':>5s} "
         f"{'package files':>13s} {'switches':>8s}"
     )
-    for label, (name, overrides) in SCENARIOS.items():
-        ticks = profile(name, overrides, args.ticks)
+    for label, (name, realism, overrides) in SCENARIOS.items():
+        ticks = profile(name, realism, overrides, args.ticks)
         med = {
             "calls": statistics.median(t.calls for t in ticks),
             "functions": statistics.median(len(t.functions) for t in ticks),
