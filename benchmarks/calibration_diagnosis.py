@@ -124,7 +124,7 @@ def main() -> None:
     s = scenario(a.set)
     s = replace(s, truth=replace(s.truth, seed=a.seed))
     session = calibrate(replace(s, seed=s.seed + a.seed), a.poses, workers=a.workers)
-    _, nominal, _ = build_robot(s.model.file)
+    nominal = build_robot(s.model.file).nominal
     changes = f", {a.set}" if a.set else ""
     print(f"robot {a.seed}, {session.recording.obs.n_poses} poses{changes}")
     at_truth(session.recording)

@@ -80,7 +80,7 @@ def one(
     # calibration's references, so sharing the run's homing would flatter the check)
     session = calibrate(replace(s, seed=s.seed + seed), poses, workers=workers)
     wall = time.perf_counter() - t0
-    _, nominal, _ = build_robot(s.model.file)
+    nominal = build_robot(s.model.file).nominal
     check = truth_check(session, nominal.geometry, nominal.T_base_tag)
     robot, _ = write(
         Path(out) / f"robot_{seed}",
@@ -132,8 +132,9 @@ def holds_p1(s, calibrated: Path) -> dict:
     from cdpr_twin.sim import build_robot
 
     p1 = s.controller.options.waypoints[0]
-    physics, nominal, _ = build_robot(s.model.file, s.truth)
-    _, cal, _ = build_robot(s.model.file, nominal_path=calibrated)
+    built = build_robot(s.model.file, s.truth)
+    physics, nominal = built.physics, built.nominal
+    cal = build_robot(s.model.file, nominal_path=calibrated).nominal
     models = (("truth", physics), ("nominal", nominal), ("calibrated", cal))
     return {name: bool(is_feasible(m.geometry, p1)) for name, m in models}
 

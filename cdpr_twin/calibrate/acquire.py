@@ -309,8 +309,11 @@ def _in_processes(
         return [f.result() for f in futures]
 
 
-def _build(s: Scenario) -> tuple:
+def _build(s: Scenario):
     """The scenario's simulated robot and its nominal model, as a segment records them.
+
+    Returns:
+        The :class:`~cdpr_twin.sim.twin.BuiltRobot`.
 
     Raises:
         ScenarioError: the robot cannot be built, or has no camera or tag.
@@ -318,7 +321,7 @@ def _build(s: Scenario) -> tuple:
     from cdpr_twin.sim import ModelError, build_robot
 
     try:
-        physics, nominal, _ = build_robot(
+        built = build_robot(
             s.model.file,
             s.truth,
             s.model.timestep,
@@ -328,9 +331,9 @@ def _build(s: Scenario) -> tuple:
         )
     except (ModelError, ValueError) as exc:
         raise ScenarioError(f"{s.source}: model: {exc}") from None
-    if nominal.T_base_tag is None or nominal.intrinsics is None:
+    if built.nominal.T_base_tag is None or built.nominal.intrinsics is None:
         raise ScenarioError(f"{s.source}: model: the robot needs a camera and a tag to calibrate")
-    return physics, nominal
+    return built
 
 
 def _start_error(s: Scenario, offset, exc: Exception) -> ScenarioError:
@@ -352,7 +355,7 @@ def check(s: Scenario) -> None:
         ScenarioError: naming the file and the field at fault, as ``cdpr-twin run`` does.
     """
     _refuse_what_it_cannot_use(s)
-    physics, _ = _build(s)
+    physics = _build(s).physics
     offset, true_start = homing(s)
     try:
         physics.reset(true_start, settle_time=0.0)
@@ -388,7 +391,8 @@ def _segment(index: int, poses: list[np.ndarray], s: Scenario, frames: int) -> _
     from cdpr_twin.sim import Sensors
     from cdpr_twin.sim.events import EventSchedule
 
-    physics, nominal = _build(s)
+    built = _build(s)
+    physics, nominal = built.physics, built.nominal
     period = s.model.control_period
     seed = (
         s.seed if index == 0 else int(np.random.SeedSequence([s.seed, index]).generate_state(1)[0])

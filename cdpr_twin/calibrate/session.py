@@ -123,7 +123,7 @@ def calibrate(s: Scenario, n_poses: int = 240, frames: int = 4, workers: int = 1
     from cdpr_twin.sim import build_robot
 
     started = time.perf_counter()
-    _, nominal, _ = build_robot(s.model.file, nominal_path=s.model.nominal)
+    nominal = build_robot(s.model.file, nominal_path=s.model.nominal).nominal
     try:
         poses = excitation_poses(
             nominal.geometry,

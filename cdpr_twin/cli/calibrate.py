@@ -147,7 +147,7 @@ def _solve_and_write(args, s, source: Path, out: Path, started: float) -> int:
 
     clear(out)  # an earlier calibration's files go first: none survives a failed one
     session = calibrate(s, args.poses, args.frames, args.workers)
-    _, nominal, _ = build_robot(s.model.file, nominal_path=s.model.nominal)
+    nominal = build_robot(s.model.file, nominal_path=s.model.nominal).nominal
     cal, rec = session.calibration, session.recording
     extra = {
         "scenario": str(s.source),

@@ -170,7 +170,7 @@ def prepare(scenario: Scenario) -> RunSetup:
     s, src = scenario, scenario.source
     try:
         occluder = any(isinstance(e, TagOcclusion) for e in s.events)
-        physics, nominal, _ = build_robot(
+        built = build_robot(
             s.model.file,
             s.truth,
             s.model.timestep,
@@ -180,6 +180,7 @@ def prepare(scenario: Scenario) -> RunSetup:
             s.model.nominal,
             (s.model.payload, s.model.payload_com),
         )
+        physics, nominal = built.physics, built.nominal
         sensors = Sensors(
             physics,
             nominal,

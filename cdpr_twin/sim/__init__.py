@@ -21,7 +21,7 @@ if TYPE_CHECKING:
     from cdpr_twin.sim.monitor import Fault, FaultKind, Monitor, MonitorLimits, robot_limits
     from cdpr_twin.sim.physics import Physics, SimulationError, StepHook
     from cdpr_twin.sim.sensors import NominalRobot, Sensors
-    from cdpr_twin.sim.twin import Twin, build_robot, nominal_robot
+    from cdpr_twin.sim.twin import BuiltRobot, Twin, build_robot, nominal_robot
     from cdpr_twin.sim.winch import WinchLimitError
 
 _WHERE = {
@@ -42,6 +42,7 @@ _WHERE = {
     "NominalRobot": "cdpr_twin.sim.sensors",
     "Sensors": "cdpr_twin.sim.sensors",
     "Twin": "cdpr_twin.sim.twin",
+    "BuiltRobot": "cdpr_twin.sim.twin",
     "build_robot": "cdpr_twin.sim.twin",
     "nominal_robot": "cdpr_twin.sim.twin",
     "WinchLimitError": "cdpr_twin.sim.winch",
@@ -63,6 +64,7 @@ def __getattr__(name: str):
 
 
 __all__ = [
+    "BuiltRobot",
     "DeviationSpec",
     "Fault",
     "FaultKind",

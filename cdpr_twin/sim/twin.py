@@ -12,7 +12,7 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import mujoco
@@ -161,6 +161,21 @@ def _nominal(model_path, nominal_path, payload) -> tuple[Path, object, NominalRo
     return path, nominal_model, nominal
 
 
+@dataclass(frozen=True)
+class BuiltRobot:
+    """A simulated robot and what its software believes of it (:func:`build_robot`).
+
+    Attributes:
+        physics: the true robot, simulated (its calibration errors in the model).
+        nominal: what the estimators and controllers believe (geometry, camera, tag).
+        deviations: the calibration errors the true robot was built with.
+    """
+
+    physics: Physics
+    nominal: NominalRobot
+    deviations: TruthDeviations
+
+
 def build_robot(
     model_path: str | Path | None = None,
     deviations: DeviationSpec | TruthDeviations | None = None,
@@ -170,7 +185,7 @@ def build_robot(
     occluder: bool = False,
     nominal_path: str | Path | None = None,
     payload: tuple[float, np.ndarray] = (0.0, np.zeros(3)),
-) -> tuple[Physics, NominalRobot, TruthDeviations]:
+) -> BuiltRobot:
     """The simulated robot (with its calibration errors) and what its software believes.
 
     Args:
@@ -213,7 +228,7 @@ def build_robot(
             physics.set_drum_radii(nominal.drum_radii)
         except ValueError as exc:  # the description's drum_radius_m is not the robot's
             raise NominalError(f"{nominal_path}: [winches] drum_radius_m × scale: {exc}") from None
-    return physics, nominal, deviations
+    return BuiltRobot(physics, nominal, deviations)
 
 
 class Twin:
@@ -258,9 +273,8 @@ class Twin:
         model_path = robot if robot is not None else model_path
         if not (np.isfinite(tension_noise_std) and tension_noise_std >= 0):
             raise ValueError(f"tension_noise_std must be ≥ 0 N, got {tension_noise_std}")
-        self.physics, self.nominal, self.deviations = build_robot(
-            model_path, deviations, timestep, align_every
-        )
+        built = build_robot(model_path, deviations, timestep, align_every)
+        self.physics, self.nominal, self.deviations = built.physics, built.nominal, built.deviations
         self.model_path = Path(self.physics.source)
         g = self.physics.geometry  # None: the model's tension range (cable_tension_range)
         self.tau_min = g.tension_min if tau_min is None else float(tau_min)

@@ -23,9 +23,10 @@ from cdpr_twin.scenario.loading import load_scenario
 def _robot(s):
     from cdpr_twin.sim import Sensors, build_robot
 
-    physics, nominal, _ = build_robot(
+    built = build_robot(
         s.model.file, s.truth, s.model.timestep, s.model.align_every, s.realism.winch
     )
+    physics, nominal = built.physics, built.nominal
     sensors = Sensors(
         physics,
         nominal,
@@ -73,7 +74,8 @@ def test_an_internal_force_step_changes_the_tensions_without_moving_the_platform
     from cdpr_twin.sim import build_robot
 
     s = load_scenario("paper_open_loop")  # robot 19: exit points 12 mm off the nominal ones
-    physics, nominal, _ = build_robot(s.model.file, s.truth, s.model.timestep, s.model.align_every)
+    built = build_robot(s.model.file, s.truth, s.model.timestep, s.model.align_every)
+    physics, nominal = built.physics, built.nominal
     g, T, dt = nominal.geometry, s.start_pose, 0.02
     N = null_space(jacobian(g, T, "base", "pulley").T)
     k = g.es / cable_lengths(g, T, "pulley")
@@ -108,7 +110,7 @@ def test_internal_forces_reach_the_least_total_tension_or_else_the_greatest_leas
     from cdpr_twin.sim import build_robot
 
     s = load_scenario("paper_open_loop")
-    g = build_robot(s.model.file)[1].geometry
+    g = build_robot(s.model.file).nominal.geometry
     T = s.start_pose
     W = jacobian(g, T, "base", "pulley").T
     N, tau = null_space(W), tension_distribution(g, T)
@@ -186,7 +188,7 @@ def test_a_frame_drawn_again_is_a_fresh_draw_of_the_same_state():
     from cdpr_twin.sim.camera import CameraRenderer
 
     s = load_scenario("paper_open_loop")
-    physics, _, _ = build_robot(s.model.file)
+    physics = build_robot(s.model.file).physics
     physics.reset(s.start_pose, settle_time=0.3)
     d = physics.data
     state = (d.qpos.copy(), d.mocap_pos.copy(), d.mocap_quat.copy())

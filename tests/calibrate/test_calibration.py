@@ -225,7 +225,7 @@ def test_calibrates_robot_19_and_its_open_loop_run_improves(tmp_path):
 
     s = load_scenario("paper_open_loop")  # robot 19, acrobot realism profile
     session = calibrate(replace(s, seed=s.seed + 1), n_poses=60)  # a session homed on its own
-    _, nominal, _ = build_robot(s.model.file)
+    nominal = build_robot(s.model.file).nominal
     check = truth_check(session, nominal.geometry, nominal.T_base_tag)
     robot, _ = write(tmp_path, ROBOT, session.calibration, {}, session.recording.drum_radii)
     p1 = {}

@@ -69,7 +69,8 @@ def test_the_software_sets_its_drums_to_the_described_radius_times_the_scale(tmp
     from cdpr_twin.sim import build_robot
 
     path = _description(tmp_path, drum_radius_m=0.0201, drum_radius_scale=[1.01] * 8)
-    physics, nominal, _ = build_robot("acrobot", nominal_path=path)
+    built = build_robot("acrobot", nominal_path=path)
+    physics, nominal = built.physics, built.nominal
     np.testing.assert_allclose(nominal.drum_radii, 0.0201 * 1.01, rtol=1e-15)
     np.testing.assert_array_equal(physics.drum_radius_set, nominal.drum_radii)
 
@@ -121,7 +122,7 @@ def test_a_drum_scale_that_is_not_one_per_drum_near_1_is_refused(tmp_path, scale
 def test_the_physics_refuses_drum_radii_that_are_not_one_positive_number_per_drum():
     from cdpr_twin.sim import build_robot
 
-    physics, _, _ = build_robot("acrobot")
+    physics = build_robot("acrobot").physics
     for bad in (np.full(7, 0.02), np.r_[np.full(7, 0.02), 0.0], np.full(8, np.nan)):
         with pytest.raises(ValueError, match=r"drum radii: 8 within 10 % of 0\.02 m"):
             physics.set_drum_radii(bad)
@@ -133,7 +134,8 @@ def test_a_description_without_drum_scales_leaves_the_drives_at_the_robots_radiu
 
     winch = WinchRealism(drum_radius=0.03)  # a scenario's override of the robot's 20 mm
     plain = MODELS_DIR / "acrobot" / "robot.toml"
-    physics, nominal, _ = build_robot("acrobot", winch=winch, nominal_path=plain)
+    built = build_robot("acrobot", winch=winch, nominal_path=plain)
+    physics, nominal = built.physics, built.nominal
     assert nominal.drum_radii is None and np.all(physics.drum_radius_set == 0.03)
     scaled = _description(tmp_path, drum_radius_scale=[1.0] * 8)  # 20 mm drums, told 30 mm
     with pytest.raises(ModelError, match=r"drum_radius_m × scale: drum radii: 8 within 10 %"):

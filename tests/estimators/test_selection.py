@@ -36,7 +36,7 @@ def pbvs_start(tmp_path_factory):
     s = load_scenario(ROOT / "scenarios" / "paper_pbvs.toml").with_overrides(duration=0.6)
     out = tmp_path_factory.mktemp("pbvs_start")
     run(s, out, record_rrd=False)
-    _, nominal, _ = build_robot(s.model.file, s.truth, s.model.timestep, s.model.align_every)
+    nominal = build_robot(s.model.file, s.truth, s.model.timestep, s.model.align_every).nominal
     return s, nominal.geometry, load_timeseries(out / "timeseries.csv")
 
 

@@ -40,9 +40,8 @@ def test_the_payload_is_carried_and_refused_above_the_rating():
 
     s = load_scenario(SCENARIO)
     assert s.model.payload == 250.0
-    physics, nominal, _ = build_robot(
-        s.model.file, payload=(s.model.payload, np.array(s.model.payload_com))
-    )
+    built = build_robot(s.model.file, payload=(s.model.payload, np.array(s.model.payload_com)))
+    physics, nominal = built.physics, built.nominal
     body = physics._platform
     # the rigid sum (MuJoCo's compiled mass and centre of mass against the arithmetic)
     assert physics.model.body_mass[body] == pytest.approx(91.058 + 250.0, rel=1e-12)

@@ -82,7 +82,8 @@ def model_file(tmp_path_factory):
 
 
 def test_physics_core_holds_a_six_cable_robot_in_force_balance(model_file):
-    physics, nominal, _ = build_robot(model_file)
+    built = build_robot(model_file)
+    physics, nominal = built.physics, built.nominal
     assert physics.n_cables == 6 and physics.cable_names[-1] == "cable6"
     assert nominal.intrinsics is None and nominal.T_base_tag is None  # no camera, no tag
     for pose in (START, AWAY):

@@ -189,7 +189,7 @@ def test_a_calibration_moves_and_reads_the_robot_only_through_an_episode(monkeyp
     for name in ("advance", "read"):
         inside_episode(name)
     s = load_scenario("paper_open_loop")
-    nominal = build_robot(s.model.file)[1]
+    nominal = build_robot(s.model.file).nominal
     poses = excitation_poses(
         nominal.geometry, nominal.T_base_tag, nominal.intrinsics, nominal.tag_size, 2, s.start_pose
     )

@@ -25,7 +25,7 @@ def _mujoco_force(physics, cable: int) -> float:
 
 @pytest.mark.parametrize("break_time", [1.0, 1.0127])  # on a tick, and between two steps
 def test_a_broken_cable_stays_slack_across_swivel_and_stiffness_refreshes(break_time):
-    physics, _, _ = build_robot(align_every=10)
+    physics = build_robot(align_every=10).physics
     physics.reset(paper_pose("p1"))
     schedule = EventSchedule((CableBreak(at=break_time, cable=7),), physics, sensors=None)
     physics.add_hook(schedule)

@@ -307,7 +307,8 @@ def test_a_cable_break_in_motion_can_leave_too_few_taut_cables(tmp_path):
 def _camera_robot(occluder: bool):
     from cdpr_twin.sim import Sensors, build_robot
 
-    physics, nominal, _ = build_robot(occluder=occluder)
+    built = build_robot(occluder=occluder)
+    physics, nominal = built.physics, built.nominal
     physics.reset(paper_pose("p1"))  # the tag in the middle of the view
     return physics, Sensors(physics, nominal, tension_noise_std=0.0)
 

@@ -47,14 +47,14 @@ def test_sag_on_cogiro_moves_the_settled_pose_by_a_fraction_of_a_millimetre():
 def test_a_description_with_sag_builds_sagging_physics(tmp_path):
     text = (MODELS_DIR / "cogiro" / "robot.toml").read_text()
     assert "\nsag = true" in text  # CoGiRo's heavy steel cables sag in the physics
-    physics, _, _ = build_robot(MODELS_DIR / "cogiro" / "scene.xml")
+    physics = build_robot(MODELS_DIR / "cogiro" / "scene.xml").physics
     assert isinstance(physics, SaggingPhysics) and physics.linear_density == 0.064
     path = tmp_path / "robot.toml"
     texture = MODELS_DIR / "acrobot" / "assets" / "tag36h11_00000.png"  # from anywhere
     text = text.replace("\nsag = true", "\nsag = false")
     path.write_text(text.replace('"../acrobot/assets/tag36h11_00000.png"', f'"{texture}"'))
     _, scene = build_files(path, tmp_path)
-    physics_plain, _, _ = build_robot(scene)
+    physics_plain = build_robot(scene).physics
     assert type(physics_plain) is Physics
 
 
@@ -196,7 +196,7 @@ def test_a_heavy_cable_hanging_beyond_its_chord_is_slack_to_the_monitor():
     from cdpr_twin.sim import build_robot
     from cdpr_twin.sim.monitor import FaultKind, Monitor, robot_limits
 
-    physics, _, _ = build_robot(MODELS_DIR / "cogiro" / "scene.xml")
+    physics = build_robot(MODELS_DIR / "cogiro" / "scene.xml").physics
     physics.reset(se3.pose_from_vector([0, 0, 2.0, 0, 0, 0]), settle_time=1.0)
     monitor = Monitor(physics, robot_limits(physics, 6000.0, 0.04))
     monitor.reset()

@@ -31,7 +31,8 @@ TWIST = np.array([0.015, 0.0075, 0.0, 0.03, 0.0, 0.15])
 
 
 def _robot(winch, seed=0):
-    physics, nominal, _ = build_robot(deviations=DeviationSpec(seed=seed), winch=winch)
+    built = build_robot(deviations=DeviationSpec(seed=seed), winch=winch)
+    physics, nominal = built.physics, built.nominal
     physics.reset(paper_pose("p1"))
     rates = kin.jacobian(nominal.geometry, paper_pose("p1"), "base", "pulley") @ TWIST
     return physics, nominal, rates
@@ -299,7 +300,7 @@ def test_the_drum_radius_and_the_sensors_spec_are_the_robots():
     t = sensors.tension.realism
     assert (t.range_min, t.range_max, t.noise_std) == (-25.0, 75.0, 0.01)
     assert t.bias_std == 0.24 / math.sqrt(3.0)  # a ±0.24 N bound, rectangular (GUM 4.3.7)
-    cogiro, _, _ = build_robot("cogiro")
+    cogiro = build_robot("cogiro").physics
     assert cogiro.winch.drum_radius == 0.0675
 
 
