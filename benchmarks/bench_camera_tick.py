@@ -1,10 +1,10 @@
-"""One camera tick against one bare render (issue 12, item 5), profiles ``ideal`` and ``acrobot``.
+"""One camera tick against one bare render, profiles ``ideal`` and ``acrobot``.
 
 Run: ``python benchmarks/bench_camera_tick.py [--ticks 40] [--pose p1]``.
 
 The paper's PBVS scenario (control-based estimate in the loop, the other estimators passive) is
-built with each realism profile, started at the pose (p1: the tag large and centred, as in the
-issue), and run ``--ticks`` control periods with a slow constant twist (so motion blur has
+built with each realism profile, started at the pose (p1: the tag large and centred, as a PBVS
+goal has it), and run ``--ticks`` control periods with a slow constant twist (so motion blur has
 something to smear). Each tick is timed whole (wall clock) and in its parts: physics
 (``advance`` of one period, swivel refreshes and hooks included), sensor read (sub-frame
 renders, image formation and the tag search; with the camera's worker thread, the wait for the
@@ -119,7 +119,7 @@ def main() -> None:
     print("ratio = median tick (physics + read + estimators, wall) / (bare render × sub-frames),")
     print("the bare render timed in the sequential loop after each tick (as a run leaves the")
     print("renderer); (b2b): against renders back to back after the loop, a best case (the")
-    print("rasteriser's threads and caches hot). Bar (issue 12): ≤ 1.3×. pipelined: a frame with")
+    print("rasteriser's threads and caches hot). Target: ≤ 1.3×. pipelined: a frame with")
     print("latency_ticks ≥ 1 is formed and detected by the camera's worker thread while the loop")
     print("goes on (identical outputs). +win: the tag searched near its last place first.")
 

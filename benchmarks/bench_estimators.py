@@ -277,11 +277,11 @@ def main() -> None:
             print(f"{name:<22}{backend:<14}{dp:>19.2e}{dr:>21.2e}  {'yes' if same else 'NO'}")
     print("(same: identical valid flags and cable choices at every update)")
     print()
-    bench_issue_11(measurements, geometry, args.repeats, args.calibration)
+    bench_fused(measurements, geometry, args.repeats, args.calibration)
     print(f"total benchmark time {time.perf_counter() - t_start:.1f} s")
 
 
-def bench_issue_11(measurements, geometry, repeats: int, calibration: bool) -> None:
+def bench_fused(measurements, geometry, repeats: int, calibration: bool) -> None:
     """Issue 11's bars: ``fused`` as the paper scenarios configure it (≤ 200 µs per update),
     against the cheapest model-based update of the same replay; one calibration (≤ 60 s)."""
     from cdpr_twin.scenario.loading import load_scenario

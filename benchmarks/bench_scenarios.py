@@ -3,10 +3,10 @@
 Run: ``python benchmarks/bench_scenarios.py [--repeats N]``.
 
 For each case it runs the full pipeline (sense → the six estimators and ``fused`` → controller →
-step → CSV and Rerun recording; one case without ``fused``, the pipeline the issue-4 bars were
+step → CSV and Rerun recording; one case without ``fused``, the pipeline the speed targets were
 set for) and reports simulated seconds per wall-clock second. The baseline, measured in
 the same run, is the twin alone stepping the same duration at zero rates with the camera off:
-the ratio says what the rest of the loop costs on top of physics. Bars (issue 4): ≥ 20× real
+the ratio says what the rest of the loop costs on top of physics. Targets: ≥ 20× real
 time without camera, ≥ 1× with camera, on a 2-core machine; aims 100× and 3×.
 """
 

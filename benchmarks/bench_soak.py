@@ -5,7 +5,7 @@ Run: ``python benchmarks/bench_soak.py [--hours H]``.
 The paper's open-loop trajectory (p0 → p1 → p2 → p0, 25 s) is repeated for the whole run, with
 all six estimators, the fault monitor, and every output (``timeseries.csv``, ``recording.rrd``,
 ``summary.json``) written to a temporary directory. The process's resident set size (RSS, from
-``/proc/self/statm``) is sampled every simulated minute. Bar (issue 13): after the first
+``/proc/self/statm``) is sampled every simulated minute. Target: after the first
 simulated minute RSS stays within 50 MB of its value then, over one simulated hour. It prints
 the growth, its rate per simulated hour, and the real-time factor against the loop's first
 minute in the same run (the baseline: a slowdown over the hour would show a leak's cost too).

@@ -1,4 +1,4 @@
-"""Where a calibration's common scale comes from, on one robot (issue 11 item 3).
+"""Where a calibration's common scale comes from, on one robot.
 
     python benchmarks/calibration_diagnosis.py --seed 4
     python benchmarks/calibration_diagnosis.py --seed 4 --set realism.camera.noise=false \\

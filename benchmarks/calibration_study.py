@@ -1,5 +1,5 @@
 """Calibration over robot seeds: exit point errors and the open-loop error at p1, nominal vs
-calibrated model, and the time per robot (issue 11 item 3).
+calibrated model, and the time per robot.
 
     python benchmarks/calibration_study.py --seeds 1-20 --workers 2 --out docs/calibration
 

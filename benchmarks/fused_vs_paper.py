@@ -1,4 +1,4 @@
-"""Does ``fused`` beat every single estimator on the paper's two experiments? (issue 11)
+"""Does ``fused`` beat every single estimator on the paper's two experiments?
 
 Runs ``paper_open_loop`` and ``paper_pbvs`` (control in the loop; the ``acrobot`` profile, the
 files' robot, camera on) with ``fused`` beside the paper's six estimators, all passive, and

@@ -14,7 +14,7 @@ The estimate (Förstner 1979; Koch, *Parameter Estimation and Hypothesis Testing
 Models*, §3.6): for each group g of residuals (already divided by their noise),
 σ̂²_g / σ²_g = r_gᵀr_g / ρ_g, where ρ_g = n_g − tr(J_g N⁻¹ J_gᵀ) is the group's share of the
 redundancy (N = JᵀJ, priors included). The priors are not re-weighted: they are the
-builder's tolerances, not measurements of this session.
+builder's tolerances, not measurements of this calibration.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Est. 7, ``model_catenary``: eq. 25 with the sagging cable's length–tension relation.
 
-For robots with heavy cables (issue 10): like ``model_elastic_pulley`` (encoder lengths plus
+For robots with heavy cables: like ``model_elastic_pulley`` (encoder lengths plus
 the elastic stretch of eq. 14, matched to pulley lengths of eq. 15-24), except that a cable of
 weight w per metre hanging between its pulley and its anchor is longer than the chord the pulley
 model measures. For a taut span the elastic catenary's arc exceeds its chord c by

@@ -1,4 +1,4 @@
-"""Est. 7, ``fused``: an error-state Kalman filter on SE(3) over every sensor (issue 11).
+"""Est. 7, ``fused``: an error-state Kalman filter on SE(3) over every sensor.
 
 Prediction: the control-based model, ``T ← T · exp(ξ Δt)`` with ξ the commanded platform twist
 (eq. 9), and process noise from the winch model — a velocity loop of time constant τ_w lags

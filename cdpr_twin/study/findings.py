@@ -410,7 +410,7 @@ def _rms_table(rep: dict) -> dict[str, dict[str, dict]]:
 
 
 def fused_beats_each(rep: dict, name: str = "fused") -> Finding | None:
-    """Beyond the paper (issue 11): the fused filter deviates less than every single estimator."""
+    """Beyond the paper: the fused filter deviates less than every single estimator."""
     table = _rms_table(rep)
     if not table or not all(name in t and len(t) > 1 for t in table.values()):
         return None
@@ -429,7 +429,7 @@ def fused_beats_each(rep: dict, name: str = "fused") -> Finding | None:
     ok = not losses
     return Finding(
         finding="fused (Est. 7, beyond the paper) beats every single estimator",
-        paper="— (issue 11's goal: ≥ 2× better than the best single one)",
+        paper="— (the design goal: ≥ 2× better than the best single one)",
         twin="; ".join(parts),
         threshold="RMS translational and rotational deviation over the run below every other "
         "estimator's, in open loop and in PBVS with control in the loop",
