@@ -127,6 +127,37 @@ class SensorWatch(enum.Flag):
     """:class:`TensionWatch`: ``TENSION_STUCK`` while a tension sensor reads a constant."""
 
 
+class SensorWatches:
+    """An :class:`EncoderWatch` and a :class:`TensionWatch`, each fed a measurement once.
+
+    Estimators reset together and updated with the same measurements can share one (see
+    :meth:`Estimator.share_watches`): a measurement asked about again, the same object, gets
+    the flags it got the first time, so each watch counts every reading once.
+    """
+
+    def __init__(self) -> None:
+        self.encoders, self.tensions = EncoderWatch(), TensionWatch()
+        self._encoders_seen: Measurement | None = None
+        self._encoder_flags: tuple[int, ...] = ()
+        self._tensions_seen: Measurement | None = None
+        self._tension_flags: tuple[int, ...] = ()
+
+    def flags(self, m: Measurement, encoders: bool, tensions: bool) -> frozenset[str]:
+        """The flags the asked-for watches raise on ``m`` (each watch ingests it once)."""
+        flags = set()
+        if encoders:
+            if m is not self._encoders_seen:
+                self._encoders_seen, self._encoder_flags = m, self.encoders.check(m)
+            if self._encoder_flags:
+                flags.add(ENCODER_MISMATCH)
+        if tensions:
+            if m is not self._tensions_seen:
+                self._tensions_seen, self._tension_flags = m, self.tensions.check(m.tensions)
+            if self._tension_flags:
+                flags.add(TENSION_STUCK)
+        return frozenset(flags)
+
+
 NO_INPUTS: Mapping[str, PoseEstimate] = MappingProxyType({})
 
 
@@ -200,7 +231,7 @@ class Estimator(ABC):
         self._T = T.copy()
         self._time = float(time)
         self._ready = True
-        self._encoders, self._tensions = EncoderWatch(), TensionWatch()
+        self._watches = SensorWatches()
 
     def _watch_flags(self, m: Measurement, watches: SensorWatch) -> frozenset[str]:
         """What the ``watches`` see in one measurement (each watch ingests it).
@@ -212,12 +243,21 @@ class Estimator(ABC):
 
     def _seen(self, m: Measurement, encoders: bool, tensions: bool) -> frozenset[str]:
         """:meth:`_watch_flags` with the watches as two booleans (the class's, known ahead)."""
-        flags = set()
-        if encoders and self._encoders.check(m):
-            flags.add(ENCODER_MISMATCH)
-        if tensions and self._tensions.check(m.tensions):
-            flags.add(TENSION_STUCK)
-        return frozenset(flags)
+        return self._watches.flags(m, encoders, tensions)
+
+    def share_watches(self, watches: SensorWatches) -> None:
+        """Read the sensor watches through ``watches``, shared with the run's other estimators.
+
+        Right after the estimators of a run are reset together, they would each keep watches
+        fed the same measurements in the same order: one shared set, which looks at each
+        measurement once, gives every one of them the same flags. A later :meth:`reset` gives
+        this estimator watches of its own again.
+
+        Args:
+            watches: fresh watches (:class:`SensorWatches`), shared by estimators reset at the
+                same time and updated with the same measurements.
+        """
+        self._watches = watches
 
     def _encoder_flags(self, m: Measurement, tensions: bool = False) -> frozenset[str]:
         """The encoder watch's flags (and the tension watch's, with ``tensions``).

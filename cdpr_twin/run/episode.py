@@ -26,6 +26,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Protocol
 
+from cdpr_twin.estimators.base import SensorWatches
 from cdpr_twin.run.interrupts import shielded
 from cdpr_twin.run.metrics import deviations
 from cdpr_twin.types import Command, Measurement, PoseEstimate, TickRecord
@@ -186,7 +187,10 @@ def start(setup) -> None:
     setup.sensors.home(s.start_pose)
     if setup.controller is not None:
         setup.controller.reset(s.start_pose)
+    # reset together and fed the same measurements: one set of sensor watches serves them all
+    watches = SensorWatches()
     for est in setup.estimators.values():
         est.reset(s.start_pose, 0.0)
+        est.share_watches(watches)
     if setup.monitor is not None:
         setup.monitor.reset()

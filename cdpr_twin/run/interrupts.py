@@ -22,10 +22,12 @@ ends it.
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import sys
 import threading
 from collections.abc import Iterator
+from typing import ClassVar
 
 from cdpr_twin.files.transaction import Terminated
 
@@ -37,10 +39,88 @@ class _Stops:
     """The signal (SIGINT, SIGTERM) that began the stop under way; ``None``: none yet."""
     depth = 0
     """How many :func:`sigterm_raises` (or :func:`handle_stops`, for good) are entered."""
+    ours: tuple[int, int] | None = None
+    """(process id, main thread id) while :func:`_stop` (or :func:`_relay`) handles SIGINT and
+    SIGTERM (or a signal is ignored) in that process: a :class:`Shield` then holds signals
+    without swapping the handlers (one is entered every control tick); ``None``: another
+    handler may be installed."""
+    held: ClassVar[list[int]] = []
+    """The signals held by the shields entered on that path, in the order they came."""
+    escapes: ClassVar[list[bool]] = []
+    """Each shield entered on that path, innermost last: whether a second signal escapes."""
+
+
+class _Relay:
+    """The handlers :func:`held_here` relays SIGINT and SIGTERM to, by signal."""
+
+    to: ClassVar[dict[int, object]] = {}
+
+
+def _held(signum: int, frame) -> int | None:
+    """Within a shield of the fast path: hold ``signum``; the signal to handle now, or ``None``.
+
+    A second signal, where the innermost shield lets it escape, is the first one held, now.
+    """
+    held = _Stops.held
+    held.append(signum)
+    if not (_Stops.escapes[-1] and len(held) > 1):
+        return None
+    return held[0]
+
+
+def _relay(signum: int, frame) -> None:
+    """Within :func:`held_here`: hold the signal in a shield, else hand it on as it was meant."""
+    if _Stops.escapes and (signum := _held(signum, frame)) is None:
+        return
+    handler = _Relay.to.get(signum)
+    if callable(handler):
+        handler(signum, frame)
+    elif handler == signal.SIG_DFL:
+        # the system's action (SIGTERM: the process ends), as if no handler had been set
+        signal.signal(signum, signal.SIG_DFL)
+        signal.raise_signal(signum)
+
+
+@contextlib.contextmanager
+def held_here() -> Iterator[None]:
+    """Within: one handler, installed once, serves every :class:`Shield` (a run's tick loop).
+
+    A shield entered every control tick would otherwise swap the handlers of SIGINT and SIGTERM
+    twice a tick. Within this block a signal outside any shield goes at once to the handler
+    that was installed before it (ignored if it was ignored, the system's action if it was the
+    default); within a shield it is held, as :class:`Shield` says. Nothing changes where this
+    module's own handler is already installed (a command) or off the main thread.
+    """
+    here = (os.getpid(), threading.get_ident())
+    if _Stops.ours == here or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    outer, ours = dict(_Relay.to), _Stops.ours
+    previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    if any(handler is None for handler in previous.values()):
+        # a handler installed from C cannot be handed on: each shield swaps handlers
+        yield
+        return
+    _Relay.to = previous
+    for sig in previous:
+        signal.signal(sig, _relay)
+    _Stops.ours = here
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        _Relay.to, _Stops.ours = outer, ours
 
 
 def _stop(signum: int, frame) -> None:
-    """SIGINT and SIGTERM, while handled: the first raises its stop, later ones are ignored."""
+    """SIGINT and SIGTERM, while handled: the first raises its stop, later ones are ignored.
+
+    Within a :class:`shielded` block the signal is held instead; a second one, where the
+    innermost shield lets it escape, handles the first one held now.
+    """
+    if _Stops.escapes and (signum := _held(signum, frame)) is None:
+        return
     if _Stops.first is not None:
         return  # a stop is under way: it decides the status and the exit code
     _Stops.first = signum
@@ -75,6 +155,7 @@ def sigterm_raises() -> Iterator[None]:
         _Stops.first = None
     _Stops.depth += 1
     previous = {sig: signal.signal(sig, _stop) for sig in _handled()}
+    _Stops.ours = _ours_now()
     try:
         yield
     except (SystemError, KeyboardInterrupt) as exc:
@@ -85,6 +166,7 @@ def sigterm_raises() -> Iterator[None]:
         for sig, handler in previous.items():
             if handler is not None:  # (None: a handler installed from C, not restorable)
                 signal.signal(sig, handler)
+        _Stops.ours = _ours_now()
         _Stops.depth -= 1
         if _Stops.depth == 0:
             _Stops.first = None  # a later Ctrl-C, outside this command, is a Ctrl-C
@@ -99,6 +181,7 @@ def handle_stops() -> None:
     _Stops.depth += 1
     for sig in _handled():
         signal.signal(sig, _stop)
+    _Stops.ours = _ours_now()
 
 
 def _handled() -> tuple[int, ...]:
@@ -124,10 +207,20 @@ def settle() -> None:
         _Stops.first = 0
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, signal.SIG_IGN)
+    _Stops.ours = _ours_now()
 
 
-@contextlib.contextmanager
-def shielded(escape: bool = False) -> Iterator[None]:
+def _ours_now() -> tuple[int, int] | None:
+    """:attr:`_Stops.ours` as the handlers are now (called where this module changes them)."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        if signal.getsignal(sig) not in (_stop, signal.SIG_IGN):
+            return None
+    return os.getpid(), threading.get_ident()
+
+
+class Shield:
     """Within: SIGINT and SIGTERM are held off, so that the outputs being saved are completed.
 
     A run completes, renames and commits its files in well under a second; a (second) Ctrl-C
@@ -137,39 +230,71 @@ def shielded(escape: bool = False) -> Iterator[None]:
     stop came first: it is the one that leaves). Within :func:`sigterm_raises` a signal of the
     other kind is delivered to its handler, which ignores it: the first stop decides (a pool
     worker's default SIGTERM, its parent's order to stop, still ends it). SIGKILL still stops
-    it. In another thread
-    than the main one (where signals cannot be handled) it does nothing.
+    it. In another thread than the main one (where signals cannot be handled) it does nothing.
+
+    Where this module's handler is the one installed (within :func:`sigterm_raises` or after
+    :func:`handle_stops`, in the process that installed it) the handler itself holds the
+    signals while a shield is entered; elsewhere each shield installs a holding handler and
+    puts the previous one back on leaving. Either way the same signals are delivered.
 
     Args:
         escape: a second signal while one is held is not held: the first one held is handled
             at once (a body that hangs can still be stopped without SIGKILL; the first decides
             which stop it is).
     """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    held: list[int] = []
-    previous: dict = {}
 
-    def hold(signum, frame) -> None:
+    __slots__ = ("_fast", "_held", "_previous", "_start", "escape")
+
+    def __init__(self, escape: bool = False) -> None:
+        self.escape = escape
+
+    def __enter__(self) -> None:
+        self._fast = _Stops.ours is not None and _Stops.ours == (os.getpid(), threading.get_ident())
+        if self._fast:
+            self._start = len(_Stops.held)
+            _Stops.escapes.append(self.escape)
+            return
+        self._previous: dict = {}
+        self._held: list[int] = []
+        if threading.current_thread() is not threading.main_thread():
+            return
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._previous[sig] = signal.signal(sig, self._hold)
+
+    def _hold(self, signum: int, frame) -> None:
+        """The holding handler of the path that swaps handlers."""
+        held = self._held
         held.append(signum)
         first = held[0]
-        if escape and len(held) > 1 and callable(meant := previous.get(first)):
+        if self.escape and len(held) > 1 and callable(meant := self._previous.get(first)):
             meant(first, frame)  # raises (Ctrl-C, Terminated) here, in the body
 
-    try:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            previous[sig] = signal.signal(sig, hold)
-        yield
-    finally:
-        for sig, handler in previous.items():
-            if handler is not None:  # (None: a handler installed from C, not restorable)
-                signal.signal(sig, handler)
-        stopping = sys.exc_info()[1]  # raised in the body, or a stop under way around it
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if self._fast:
+            _Stops.escapes.pop()
+            held = _Stops.held[self._start :]
+            del _Stops.held[self._start :]
+        else:
+            for sig, handler in self._previous.items():
+                if handler is not None:  # (None: a handler installed from C, not restorable)
+                    signal.signal(sig, handler)
+            held = self._held
+        if not held:
+            return
+        # raised in the body, or a stop under way around it
+        stopping = exc if exc is not None else sys.exc_info()[1]
         absorbed = signal.SIGTERM if isinstance(stopping, Terminated) else signal.SIGINT
         for sig in dict.fromkeys(held):  # each kind once, in the order they came
             if not (isinstance(stopping, KeyboardInterrupt) and sig == absorbed):
-                signal.raise_signal(sig)  # now, to the handler it was meant for (a worker: exit)
+                if self._fast and _Stops.escapes:
+                    _Stops.held.append(sig)  # an outer shield holds it in turn
+                else:
+                    signal.raise_signal(sig)  # now, to the handler it was meant for
+
+
+def shielded(escape: bool = False) -> Shield:
+    """Hold SIGINT and SIGTERM off within a ``with`` block (see :class:`Shield`)."""
+    return Shield(escape)
 
 
 def closed_stdout(exc: BrokenPipeError) -> int:

@@ -34,7 +34,7 @@ from cdpr_twin.recording.rerun import SceneInfo
 from cdpr_twin.recording.sinks import Recorders
 from cdpr_twin.run.episode import Episode, start
 from cdpr_twin.run.homing_and_teaching import homing, teach
-from cdpr_twin.run.interrupts import interruption, shielded
+from cdpr_twin.run.interrupts import held_here, interruption, shielded
 from cdpr_twin.run.metrics import RunMetrics
 from cdpr_twin.run.summary import Tally, summarize, tag_view
 from cdpr_twin.scenario.loading import Scenario, ScenarioError
@@ -375,12 +375,14 @@ def _loop(setup: RunSetup, sinks: tuple, progress) -> str:
     tick = episode.reset()
     if tick.stop:  # a fault already at the start
         return tick.stop
-    for k in range(n_ticks):
-        tick = episode.step()
-        if progress is not None:
-            progress((k + 1) / n_ticks, tick.time)
-        if tick.stop:  # stopped at the tick the fault happened in
-            return tick.stop
-        if tick.command.done:
-            return tick.command.status
+    # every tick's record is shielded: one handler for the whole loop, not two swaps a tick
+    with held_here():
+        for k in range(n_ticks):
+            tick = episode.step()
+            if progress is not None:
+                progress((k + 1) / n_ticks, tick.time)
+            if tick.stop:  # stopped at the tick the fault happened in
+                return tick.stop
+            if tick.command.done:
+                return tick.command.status
     return setup.controller.timeout_status

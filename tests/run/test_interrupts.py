@@ -263,3 +263,61 @@ def test_a_held_signal_of_another_kind_than_the_stop_under_way_is_delivered():
             with shielded():
                 os.kill(os.getpid(), signal.SIGINT)
     assert str(stop.value) == "first"
+
+
+def test_a_library_run_holds_a_signal_in_a_ticks_record_and_hands_it_to_the_callers_handler(
+    tmp_path, monkeypatch
+):
+    # truth: the order in which the sink finished and the caller's own handler ran, and the
+    # handler installed after the run (``run`` used as a library: no command's handler)
+    from cdpr_twin.recording import sinks as recorders
+
+    seen: list[str] = []
+
+    class Stop(Exception):
+        pass
+
+    def callers_handler(signum, frame):
+        seen.append(f"handler {signum}")
+        raise Stop
+
+    add = recorders.Recorders.add
+    calls = {"n": 0}
+
+    def add_under_fire(self, tick):
+        calls["n"] += 1
+        if calls["n"] == 4:  # inside the shield of the fourth tick's record
+            signal.raise_signal(signal.SIGTERM)
+            seen.append("signal sent")
+        add(self, tick)
+        seen.append(f"sink {calls['n']}")
+
+    monkeypatch.setattr(recorders.Recorders, "add", add_under_fire)
+    previous = signal.signal(signal.SIGTERM, callers_handler)
+    try:
+        s = load_scenario("paper_open_loop").with_overrides(duration=0.4, camera=False)
+        with pytest.raises(Stop):
+            run(s, tmp_path / "run", record_rrd=False)
+        assert signal.getsignal(signal.SIGTERM) is callers_handler
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    # held until the tick was in the sink, then the caller's handler, and nothing after it
+    assert seen[-3:] == ["signal sent", "sink 4", f"handler {int(signal.SIGTERM)}"]
+    # outside a record, a signal reaches the caller's handler at once
+    seen.clear()
+    calls["n"] = 0
+    monkeypatch.setattr(recorders.Recorders, "add", add)
+
+    def progress(fraction, t):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            signal.raise_signal(signal.SIGTERM)
+            seen.append("after the signal")  # not reached: the handler raised
+
+    previous = signal.signal(signal.SIGTERM, callers_handler)
+    try:
+        with pytest.raises(Stop):
+            run(s, tmp_path / "run2", record_rrd=False, progress=progress)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert seen == [f"handler {int(signal.SIGTERM)}"]
