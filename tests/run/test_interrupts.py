@@ -274,12 +274,12 @@ def test_a_library_run_holds_a_signal_in_a_ticks_record_and_hands_it_to_the_call
 
     seen: list[str] = []
 
-    class Stop(Exception):
+    class StopError(Exception):
         pass
 
     def callers_handler(signum, frame):
         seen.append(f"handler {signum}")
-        raise Stop
+        raise StopError
 
     add = recorders.Recorders.add
     calls = {"n": 0}
@@ -296,7 +296,7 @@ def test_a_library_run_holds_a_signal_in_a_ticks_record_and_hands_it_to_the_call
     previous = signal.signal(signal.SIGTERM, callers_handler)
     try:
         s = load_scenario("paper_open_loop").with_overrides(duration=0.4, camera=False)
-        with pytest.raises(Stop):
+        with pytest.raises(StopError):
             run(s, tmp_path / "run", record_rrd=False)
         assert signal.getsignal(signal.SIGTERM) is callers_handler
     finally:
@@ -316,7 +316,7 @@ def test_a_library_run_holds_a_signal_in_a_ticks_record_and_hands_it_to_the_call
 
     previous = signal.signal(signal.SIGTERM, callers_handler)
     try:
-        with pytest.raises(Stop):
+        with pytest.raises(StopError):
             run(s, tmp_path / "run2", record_rrd=False, progress=progress)
     finally:
         signal.signal(signal.SIGTERM, previous)
