@@ -19,8 +19,8 @@ T_TAGPUPIL_TAGVISP = transform(rot_x(np.pi), np.zeros(3))
 π about x, its own inverse: ``T_cam_tagPupil = T_cam_tagViSP @ T_TAGPUPIL_TAGVISP`` as well."""
 
 
-def _frozen(value: object) -> np.ndarray:
-    out = np.array(value)
+def _frozen(value: object, dtype: type | None = None) -> np.ndarray:
+    out = np.array(value, dtype=dtype)
     out.flags.writeable = False
     return out
 
@@ -164,7 +164,7 @@ class Command:
         for name in ("cable_rates", "twist_platform", "error"):
             value = getattr(self, name)
             if value is not None:
-                object.__setattr__(self, name, _frozen(np.asarray(value, dtype=float)))
+                object.__setattr__(self, name, _frozen(value, float))
 
 
 @dataclass(frozen=True, eq=False)
@@ -193,13 +193,11 @@ class PoseEstimate:
     covariance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(
-            self, "T_base_platform", _frozen(np.asarray(self.T_base_platform, dtype=float))
-        )
+        object.__setattr__(self, "T_base_platform", _frozen(self.T_base_platform, float))
         if not isinstance(self.flags, frozenset):
             object.__setattr__(self, "flags", frozenset(self.flags))
         if self.covariance is not None:
-            cov = _frozen(np.asarray(self.covariance, dtype=float))
+            cov = _frozen(self.covariance, float)
             if cov.shape != (6, 6):
                 raise ValueError(f"PoseEstimate.covariance must be (6, 6), got {cov.shape}")
             object.__setattr__(self, "covariance", cov)

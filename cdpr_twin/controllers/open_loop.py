@@ -134,6 +134,7 @@ class OpenLoopController(Controller):
         self.jacobian_model = options.jacobian_model
         self.segments: list[Segment] = []
         self._starts = np.zeros(0)
+        self._total = self.total_duration
 
     def check(self) -> None:
         """Every waypoint inside the frame and wrench-feasible (:mod:`cdpr_twin.math.workspace`).
@@ -189,18 +190,18 @@ class OpenLoopController(Controller):
         self._starts = np.concatenate([[0.0], np.cumsum(self.durations)])
 
     def _locate(self, t: float) -> tuple[Segment, float]:
-        k = int(np.searchsorted(self._starts, t, side="right")) - 1
+        k = int(self._starts.searchsorted(t, side="right")) - 1
         k = min(max(k, 0), len(self.segments) - 1)
         return self.segments[k], t - self._starts[k]
 
     def planned_pose(self, t: float) -> np.ndarray:
         """Planned pose at time t (the last waypoint after the end)."""
-        seg, tau = self._locate(min(t, self.total_duration))
+        seg, tau = self._locate(min(t, self._total))
         return seg.pose(tau)
 
     def planned_twist_base(self, t: float) -> np.ndarray:
         """Planned twist ᵇv_p at time t (zero outside the trajectory)."""
-        if t < 0 or t > self.total_duration:
+        if t < 0 or t > self._total:
             return np.zeros(6)
         seg, tau = self._locate(t)
         return seg.twist_base(tau)
@@ -217,7 +218,7 @@ class OpenLoopController(Controller):
         rates = jacobian(self.geometry, T, "base", self.jacobian_model) @ twist_base
         R = T[:3, :3]
         twist_platform = np.concatenate([R.T @ twist_base[:3], R.T @ twist_base[3:]])
-        done = t + period >= self.total_duration - 1e-9
+        done = t + period >= self._total - 1e-9
         return Command(
             rates, twist_platform, done=done, status=Status.DONE if done else Status.TRACKING
         )

@@ -363,13 +363,10 @@ class FusedEstimator(Estimator):
         if not dt >= 0:
             raise ValueError(f"fused: measurement time {m.time} s precedes {self._time} s")
         twist = m.twist_platform
-        readings = [
-            m.cable_lengths,
-            m.tensions,
-            *(v for v in (twist, m.cable_rates) if v is not None),
-        ]
-        # (no command yet: no twist, rates)
-        if not all(np.logical_and.reduce(np.isfinite(v)) for v in readings):
+        readings = [m.cable_lengths, m.tensions]
+        if twist is not None:  # (no command yet: no twist, rates)
+            readings += [twist, m.cable_rates]
+        if not np.isfinite(np.concatenate(readings)).all():
             return self._held(m, NON_FINITE_INPUT, covariance=self.P[fm.POSE, fm.POSE])
         if dt > 0:
             moving = twist is not None

@@ -147,13 +147,13 @@ class TimeseriesWriter:
             marks: what happened during the tick (events, faults), in words.
         """
         m = measurement
-        poses = [
-            T_true,
-            *(estimates[n].T_base_platform for n in self.estimators),
-            plan,
-            None if m.tag is None else m.tag.T_cam_tag,
-        ]
-        valid = [int(estimates[n].valid) for n in self.estimators]
+        poses = [T_true]
+        valid = []
+        for n in self.estimators:
+            poses.append(estimates[n].T_base_platform)
+            valid.append(int(estimates[n].valid))
+        poses.append(plan)
+        poses.append(None if m.tag is None else m.tag.T_cam_tag)
         if self.covariance:
             valid = [(v, _cov21(estimates[n])) for v, n in zip(valid, self.estimators, strict=True)]
         sensors = [*m.tensions.tolist(), *m.cable_lengths.tolist(), *m.cable_rates.tolist()]

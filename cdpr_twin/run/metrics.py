@@ -85,7 +85,9 @@ class DeviationTrack:
         self.count += 1
         if not estimate.valid:
             self.invalid_updates += 1
-        self.flags.update(estimate.flags)
+        # most estimates carry no flag: Counter.update costs a type check even on nothing
+        for flag in estimate.flags:
+            self.flags[flag] += 1
 
     def summary(self) -> dict:
         """JSON-ready summary (metres and degrees).

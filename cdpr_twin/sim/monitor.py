@@ -180,7 +180,7 @@ class Monitor:
 
     def next_time(self) -> float:
         """Always due: the monitor looks at every refresh chunk."""
-        return self.physics.time
+        return self.physics.data.time
 
     def fire(self, time: float) -> None:
         """Check now (the state the last chunk left)."""
@@ -240,8 +240,8 @@ class Monitor:
             )
 
     def _constraint(self, taut_cables: np.ndarray, seen: dict) -> None:
-        lim, t = self.limits, self.physics.time
-        taut = len(taut_cables.nonzero()[0])
+        lim, t = self.limits, self.physics.data.time
+        taut = int(taut_cables.sum())
         if taut >= lim.min_taut:
             self._slack_since = math.nan
             return
