@@ -193,7 +193,10 @@ class PoseEstimate:
     covariance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "T_base_platform", _frozen(self.T_base_platform, float))
+        # (the freezing inline: six estimates a tick)
+        T = np.array(self.T_base_platform, dtype=float)
+        T.flags.writeable = False
+        object.__setattr__(self, "T_base_platform", T)
         if not isinstance(self.flags, frozenset):
             object.__setattr__(self, "flags", frozenset(self.flags))
         if self.covariance is not None:

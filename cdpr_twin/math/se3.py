@@ -55,9 +55,10 @@ def rot_z(angle: float) -> np.ndarray:
 
 def transform(R: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Homogeneous transform from rotation (3, 3) and translation (3,) [m]. Returns (4, 4)."""
-    T = np.eye(4)
+    T = np.zeros((4, 4))
     T[:3, :3] = R
     T[:3, 3] = t
+    T[3, 3] = 1.0
     return T
 
 
@@ -224,10 +225,11 @@ def matrix_from_quat_wxyz(quat_wxyz: np.ndarray) -> np.ndarray:
         (..., 3, 3) rotation matrices.
     """
     q = np.asarray(quat_wxyz, dtype=float)
-    n = np.linalg.norm(q) if q.ndim == 1 else np.linalg.norm(q, axis=-1, keepdims=True)
-    if not np.all(np.isfinite(n)) or np.any(n < 1e-12):
-        raise ValueError(f"quaternion {q} is zero or not finite; pass a non-zero finite wxyz")
     if q.shape == (4,):  # one quaternion: the same arithmetic on Python floats, 8× faster
+        # (np.linalg.norm's own arithmetic for a vector: the square root of its dot product)
+        n = math.sqrt(q.dot(q))
+        if not (math.isfinite(n) and n >= 1e-12):
+            raise ValueError(f"quaternion {q} is zero or not finite; pass a non-zero finite wxyz")
         w, x, y, z = (q / n).tolist()
         return np.array(
             [
@@ -236,6 +238,9 @@ def matrix_from_quat_wxyz(quat_wxyz: np.ndarray) -> np.ndarray:
                 [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
             ]
         )
+    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    if not np.all(np.isfinite(n)) or np.any(n < 1e-12):
+        raise ValueError(f"quaternion {q} is zero or not finite; pass a non-zero finite wxyz")
     w, x, y, z = np.moveaxis(q / n, -1, 0)
     R = np.stack(
         [

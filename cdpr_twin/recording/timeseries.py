@@ -155,7 +155,10 @@ class TimeseriesWriter:
         poses.append(plan)
         poses.append(None if m.tag is None else m.tag.T_cam_tag)
         if self.covariance:
-            valid = [(v, _cov21(estimates[n])) for v, n in zip(valid, self.estimators, strict=True)]
+            valid = [
+                (v, _cov21(estimates[n]) if n in self.covariance else [])
+                for v, n in zip(valid, self.estimators, strict=True)
+            ]
         sensors = [*m.tensions.tolist(), *m.cable_lengths.tolist(), *m.cable_rates.tolist()]
         status = command.status if command is not None else Status.START
         event = "; ".join(marks).replace(",", ";").replace("\n", " ")
@@ -207,7 +210,6 @@ class TimeseriesWriter:
             for j in range(k):
                 if self.covariance:
                     v, cov = valid[j]
-                    cov = cov if self.estimators[j] in self.covariance else []
                     values += [*pose7[i, 1 + j].tolist(), v, *cov]
                 else:
                     values += [*pose7[i, 1 + j].tolist(), valid[j]]
