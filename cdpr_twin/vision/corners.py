@@ -6,6 +6,7 @@ refinement here fits a line to each edge's sub-pixel mid-level crossings and int
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import cv2
@@ -80,7 +81,11 @@ def _edge_line(
     found = base[rows] + t[:, None] * n
     q = found if undistort is None else undistort(found)
     mean = q.mean(axis=0)
-    return mean, np.linalg.svd(q - mean)[2][0]
+    # the total-least-squares direction: the major axis of the points' 2 × 2 scatter, whose
+    # angle has a closed form (the first right singular vector of q − mean, up to its sign)
+    (sxx, sxy), (_, syy) = ((q - mean).T @ (q - mean)).tolist()
+    angle = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
+    return mean, np.array([math.cos(angle), math.sin(angle)])
 
 
 def refine_quad(
@@ -126,11 +131,13 @@ def refine_quad(
     out = np.empty((4, 2))
     for j in range(4):  # corner j is the meeting point of edges j-1 and j
         (m0, d0), (m1, d1) = lines[j - 1], lines[j]
-        A = np.column_stack([d0, -d1])
-        if abs(np.linalg.det(A)) < 1e-6:
+        # m0 + s·d0 = m1 + u·d1, by Cramer's rule: det [d0, −d1] is the sine of their angle
+        det = d1[0] * d0[1] - d0[0] * d1[1]
+        if abs(det) < 1e-6:
             return fallback
-        s = np.linalg.solve(A, m1 - m0)
-        out[j] = m0 + s[0] * d0
+        gap = m1 - m0
+        s = (d1[0] * gap[1] - gap[0] * d1[1]) / det
+        out[j] = m0 + s * d0
     if np.max(np.abs(out - fallback)) > 2.0:  # refinement wandered off: the detector's corners
         return fallback
     return out
