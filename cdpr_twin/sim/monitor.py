@@ -241,7 +241,7 @@ class Monitor:
 
     def _constraint(self, taut_cables: np.ndarray, seen: dict) -> None:
         lim, t = self.limits, self.physics.data.time
-        taut = int(taut_cables.sum())
+        taut = len(taut_cables.nonzero()[0])
         if taut >= lim.min_taut:
             self._slack_since = math.nan
             return

@@ -68,11 +68,13 @@ def _edge_line(
         cv2.INTER_LINEAR,
         borderMode=cv2.BORDER_REPLICATE,
     )
-    lo, hi = prof.min(axis=1, keepdims=True), prof.max(axis=1, keepdims=True)
+    # (ufunc reductions: the same values as .min/.max/.mean, without their Python wrappers)
+    lo = np.minimum.reduce(prof, axis=1, keepdims=True)
+    hi = np.maximum.reduce(prof, axis=1, keepdims=True)
     ok = (hi - lo).ravel() > 20.0
     f = prof - 0.5 * (lo + hi)  # rising from dark (inside) to light (outside)
     cross = (f[:, :-1] < 0) & (f[:, 1:] >= 0)
-    rows = np.flatnonzero(ok & (cross.sum(axis=1) == 1))  # profiles with one clean crossing
+    rows = (ok & (cross.sum(axis=1) == 1)).nonzero()[0]  # profiles with one clean crossing
     if len(rows) < 4:
         return None
     i = cross[rows].argmax(axis=1)
@@ -80,7 +82,7 @@ def _edge_line(
     t = steps[i] + (steps[i + 1] - steps[i]) * fi / (fi - fj)
     found = base[rows] + t[:, None] * n
     q = found if undistort is None else undistort(found)
-    mean = q.mean(axis=0)
+    mean = np.add.reduce(q, axis=0) / len(q)
     # the total-least-squares direction: the major axis of the points' 2 × 2 scatter, whose
     # angle has a closed form (the first right singular vector of q − mean, up to its sign)
     (sxx, sxy), (_, syy) = ((q - mean).T @ (q - mean)).tolist()

@@ -346,10 +346,10 @@ class TagDetector:
                 np.array(tvec0, dtype=float).reshape(3, 1),
             )
             T_try = transform(cv2.Rodrigues(rvec)[0], tvec.ravel())
-            if T_try[2, 3] <= 0 or not np.all(np.isfinite(T_try)):
+            if T_try[2, 3] <= 0 or not np.logical_and.reduce(np.isfinite(T_try), axis=None):
                 continue
             e = project_points(self.intrinsics, T_try, self._object_points) - corners
-            err = float(np.sum(e**2))
+            err = float(np.add.reduce(e**2, axis=None))
             if err < best_err:
                 best, best_err = T_try, err
         return best
