@@ -111,6 +111,15 @@ class Controller(ABC):
             measurement: the current measurement (PBVS reads its tag detection).
         """
 
+    @property
+    def goal_is_taught(self) -> bool:
+        """Whether :meth:`teach` sets the goal: known only once the true robot is shown.
+
+        A check before any robot is built (the scenario's preflight) then leaves the goal to
+        the run, which checks the view it was shown.
+        """
+        return False
+
     def planned_pose(self, t: float) -> np.ndarray | None:
         """The pose the controller plans for time t, if it plans one (else ``None``)."""
         return None

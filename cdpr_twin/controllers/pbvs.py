@@ -210,6 +210,11 @@ class PbvsController(Controller):
         R_goal_cur = self.goal[:3, :3] @ T_cam_tag[:3, :3].T  # ᶜ*R_c = ᶜ*R_o ᶜR_oᵀ
         return np.concatenate([T_cam_tag[:3, 3] - self.goal[:3, 3], so3_log(R_goal_cur)])
 
+    @property
+    def goal_is_taught(self) -> bool:
+        """With ``goal = "taught"``: the goal is the view shown at ``teach_pose``."""
+        return self.options.goal == "taught"
+
     def goal_pose(self, T_base_tag: np.ndarray | None) -> np.ndarray | None:
         """The task's end pose.
 

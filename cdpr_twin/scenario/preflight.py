@@ -110,8 +110,10 @@ def check_task(scenario: Scenario, nominals: dict | None = None) -> None:
     nominal = nominals[key]
     check_camera(s, nominal.intrinsics)
     controller = controller_for(s, nominal)  # the start pose and a plan's rates too
-    if getattr(controller.options, "goal", None) == "taught":  # (pbvs) checked when shown to the
-        return  # true robot, as runner.prepare does: its pose, not the nominal model's view
+    if controller.goal_is_taught:
+        # checked when shown to the true robot, as runner.prepare does: its pose, not the
+        # nominal model's view
+        return
     try:
         goal = controller.goal_pose(nominal.T_base_tag)
     except (Exception, SystemExit) as exc:  # a plugin's own failure (or exit): no traceback
