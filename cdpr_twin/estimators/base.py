@@ -159,6 +159,7 @@ class SensorWatches:
 
 
 NO_INPUTS: Mapping[str, PoseEstimate] = MappingProxyType({})
+_NO_FLAGS: frozenset[str] = frozenset()
 
 
 class Estimator(ABC):
@@ -239,10 +240,7 @@ class Estimator(ABC):
         ``ENCODER_MISMATCH`` while an encoder disagrees with its commands; ``TENSION_STUCK``
         while a tension sensor reads a constant.
         """
-        return self._seen(m, SensorWatch.ENCODERS in watches, SensorWatch.TENSIONS in watches)
-
-    def _seen(self, m: Measurement, encoders: bool, tensions: bool) -> frozenset[str]:
-        """:meth:`_watch_flags` with the watches as two booleans (the class's, known ahead)."""
+        encoders, tensions = SensorWatch.ENCODERS in watches, SensorWatch.TENSIONS in watches
         return self._watches.flags(m, encoders, tensions)
 
     def share_watches(self, watches: SensorWatches) -> None:
@@ -314,8 +312,11 @@ class Estimator(ABC):
             self._check_reset()
         if not math.isfinite(measurement.time):
             return self._bad_time(measurement)
-        watch_flags = self._seen(measurement, self._watch_encoders, self._watch_tensions)
-        return self._step(measurement, inputs, watch_flags)
+        encoders, tensions = self._watch_encoders, self._watch_tensions
+        flags = _NO_FLAGS
+        if encoders or tensions:
+            flags = self._watches.flags(measurement, encoders, tensions)
+        return self._step(measurement, inputs, flags)
 
     @abstractmethod
     def _step(
