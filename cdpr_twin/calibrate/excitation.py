@@ -42,6 +42,8 @@ def _draw(
     geom: CdprGeometry, n: int, centre, half, max_angle: float, t_min: float, seed: int, keep
 ) -> list[np.ndarray]:
     """``n`` poses from a scrambled Halton sequence in a box that pass ``keep``."""
+    if n <= 0:
+        return []
     sampler = qmc.Halton(d=6, scramble=True, seed=seed)
     poses: list[np.ndarray] = []
     for _ in range(50):

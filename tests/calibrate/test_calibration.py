@@ -592,3 +592,19 @@ def test_what_a_calibration_cannot_use_is_refused_not_ignored(tmp_path, capsys, 
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"s.toml: {field}: a calibration" in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("n", [1, 2, 3])
+def test_excitation_gives_as_many_poses_as_asked_each_feasible(n):
+    # truth: the count asked for, the share that sees the tag (the camera's own projection) and
+    # each pose's wrench feasibility (the workspace's linear program), checked independently
+    from cdpr_twin.calibrate.excitation import tag_in_view
+    from cdpr_twin.math.workspace import inside_frame, is_feasible
+
+    g, T_tag, K, size = _nominal()
+    start = se3.transform(np.eye(3), np.array([0.0, 0.0, 0.3]))
+    poses = excitation_poses(g, T_tag, K, size, n, start)
+    assert len(poses) == n
+    n_seen = sum(tag_in_view(g, T_tag, K, size, T) for T in poses)
+    assert n_seen >= max(1, round(0.5 * n))
+    assert all(inside_frame(g, T) and is_feasible(g, T, tension_min=g.tension_min) for T in poses)
