@@ -42,15 +42,15 @@ class _Progress:
         pct = int(100 * fraction)
         if self.tty:
             if pct != self._last:
-                bar = "#" * (pct // 4) + "." * (25 - pct // 4)
-                self.stream.write(f"\r{self.label} [{bar}] {pct:3d}%  t = {t:6.2f} s")
+                drawn = "#" * (pct // 4) + "." * (25 - pct // 4)
+                self.stream.write(f"\r{self.label} [{drawn}] {pct:3d}%  t = {t:6.2f} s")
                 self.stream.flush()
         elif pct // 10 != self._last // 10:
             self.stream.write(f"{self.label}: {pct}% (t = {t:.2f} s)\n")
         self._last = pct
 
     def done(self) -> None:
-        """End the bar's line (if one was drawn)."""
+        """End the progress line (if one was drawn)."""
         if self.tty and self._last >= 0:
             self.stream.write("\n")
 

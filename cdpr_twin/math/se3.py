@@ -1,10 +1,10 @@
-"""SO(3)/SE(3) helpers: exp/log, adjoint, θu, quaternions, file poses, pose distance.
+"""SO(3)/SE(3) functions: exp/log, adjoint, θu, quaternions, file poses, pose distance.
 
 Quaternion conversions and the pose distance take one pose or any stack (leading axes), one
 implementation each (jaxlie's style); one pose takes a bit-identical fast path in plain floats,
 as the Newton kernels of :mod:`cdpr_twin.estimators.model_based` do (a test holds them to these).
 
-Conventions (DESIGN §3): homogeneous transforms are 4×4 arrays named ``T_<to>_<from>``;
+Conventions: homogeneous transforms are 4×4 arrays named ``T_<to>_<from>``;
 twists are ``[v, ω]`` (linear first); quaternions are ``quat_wxyz`` (scalar first, the MuJoCo
 order); poses in files are ``[x, y, z, rx, ry, rz]`` in metres and degrees with
 R = Rx(rx)·Ry(ry)·Rz(rz) (intrinsic XYZ). Everything here imports numpy only.

@@ -5,7 +5,7 @@
 
 Written as ``recording.rrd.partial``, renamed when complete (:mod:`cdpr_twin.files.transaction`).
 
-Rerun entity paths (they follow the frame tree, DESIGN §9):
+Rerun entity paths (they follow the frame tree, docs/concepts/frames.md):
 
 | path | content |
 |---|---|

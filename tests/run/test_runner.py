@@ -1,4 +1,4 @@
-"""Scenario runs against the paper's observations and the twin's ground truth (DESIGN §8)."""
+"""Scenario runs against the paper's observations and the twin's ground truth."""
 
 import dataclasses
 import json
