@@ -1,12 +1,12 @@
 """The repository speaks of its subject only: no file tells how it was made.
 
 Every file git tracks (text files; images and Parquet parts skipped) is searched for words that
-belong to a development narrative rather than to the twin: work periods, tracker numbers
-("issue 12", "#12"), targets called bars, the people or programs who checked a change, and
-citations of design notes kept elsewhere. Legitimate uses stay allowed: a subprocess's
-``start_new_session``, a progress bar, error bars, Matplotlib's ``ax.bar``, Bar-Shalom's book,
-another project's tracker (``owner/repo#12``). Each pattern writes one letter in brackets so
-this file does not match itself.
+belong to a development narrative rather than to the twin: work periods, tracker numbers, targets
+called by the word for a rod, the people or programs who checked a change, and citations of
+design notes kept elsewhere. Legitimate uses stay allowed: a subprocess's ``start_new_session``,
+a progress or error b[a]r, Matplotlib's ``ax.b[a]r``, B[a]r-Shalom's book, another project's
+tracker (``owner/repo`` then a number). Each pattern writes one letter in brackets so this file
+does not match itself.
 """
 
 import re
@@ -20,7 +20,7 @@ PATTERNS = {
     "a tracker reference": re.compile(
         r"\bi[s]sues?(\s*#?\d+|'s)\b|\bthe i[s]sue\b|(?<![\w/&-])#\d{1,5}\b(?!-)", re.IGNORECASE
     ),
-    "a target called a bar": re.compile(
+    "a target called a b[a]r": re.compile(
         r"(?<!progress )(?<!error )(?<!color )(?<!colour )\bb[a]rs?\b(?![-(])", re.IGNORECASE
     ),
     "a checker of changes": re.compile(r"\br[e]view(ers?|s|ed|ing)?\b", re.IGNORECASE),

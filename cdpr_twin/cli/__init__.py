@@ -277,7 +277,17 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _parser() -> argparse.ArgumentParser:
+    from cdpr_twin.provenance import software
+
     parser = argparse.ArgumentParser(prog="cdpr-twin", description=__doc__)
+    v = software()
+    # twelve digits name a commit and keep the line within a terminal's width
+    commit = f", commit {v['git_commit'][:12]}" if v["git_commit"] else ""
+    parser.add_argument(
+        "--version",
+        action="version",
+        version=f"cdpr-twin {v['cdpr_twin']} (MuJoCo {v['mujoco']}, Python {v['python']}{commit})",
+    )
     sub = parser.add_subparsers(dest="command", required=True)
     cli_demo.add_parser(sub)  # cdpr-twin demo
     runp = sub.add_parser("run", help="run a scenario headless and write its outputs")
