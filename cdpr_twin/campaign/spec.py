@@ -3,7 +3,7 @@
 A campaign file (TOML) names a base scenario and how to vary it::
 
     name = "pbvs_gain_sweep"
-    scenario = "../scenarios/paper_pbvs.toml"   # relative to this file, or a shipped name
+    scenario = "paper_pbvs"                     # a shipped name, or a file relative to this one
     seed = 1                                    # seeds the random draws below
     samples = 1                                 # random draws per grid point
     artefacts = "none"                          # per-run files: "none", "csv" or "all"
@@ -342,10 +342,16 @@ def _tasks(source: Path, block: _Block, seed: int, where: str) -> list[Task]:
 def load_campaign(path: str | Path) -> Campaign:
     """Read a campaign file and build and validate every run's scenario.
 
+    Args:
+        path: a campaign file, or a shipped campaign's name (``pbvs_gain_sweep``).
+
     Raises:
         CampaignError: naming the file and the field (and the scenario's own error).
     """
-    source = Path(path)
+    try:
+        source = resources.campaign_file(path)
+    except resources.ResourceError as exc:
+        raise CampaignError(str(exc)) from None
     top = _read_toml(source, "campaign file")
     seed = top.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:

@@ -125,7 +125,9 @@ def add_campaign_parser(sub) -> None:
     from cdpr_twin.files.transaction import out_path
 
     cp = sub.add_parser("campaign", help="run a campaign file: many varied runs into one table")
-    cp.add_argument("campaign", type=Path, help="campaign file (campaigns/*.toml)")
+    cp.add_argument(
+        "campaign", type=Path, help="campaign file, or a shipped one's name (campaigns list)"
+    )
     cp.add_argument("--out", type=out_path, default=None, help="output directory (runs/<name>)")
     cp.add_argument("--workers", type=int, default=None, help="parallel runs (default: cores)")
     cp.add_argument("--resume", action="store_true", help="run only the runs not in the table")
