@@ -13,6 +13,7 @@ import numpy as np
 from cdpr_twin.cli import demo as cli_demo
 from cdpr_twin.cli import model as model_cli
 from cdpr_twin.cli.campaign import add_campaign_parser
+from cdpr_twin.cli.plots import missing_plots
 from cdpr_twin.files.transaction import out_path
 from cdpr_twin.run.interrupts import closed_stdout
 
@@ -187,6 +188,9 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _reproduce(args: argparse.Namespace) -> int:
+    if message := missing_plots("reproduce"):
+        print(message, file=sys.stderr)
+        return 2
     from cdpr_twin import study
     from cdpr_twin.robot.realism import RUN_SOURCES
     from cdpr_twin.run.interrupts import sigterm_raises

@@ -96,6 +96,11 @@ def _build(args: argparse.Namespace) -> int:
 
 
 def _workspace(args: argparse.Namespace) -> int:
+    from cdpr_twin.cli.plots import missing_plots
+
+    if message := missing_plots("model workspace"):
+        print(message, file=sys.stderr)
+        return 2
     from cdpr_twin.files.transaction import OutputError
     from cdpr_twin.math.workspace import geometry_of, sample_workspace, spacing_problem
     from cdpr_twin.robot.description import RobotError, load_robot
