@@ -37,6 +37,7 @@ override applied), so a campaign can be resumed, and re-running a finished one d
 from __future__ import annotations
 
 import copy
+import dataclasses
 import itertools
 import json
 import math
@@ -388,3 +389,22 @@ def load_campaign(path: str | Path) -> Campaign:
             raise _fail(source, "axes", f"runs {seen[key]} and {t.name} are identical")
         seen[key] = t.name
     return Campaign(name, source, description, tuple(tasks))
+
+
+def shortened(campaign: Campaign, duration: float) -> Campaign:
+    """The campaign with every run's duration capped at ``duration`` [s] (quick checks).
+
+    A capped run is another scenario, so it gets another id: its row never mixes with the full
+    runs' in a table (``--resume`` in a directory of the full campaign refuses).
+
+    Raises:
+        CampaignError: ``duration`` is not a finite time > 0 s.
+    """
+    if not (isinstance(duration, float | int) and math.isfinite(duration) and duration > 0):
+        raise CampaignError(f"--duration must be a time > 0 s, got {duration!r}")
+    tasks = []
+    for task in campaign.tasks:
+        data = copy.deepcopy(task.data)
+        data["duration"] = min(float(data.get("duration", duration)), float(duration))
+        tasks.append(dataclasses.replace(task, data=data, run_id=run_id(data)))
+    return dataclasses.replace(campaign, tasks=tuple(tasks))

@@ -53,6 +53,7 @@ def campaign_command(args: argparse.Namespace) -> int:
     )
     from cdpr_twin.campaign.executor import check_address
     from cdpr_twin.campaign.report import write_report
+    from cdpr_twin.campaign.spec import shortened
     from cdpr_twin.files.transaction import OutputDirError, OutputError, Terminated
     from cdpr_twin.run.interrupts import sigterm_raises
 
@@ -61,6 +62,8 @@ def campaign_command(args: argparse.Namespace) -> int:
         return 2
     try:
         campaign = load_campaign(args.campaign)
+        if args.duration is not None:
+            campaign = shortened(campaign, args.duration)
     except CampaignError as exc:
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
         return 2
@@ -131,6 +134,9 @@ def add_campaign_parser(sub) -> None:
     cp.add_argument("--out", type=out_path, default=None, help="output directory (runs/<name>)")
     cp.add_argument("--workers", type=int, default=None, help="parallel runs (default: cores)")
     cp.add_argument("--resume", action="store_true", help="run only the runs not in the table")
+    cp.add_argument(
+        "--duration", type=float, default=None, help="cap every run's duration [s] (quick checks)"
+    )
     cp.add_argument(
         "--ray",
         nargs="?",
