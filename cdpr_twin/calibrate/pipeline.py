@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
@@ -110,11 +111,18 @@ def priors_of(s: Scenario, focal_px: float, tension: tuple[float, float, float])
     )
 
 
-def calibrate(s: Scenario, n_poses: int = 240, frames: int = 4, workers: int = 1) -> Outcome:
+def calibrate(
+    s: Scenario,
+    n_poses: int = 240,
+    frames: int = 4,
+    workers: int = 1,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> Outcome:
     """Excite, record and calibrate the robot of scenario ``s``.
 
     ``workers`` processes record the tour's segments side by side (the result does not depend
-    on their number).
+    on their number). ``progress`` is told each stage: ``("recording", done, segments)`` as
+    segments end, then ``("solving", 0, 0)``.
 
     Raises:
         ScenarioError: the scenario's robot cannot be built or has no camera.
@@ -136,7 +144,9 @@ def calibrate(s: Scenario, n_poses: int = 240, frames: int = 4, workers: int = 1
     except ValueError as exc:
         raise CalibrationError(str(exc)) from None
     chosen = time.perf_counter() - started
-    rec = record(s, poses, frames, workers)
+    tell = progress or (lambda stage, done, total: None)
+    tell("recording", 0, 1)
+    rec = record(s, poses, frames, workers, lambda done, total: tell("recording", done, total))
     if not rec.obs.seen.any():
         raise CalibrationError(
             "the tag was never detected at the excitation poses; check the camera and tag in "
@@ -147,6 +157,7 @@ def calibrate(s: Scenario, n_poses: int = 240, frames: int = 4, workers: int = 1
     priors = priors_of(s, rec.detector.focal_px, rec.tension_sensors)
     noise = noise_of(rec, frames)
     problem = Problem(nominal.geometry, nominal.T_base_tag, rec.obs, priors, noise, rec.detector)
+    tell("solving", 0, 0)
     cal, weighting = solve_weighted(problem)
     return Outcome(
         cal, rec, priors, chosen, int(np.count_nonzero(~keep)), weighting.noise, weighting

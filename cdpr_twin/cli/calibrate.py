@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cdpr_twin.cli.progress import Progress, duration
+
 MAX_POSES, MAX_FRAMES = 10_000, 1_000
 """Upper bounds of ``--poses`` (40× the default: ≈ 40 min) and ``--frames``: beyond them a typo
 would run for days, its memory growing, before saying anything."""
@@ -146,7 +148,18 @@ def _solve_and_write(args, s, source: Path, out: Path, started: float) -> int:
     from cdpr_twin.sim import build_robot
 
     clear(out)  # an earlier calibration's files go first: none survives a failed one
-    outcome = calibrate(s, args.poses, args.frames, args.workers)
+    line = Progress("calibrate", "segments")
+
+    def progress(stage: str, done: int, total: int) -> None:
+        if stage == "recording":
+            line.update(done, total, f"{args.poses} poses, {args.workers} workers")
+        else:
+            line.stage(f"{stage} (recorded in {duration(time.perf_counter() - line.start)})")
+
+    try:
+        outcome = calibrate(s, args.poses, args.frames, args.workers, progress=progress)
+    finally:
+        line.done()
     nominal = build_robot(s.model.file, nominal_path=s.model.nominal).nominal
     cal, rec = outcome.calibration, outcome.recording
     extra = {

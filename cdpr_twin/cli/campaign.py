@@ -7,40 +7,28 @@ import sys
 import time
 from pathlib import Path
 
+from cdpr_twin.cli.progress import Progress
+
 
 class CampaignProgress:
-    """One line on stderr: runs done, failed, rate (runs/min) and ETA, across every worker.
+    """Runs done of the total, failed, rate and time left, across every worker.
 
-    A terminal gets a redrawn line; a log gets a line per 10 % of the runs.
+    A terminal gets a redrawn line (:class:`~cdpr_twin.cli.progress.Progress`); a log gets the
+    command's final line only.
     """
 
     def __init__(self, label: str, stream=None) -> None:
-        self.label = label
-        self.stream = sys.stderr if stream is None else stream  # now: not the import's
-        self.tty = self.stream.isatty()
-        self.start, self.failed, self._decile = time.perf_counter(), 0, -1
+        self.line = Progress(label, "runs", stream)
+        self.failed = 0
 
     def __call__(self, done: int, total: int, row: dict) -> None:
         """Account one finished run and redraw."""
         self.failed += 0 if row["ok"] else 1
-        elapsed = time.perf_counter() - self.start
-        rate = done / max(elapsed, 1e-9)
-        eta = (total - done) / rate if rate > 0 else float("inf")
-        line = (
-            f"{self.label}: {done}/{total} runs, {self.failed} failed, {60 * rate:.1f} runs/min,"
-            f" ETA {eta / 60:.1f} min"
-        )
-        if self.tty:
-            self.stream.write("\r" + line + " " * 8)
-            self.stream.flush()
-        elif (10 * done) // max(total, 1) != self._decile:
-            self._decile = (10 * done) // max(total, 1)
-            self.stream.write(line + "\n")
+        self.line.update(done, total, f"{self.failed} failed" if self.failed else "")
 
     def done(self) -> None:
         """End the line."""
-        if self.tty:
-            self.stream.write("\n")
+        self.line.done()
 
 
 def campaign_command(args: argparse.Namespace) -> int:

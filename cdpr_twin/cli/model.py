@@ -120,7 +120,13 @@ def _workspace(args: argparse.Namespace) -> int:
     except (RobotError, ValueError) as exc:
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
         return 2
-    ws = sample_workspace(geom, spacing=args.spacing)
+    from cdpr_twin.cli.progress import Progress
+
+    line = Progress(f"workspace of {robot.name}", "points")
+    try:
+        ws = sample_workspace(geom, spacing=args.spacing, progress=line.update)
+    finally:
+        line.done()
     try:
         draw_workspace(ws, out, title=robot.name)
     except OutputError as exc:
