@@ -62,3 +62,30 @@ def test_a_readme_example_runs_as_written(index, tmp_path, monkeypatch):
         summary = namespace["result"].summary
         assert summary["status"] == "completed" and abs(summary["simulated_time_s"] - 2.0) < 1e-9
         assert (tmp_path / "runs" / "quick" / "summary.json").is_file()
+
+
+def test_the_examples_type_check(tmp_path):
+    """mypy, with the project's settings, accepts every Python example a reader pastes."""
+    import subprocess
+    import sys
+
+    files = []
+    for index, block in enumerate(BLOCKS):
+        files.append(tmp_path / f"example_{index + 1}.py")
+        files[-1].write_text(block)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "mypy",
+            "--follow-imports=silent",
+            "--cache-dir",
+            str(tmp_path / "cache"),
+            *map(str, files),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
