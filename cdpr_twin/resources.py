@@ -234,7 +234,7 @@ def _copy(files: dict[Path, Path]) -> list[Path]:
             raise ResourceError(f"{target.parent} is not a directory; give a directory")
         if path_kind(target, ResourceError):
             raise ResourceError(f"{target} exists; remove it or copy into another directory")
-    data = {target: source.read_bytes() for source, target in files.items()}
+    data: dict[Path, str | bytes] = {t: s.read_bytes() for s, t in files.items()}
     for directory in dict.fromkeys(target.parent for target in files.values()):
         try:
             directory.mkdir(parents=True, exist_ok=True)

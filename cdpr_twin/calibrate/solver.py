@@ -179,7 +179,8 @@ def solve_weighted(
     """
     started, told = time.perf_counter(), problem.noise
     res = _minimise(problem, max_iterations, None)
-    nfev, history, total, settled, note = res.nfev, [], {}, False, ""
+    total: dict = {}
+    nfev, history, settled, note = res.nfev, [], False, ""
     pruned = _leave_out_gross_views(problem, res, max_iterations)
     problem, res, gross = pruned.problem, pruned.solution, pruned.left_out
     nfev += pruned.evaluations

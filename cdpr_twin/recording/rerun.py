@@ -105,7 +105,8 @@ class RerunRecorder:
     ) -> None:
         import rerun as rr
 
-        self.covariance, self._ended = tuple(covariance), None  # _ended: disconnect returned
+        self.covariance = tuple(covariance)
+        self._ended: bool | None = None  # what disconnect returned, once it has
         self.rr = rr
         self.path = path
         self.scene, self.estimators, self.jpeg_quality = scene, estimators, jpeg_quality
