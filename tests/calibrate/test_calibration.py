@@ -240,9 +240,9 @@ def test_calibrates_robot_19_and_its_open_loop_run_improves(tmp_path):
     assert exit_cal < 0.7 * check["nominal"]["exit_error_median_mm"]
     assert check["calibrated"]["exit_shape_error_median_mm"] < 5.0
     assert p1["calibrated"] < 0.5 * p1["nominal"]
-    # the calibration's goals (1 mm median exit error, < 1 mm at p1): see the README's
-    # "Self-calibration" (what only the tag's and the homing's tolerances place stays, and a run
-    # homed anew misses p1 by its homing's offset); this prints where this robot stands
+    # the calibration's goals (1 mm median exit error, < 1 mm at p1): see
+    # docs/results/calibration.md (what only the tag's and the homing's tolerances place stays,
+    # and a run homed anew misses p1 by its homing's offset); this prints where this robot stands
     print(
         f"exit points {exit_cal:.2f} mm median (goal 1 mm); open-loop error at p1 "
         f"{p1['calibrated'] * 1e3:.2f} mm (goal 1 mm; nominal model {p1['nominal'] * 1e3:.2f} mm)"
