@@ -25,7 +25,7 @@ def duration(seconds: float) -> str:
 
 
 class Progress:
-    """``label: done/total unit [bar] rate, left ETA``, redrawn in place on a terminal.
+    """``label: done/total unit [#####.....] rate, left ETA``, redrawn in place on a terminal.
 
     Args:
         label: what is under way (the command's subject).
