@@ -304,7 +304,7 @@ def _in_processes(
     workers: int,
     s: Scenario,
     frames: int,
-    tell: Callable[[int, int], None],
+    tell: Callable[[int, int], None] | None = None,
 ) -> list[_Segment]:
     """:func:`_segment` of each part of the tour in spawned processes, in order.
 
@@ -319,7 +319,8 @@ def _in_processes(
         try:
             for done, f in enumerate(as_completed(futures), 1):
                 f.result()  # raises the segment's error (BrokenProcessPool: a worker died)
-                tell(done, len(futures))
+                if tell is not None:
+                    tell(done, len(futures))
         except BaseException:
             abandon(pool)
             raise

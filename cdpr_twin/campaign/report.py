@@ -264,11 +264,11 @@ def _failure_section(columns: dict, ok: np.ndarray) -> list[str]:
 
 
 def cpu_time(seconds: float) -> str:
-    """The runs' summed time, in the unit that shows it: CPU-s below ten minutes, else CPU-min.
+    """The runs' summed time, in the unit that shows it: CPU-s below a minute, else CPU-min.
 
     A campaign of short runs took seconds: in minutes to one decimal it read "0.0 CPU-min".
     """
-    if seconds < 600:
+    if seconds < 60:
         return f"{seconds:.1f} CPU-s"
     return f"{seconds / 60:.1f} CPU-min"
 
