@@ -20,7 +20,7 @@ Measures, in one run:
     here: the same ``least_squares`` formulation (unknowns [x y z q1 q2 q3 q4], f1…f6 the length
     residuals, f7 = |q|² − 1, trf, xtol = ftol = gtol = 1e-15) whose residuals are computed by
     the fast backend's scalar kernel ``cdpr_twin.estimators.model_based._kernel``. It subclasses the
-    estimator, so the cable choice (six largest tensions), stretch correction and acceptance test
+    estimator, so the cable choice (six largest tensions), stretch correction and validity test
     are the estimator's own. scipy/scipy+kernel shows what the scalar kernel alone buys;
     scipy+kernel/fast what the Newton method with the analytic Jacobian buys;
 (d) the largest pose difference over the replay between ``fast`` and the two scipy solvers, and
@@ -28,7 +28,7 @@ Measures, in one run:
     fast stops once every length residual is below 1e-12 m (its ``tol``), while scipy runs to
     ~1e-16 m, so the difference is fast's stopping tolerance mapped through the Jacobian.
 
-The bar: ``fast`` at least 20× faster than ``scipy`` per update (aim: 100×).
+The target: ``fast`` at least 20× faster than ``scipy`` per update (aim: 100×).
 
 Run from the repository root (about 15 s on a 2-core machine; well under 90 s):
 
@@ -71,7 +71,7 @@ XI = np.array([0.01, -0.005, -0.01, 0.0, 0.0, 0.02])  # ᵖv_p: 1.5 cm/s, 1.1°/
 TICK = 0.04  # s
 REPLAY_BUDGET = 0.5  # s of timed replays per variant, at least --repeats replays
 MAX_REPLAYS = 200
-BAR, AIM = 20.0, 100.0  # required and aimed-at speed-up of fast over scipy
+TARGET, AIM = 20.0, 100.0  # required and aimed-at speed-up of fast over scipy
 KERNEL = "scipy+kernel"
 
 
@@ -245,11 +245,11 @@ def main() -> None:
     print()
 
     print(
-        f"bar: fast ≥ {BAR:g}x faster than scipy per update (aim {AIM:g}x); "
+        f"target: fast ≥ {TARGET:g}x faster than scipy per update (aim {AIM:g}x); "
         f"split of the speed-up (scipy/fast = scipy/{KERNEL} × {KERNEL}/fast)"
     )
     header = (
-        f"{'estimator':<22}{'scipy/fast':>11}{'bar':>6}{'aim':>6}"
+        f"{'estimator':<22}{'scipy/fast':>11}{'target':>7}{'aim':>6}"
         f"{f'scipy/{KERNEL}':>20}{f'{KERNEL}/fast':>19}"
     )
     print(header)
@@ -259,7 +259,7 @@ def main() -> None:
         fast, sp, ker = (by_key[(name, b)][2] for b in ("fast", "scipy", KERNEL))
         ratio = sp / fast
         print(
-            f"{name:<22}{ratio:>10.1f}x{'PASS' if ratio >= BAR else 'FAIL':>6}"
+            f"{name:<22}{ratio:>10.1f}x{'PASS' if ratio >= TARGET else 'FAIL':>7}"
             f"{'yes' if ratio >= AIM else 'no':>6}{sp / ker:>19.1f}x{ker / fast:>18.1f}x"
         )
     print()
@@ -282,7 +282,7 @@ def main() -> None:
 
 
 def bench_fused(measurements, geometry, repeats: int, calibration: bool) -> None:
-    """Issue 11's bars: ``fused`` as the paper scenarios configure it (≤ 200 µs per update),
+    """The targets: ``fused`` as the paper scenarios configure it (≤ 200 µs per update),
     against the cheapest model-based update of the same replay; one calibration (≤ 60 s)."""
     from cdpr_twin.scenario.loading import load_scenario
 
@@ -293,43 +293,43 @@ def bench_fused(measurements, geometry, repeats: int, calibration: bool) -> None
     print(
         f"fused as in paper_pbvs.toml ({fused.layout.n} error states, "
         f"{int(fused.layout.consider.sum())} considered): {us:.0f} µs per update "
-        f"({us / base:.1f}× model_simple's {base:.0f} µs); bar 200 µs: "
+        f"({us / base:.1f}× model_simple's {base:.0f} µs); target 200 µs: "
         f"{'PASS' if us <= 200 else 'FAIL'}"
     )
     if calibration:
-        from cdpr_twin.calibrate.session import calibrate
+        from cdpr_twin.calibrate.pipeline import calibrate
 
         t0 = time.perf_counter()
         ol = load_scenario(ROOT / "scenarios" / "paper_open_loop.toml")
         workers = os.cpu_count() or 1  # the CLI's default: the tour's segments side by side
-        session = calibrate(ol, workers=workers)
-        wall, rec = time.perf_counter() - t0, session.recording
+        outcome = calibrate(ol, workers=workers)
+        wall, rec = time.perf_counter() - t0, outcome.recording
         print(
             f"self-calibration of paper_open_loop's robot {ol.truth.seed} "
             f"({rec.obs.n_poses} poses, {workers} workers): {wall:.1f} s (recording "
             f"{rec.wall_time:.1f} s for {rec.simulated_time:.0f} simulated s, "
-            f"{rec.simulated_time / rec.wall_time:.1f}× real time); bar 60 s: "
+            f"{rec.simulated_time / rec.wall_time:.1f}× real time); target 60 s: "
             f"{'PASS' if wall <= 60 else 'FAIL'}"
         )
-        bench_solve(session)
+        bench_solve(outcome)
 
 
-def bench_solve(session) -> None:
+def bench_solve(outcome) -> None:
     """The calibration's solve of one recording, against the way it was solved before: dense
     Cholesky steps on the whole normal matrix and central differences column by column (the
     wrench balance and the tag views included), in the same run. Both compute the leverages of
     the variance components and the covariance by the Schur complement."""
     from cdpr_twin.calibrate import normal_equations, solver
+    from cdpr_twin.calibrate.pipeline import noise_of
     from cdpr_twin.calibrate.problem import Problem
-    from cdpr_twin.calibrate.session import noise_of
 
-    rec = session.recording
+    rec = outcome.recording
     nominal = rec.nominal
 
     def problem() -> Problem:  # a fresh one: no sparsity pattern or column groups kept
         noise = noise_of(rec, 4)
         return Problem(
-            nominal.geometry, nominal.T_base_tag, rec.obs, session.priors, noise, rec.detector
+            nominal.geometry, nominal.T_base_tag, rec.obs, outcome.priors, noise, rec.detector
         )
 
     t0 = time.perf_counter()

@@ -76,7 +76,7 @@ def main() -> None:
     rate_h = growth / max(t_end - t1, 1e-9) * 3600.0
     print(f"status {result.summary['status']}, {t_end:.0f} s simulated in {w_end:.0f} s")
     print(f"RSS after the first minute {m1:.1f} MB; at the end {m_end:.1f} MB; peak {peak:.1f} MB")
-    print(f"growth {growth:+.1f} MB ({rate_h:+.1f} MB per simulated hour; bar: within 50 MB)")
+    print(f"growth {growth:+.1f} MB ({rate_h:+.1f} MB per simulated hour; target: within 50 MB)")
     print(
         f"real-time factor: first minute {t1 / w1:.1f}×, whole run {t_end / w_end:.1f}× "
         f"(ratio {(t_end / w_end) / (t1 / w1):.2f})"

@@ -76,13 +76,13 @@ def at_truth(rec) -> None:
     )
 
 
-def solves(session, nominal, frames: int) -> None:
+def solves(outcome, nominal, frames: int) -> None:
     """Part 2: the common scale and the exit points, solved three ways."""
+    from cdpr_twin.calibrate.pipeline import noise_of, truth_check
     from cdpr_twin.calibrate.problem import Problem
-    from cdpr_twin.calibrate.session import noise_of, truth_check
     from cdpr_twin.calibrate.solver import solve, solve_weighted
 
-    rec, tr = session.recording, session.recording.truth
+    rec, tr = outcome.recording, outcome.recording.truth
     exact = true_views(rec)
     exact_obs = replace(
         rec.obs, T_cam_tag=np.where(rec.obs.seen[:, None, None], exact, rec.obs.T_cam_tag)
@@ -96,12 +96,12 @@ def solves(session, nominal, frames: int) -> None:
             nominal.geometry,
             nominal.T_base_tag,
             obs,
-            session.priors,
+            outcome.priors,
             noise_of(rec, frames),
             rec.detector,
         )
         cal = solve_weighted(p)[0] if weighted else solve(p)
-        solved = replace(session, calibration=cal, recording=replace(rec, obs=obs))
+        solved = replace(outcome, calibration=cal, recording=replace(rec, obs=obs))
         c = truth_check(solved, nominal.geometry, nominal.T_base_tag)["calibrated"]
         common = (cal.model.scale.mean() - tr.drum_scale.mean()) * 100
         print(
@@ -118,17 +118,17 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     a = ap.parse_args()
-    from cdpr_twin.calibrate.session import calibrate
+    from cdpr_twin.calibrate.pipeline import calibrate
     from cdpr_twin.sim import build_robot
 
     s = scenario(a.set)
     s = replace(s, truth=replace(s.truth, seed=a.seed))
-    session = calibrate(replace(s, seed=s.seed + a.seed), a.poses, workers=a.workers)
+    outcome = calibrate(replace(s, seed=s.seed + a.seed), a.poses, workers=a.workers)
     nominal = build_robot(s.model.file).nominal
     changes = f", {a.set}" if a.set else ""
-    print(f"robot {a.seed}, {session.recording.obs.n_poses} poses{changes}")
-    at_truth(session.recording)
-    solves(session, nominal, frames=4)
+    print(f"robot {a.seed}, {outcome.recording.obs.n_poses} poses{changes}")
+    at_truth(outcome.recording)
+    solves(outcome, nominal, frames=4)
 
 
 if __name__ == "__main__":

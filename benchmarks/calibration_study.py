@@ -4,7 +4,7 @@ calibrated model, and the time per robot.
     python benchmarks/calibration_study.py --seeds 1-20 --workers 2 --out docs/calibration
 
 Each robot N in turn: `cdpr-twin calibrate paper_open_loop --workers W --seed N+1` (truth
-seed N, acrobot profile; a session of its own, with its own homing and sensor noise; W
+seed N, acrobot profile; a calibration of its own, with its own homing and sensor noise; W
 processes record the tour's segments side by side), then `paper_open_loop` p0 -> p1 (run seed
 1, 10 s, camera off) with the nominal and with the calibrated model ([model] nominal), each
 also with the homing exact (what the model alone misses p1 by). Writes results.json and prints
@@ -32,18 +32,18 @@ from dataclasses import replace
 from pathlib import Path
 
 
-def tag_known(session, nominal) -> dict:
+def tag_known(outcome, nominal) -> dict:
     """Exit-point errors of the recording re-solved with the tag's true pose given."""
+    from cdpr_twin.calibrate.pipeline import Outcome, truth_check
     from cdpr_twin.calibrate.problem import Problem
-    from cdpr_twin.calibrate.session import Session, truth_check
     from cdpr_twin.calibrate.solver import solve
 
-    rec = session.recording
-    priors = replace(session.priors, tag_position=1e-6, tag_rotation=1e-6)
+    rec = outcome.recording
+    priors = replace(outcome.priors, tag_position=1e-6, tag_rotation=1e-6)
     problem = Problem(
-        nominal.geometry, rec.truth.T_base_tag, rec.obs, priors, session.noise, rec.detector
+        nominal.geometry, rec.truth.T_base_tag, rec.obs, priors, outcome.noise, rec.detector
     )
-    solved = Session(solve(problem), rec, priors, 0.0, 0, session.noise)
+    solved = Outcome(solve(problem), rec, priors, 0.0, 0, outcome.noise)
     check = truth_check(solved, nominal.geometry, nominal.T_base_tag)["calibrated"]
     return {k: check[f"exit_{k}error_median_mm"] for k in ("", "shape_")}
 
@@ -68,26 +68,26 @@ def one(
     seed: int, poses: int, out: str, workers: int, known: bool = False, changes: tuple = ()
 ) -> dict:
     from cdpr_twin.calibrate.output import write
-    from cdpr_twin.calibrate.session import calibrate, truth_check, weighting_report
+    from cdpr_twin.calibrate.pipeline import calibrate, truth_check, weighting_report
     from cdpr_twin.run.runner import run
     from cdpr_twin.sim import build_robot
 
     s = scenario(list(changes))
     s = replace(s, truth=replace(s.truth, seed=seed))
     t0 = time.perf_counter()
-    # a calibration session of its own (run seed 1 + robot: its own homing and sensor noise), as
+    # a calibration of its own (run seed 1 + robot: its own homing and sensor noise), as
     # on the real robot: the run that checks it is homed anew (the homed pose is one of the
     # calibration's references, so sharing the run's homing would flatter the check)
-    session = calibrate(replace(s, seed=s.seed + seed), poses, workers=workers)
+    outcome = calibrate(replace(s, seed=s.seed + seed), poses, workers=workers)
     wall = time.perf_counter() - t0
     nominal = build_robot(s.model.file).nominal
-    check = truth_check(session, nominal.geometry, nominal.T_base_tag)
+    check = truth_check(outcome, nominal.geometry, nominal.T_base_tag)
     robot, _ = write(
         Path(out) / f"robot_{seed}",
         s.model.file.parent / "robot.toml",
-        session.calibration,
-        {**weighting_report(session), "check_against_truth": check},
-        session.recording.drum_radii,
+        outcome.calibration,
+        {**weighting_report(outcome), "check_against_truth": check},
+        outcome.recording.drum_radii,
     )
     p1, exact, refused = {}, {}, None
     # the homing exactly at the start pose: what the model alone misses p1 by
@@ -122,7 +122,7 @@ def one(
         "p1_error_exact_homing_mm": exact,
         "refused": refused,
         "p1_wrench_feasible": holds,
-        **({"tag_known_exit_median_mm": tag_known(session, nominal)} if known else {}),
+        **({"tag_known_exit_median_mm": tag_known(outcome, nominal)} if known else {}),
     }
 
 

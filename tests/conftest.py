@@ -14,7 +14,7 @@ import pytest
 
 from cdpr_twin.math import se3
 
-# ACROBOT's exit and anchor points (DESIGN §4), typed here independently of the model file
+# ACROBOT's exit and anchor points (models/acrobot), typed here independently of the model file
 A_BASE = [
     (-0.4725, -0.5275, 1.165),
     (-0.5225, -0.4675, 1.165),

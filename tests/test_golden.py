@@ -133,11 +133,12 @@ ADDED_LATER = {
     "true_pose",
     "nominal_model",
     "detected_at_s",
+    "software",
 }
 """Summary keys added after the fixtures were recorded (campaign tables need the RMS
 deviations and the true pose at each checkpoint; the robot description the software believed,
-when not the model's; when the last tag detection was read); every key of the fixtures is
-compared."""
+when not the model's; when the last tag detection was read; the versions that computed the
+run); every key of the fixtures is compared."""
 
 
 def _assert_json_close(got, want, case, where=""):

@@ -42,7 +42,7 @@ class Exiting(ControlEstimator):
 
 
 def _scenario(tmp_path: Path, at_import: bool = False, at_build: bool = False) -> Path:
-    """The paper's open loop with the plugin (one file for the session: it registers once)."""
+    """The paper's open loop with the plugin (one file for all tests: it registers once)."""
     stem = "exiting_at_import" if at_import else "exiting_at_build" if at_build else "exiting"
     plugin = tmp_path.parent / f"{stem}.py"
     if not plugin.exists():

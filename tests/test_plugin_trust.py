@@ -3,7 +3,7 @@
 One line per plugin file or module, once a process, before its code runs; a campaign's workers
 (which load them again) say nothing more. Truth: the command's stderr, read from the pipe of a
 fresh process (in this one, a plugin already loaded is not loaded again), and the plugins
-module's and the README's own words.
+module's and the documentation's own words (the tutorial on writing an estimator).
 """
 
 import os
@@ -76,5 +76,5 @@ def test_where_plugins_are_taught_says_they_run_code():
     from cdpr_twin import plugins
 
     assert TRUST in " ".join(plugins.__doc__.split()).lower()
-    readme = " ".join((ROOT / "README.md").read_text().split()).lower()
-    assert TRUST in readme
+    page = ROOT / "docs" / "tutorials" / "own-estimator.md"
+    assert TRUST in " ".join(page.read_text().split()).lower()

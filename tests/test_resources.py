@@ -174,3 +174,39 @@ def test_spawn_and_connect_together_is_a_one_line_error(tmp_path):
         "cdpr-twin: error: give --spawn (a new viewer) or --connect ADDR, not both"
     )
     assert not (tmp_path / "runs").exists()
+
+
+def test_campaigns_and_robots_are_shipped_by_name_and_copy_whole(tmp_path):
+    from cdpr_twin.campaign import load_campaign
+
+    shipped = tuple(sorted(p.stem for p in (ROOT / "campaigns").glob("*.toml")))
+    assert resources.campaigns() == shipped and "pbvs_gain_sweep" in shipped
+    listed = _cli("campaigns", "list", cwd=tmp_path)
+    assert listed.returncode == 0 and [r.split()[0] for r in listed.stdout.splitlines()] == list(
+        shipped
+    )
+    # a copied campaign names its scenario by shipped name: it loads from anywhere, and its
+    # runs are the shipped file's (same run ids: each hashes the resolved scenario)
+    copied = _cli("campaigns", "copy", "pbvs_gain_sweep", "c", cwd=tmp_path)
+    assert copied.returncode == 0, copied.stderr
+    mine = load_campaign(tmp_path / "c" / "pbvs_gain_sweep.toml")
+    by_name = load_campaign("pbvs_gain_sweep")
+    assert [t.run_id for t in mine.tasks] == [t.run_id for t in by_name.tasks]
+    assert len(by_name.tasks) == 18  # 3 gains x 6 estimators, as the file says
+    # a robot's copy holds what its description needs: the built scene loads with its texture
+    robot = _cli("robots", "copy", "acrobot", "r", cwd=tmp_path)
+    assert robot.returncode == 0, robot.stderr
+    source = ROOT / "models" / "acrobot"
+    for name in ("robot.toml", "scene.xml", "acrobot.xml", "assets/tag36h11_00000.png"):
+        assert (tmp_path / "r" / name).read_bytes() == (source / name).read_bytes(), name
+    assert not list((tmp_path / "r").glob("*.py"))
+    built = _cli("model", "build", "acrobot", cwd=tmp_path)  # by name: into ./acrobot
+    assert built.returncode == 0, built.stderr
+    import mujoco
+
+    for scene in (tmp_path / "r" / "scene.xml", tmp_path / "acrobot" / "scene.xml"):
+        model = mujoco.MjModel.from_xml_path(str(scene))
+        # the tag's texture and the floor's grid; 8 cables as tendons
+        assert model.ntex == 2 and model.ntendon == 8
+    unknown = _cli("campaigns", "copy", "nosuch", "x", cwd=tmp_path)
+    assert unknown.returncode == 2 and len(unknown.stderr.strip().splitlines()) == 1

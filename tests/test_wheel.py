@@ -21,7 +21,15 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-SOURCES = ("pyproject.toml", "README.md", "cdpr_twin", "models", "scenarios")
+SOURCES = (
+    "pyproject.toml",
+    "README.md",
+    "LICENSE",
+    "cdpr_twin",
+    "models",
+    "scenarios",
+    "campaigns",
+)
 
 
 def _call(*command, cwd: Path, env: dict | None = None) -> subprocess.CompletedProcess:
@@ -74,28 +82,54 @@ def test_the_wheel_carries_every_package_the_robots_and_the_scenarios(installed)
             assert f"cdpr_twin/models/{path.relative_to(ROOT / 'models').as_posix()}" in names
     for path in (ROOT / "scenarios").glob("*.toml"):
         assert f"cdpr_twin/scenarios/{path.name}" in names
+    for path in (ROOT / "campaigns").glob("*.toml"):
+        assert f"cdpr_twin/campaigns/{path.name}" in names
 
 
 @pytest.mark.slow
-def test_the_installed_wheel_runs_a_scenario_by_name_from_an_empty_directory(installed):
+def test_the_installed_wheel_runs_everything_by_name_from_an_empty_directory(installed):
+    """A scenario, a campaign and a robot build by name, --version, the README's example."""
+    import re
+
     venv, _, env, work = installed
-    proc = _call(
-        venv / "bin" / "cdpr-twin",
-        "run",
-        "paper_open_loop",
-        "--duration",
-        "1",
-        "--no-camera",
-        cwd=work,
-        env=env,
-    )
+    cli = venv / "bin" / "cdpr-twin"
+    version = _call(cli, "--version", cwd=work, env=env).stdout
+    # an installed wheel is no checkout: no commit to name
+    assert re.fullmatch(r"cdpr-twin 0\.1\.0 \(MuJoCo [\d.]+, Python [\d.]+\)\n", version), version
+    proc = _call(cli, "run", "paper_open_loop", "--duration", "1", "--no-camera", cwd=work, env=env)
     summary = json.loads((work / "runs" / "paper_open_loop" / "summary.json").read_text())
     assert summary["status"] == "completed" and summary["simulated_time_s"] == pytest.approx(1.0)
     assert "paper_open_loop: completed after 1.00 s simulated" in proc.stdout, proc.stdout
     assert Path(summary["source"]).resolve().is_relative_to(venv.resolve()), summary["source"]
-    listed = _call(venv / "bin" / "cdpr-twin", "scenarios", "list", cwd=work, env=env).stdout
+    assert summary["software"]["cdpr_twin"] == "0.1.0" and summary["software"]["git_commit"] is None
+    listed = _call(cli, "scenarios", "list", cwd=work, env=env).stdout
     shipped = sorted(p.stem for p in (ROOT / "scenarios").glob("*.toml"))
     assert [line.split()[0] for line in listed.splitlines()] == shipped
+    # a shipped campaign by name, each run cut to one control tick (18 runs)
+    _call(
+        cli,
+        "campaign",
+        "pbvs_gain_sweep",
+        "--duration",
+        "0.04",
+        "--workers",
+        "2",
+        cwd=work,
+        env=env,
+    )
+    campaign = json.loads((work / "runs" / "pbvs_gain_sweep" / "campaign.json").read_text())
+    assert campaign["status"] == "completed" and campaign["ran_now"] == 18
+    # a shipped robot's description built by name, into ./acrobot (never into the package)
+    _call(cli, "model", "build", "acrobot", cwd=work, env=env)
+    assert (work / "acrobot" / "scene.xml").is_file() and (
+        work / "acrobot" / "acrobot.xml"
+    ).is_file()
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    (example,) = re.findall(r"^```python\n(.*?)^```", readme, flags=re.S | re.M)
+    out = _call(venv / "bin" / "python", "-c", example, cwd=work, env=env).stdout
+    assert out.startswith("completed"), out
+    quick = json.loads((work / "runs" / "quick" / "summary.json").read_text())
+    assert quick["simulated_time_s"] == pytest.approx(2.0)
 
 
 def test_the_installed_wheel_builds_the_acrobot_by_name(installed):

@@ -5,7 +5,7 @@ holding the other kinds and their vectorised derivatives; ``parameter_layout`` p
 unknown in the parameter vector), ``jacobian`` (their sparse finite differences), ``solver``
 (Levenberg–Marquardt on the normal equations, ``normal_equations`` and ``schur``; uncertainty,
 rank; ``solve_weighted``: the noise re-estimated by ``variance``), ``excitation`` (which
-poses), ``drive`` and ``acquire`` (recording them in the twin), ``session`` (all of it for one
+poses), ``drive`` and ``acquire`` (recording them in the twin), ``pipeline`` (all of it for one
 scenario), ``output`` (the calibrated robot description and the report).
 """
 

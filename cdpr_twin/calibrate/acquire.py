@@ -28,6 +28,7 @@ import multiprocessing
 import os
 import signal
 import time
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, replace
 
@@ -236,7 +237,13 @@ def _mean_pose(poses: list[np.ndarray]) -> np.ndarray | None:
     return transform(R0 @ so3_exp(w), np.mean([T[:3, 3] for T in poses], axis=0))
 
 
-def record(s: Scenario, poses: list[np.ndarray], frames: int = 4, workers: int = 1) -> Recording:
+def record(
+    s: Scenario,
+    poses: list[np.ndarray],
+    frames: int = 4,
+    workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+) -> Recording:
     """Home the scenario's robot, record it there, drive it through ``poses`` and record each.
 
     The observations' first row is the homed robot's (``home``; ``T_guess`` the start pose),
@@ -248,6 +255,7 @@ def record(s: Scenario, poses: list[np.ndarray], frames: int = 4, workers: int =
         frames: readings averaged at each pose.
         workers: processes recording the tour's segments side by side (the readings do not
             depend on it).
+        progress: called with (segments recorded, segments) as each segment ends.
 
     Raises:
         ScenarioError: the scenario's robot cannot be built, has no camera, or its start pose
@@ -261,10 +269,14 @@ def record(s: Scenario, poses: list[np.ndarray], frames: int = 4, workers: int =
     n = min(SEGMENTS, len(poses))
     bounds = np.linspace(0, len(poses), n + 1).round().astype(int)
     parts = [poses[bounds[i] : bounds[i + 1]] for i in range(n)]
+    tell = progress or (lambda done, total: None)
     if workers > 1 and n > 1:
-        segments = _in_processes(parts, min(workers, n), s, frames)
+        segments = _in_processes(parts, min(workers, n), s, frames, tell)
     else:
-        segments = [_segment(i, part, s, frames) for i, part in enumerate(parts)]
+        segments = []
+        for i, part in enumerate(parts):
+            segments.append(_segment(i, part, s, frames))
+            tell(i + 1, n)
     first = segments[0]  # the robot and its sensors are the same in every segment
     truth = Truth(
         T_base_platform=np.array([T for seg in segments for T in seg.true_poses]),
@@ -288,7 +300,11 @@ def record(s: Scenario, poses: list[np.ndarray], frames: int = 4, workers: int =
 
 
 def _in_processes(
-    parts: list[list[np.ndarray]], workers: int, s: Scenario, frames: int
+    parts: list[list[np.ndarray]],
+    workers: int,
+    s: Scenario,
+    frames: int,
+    tell: Callable[[int, int], None] | None = None,
 ) -> list[_Segment]:
     """:func:`_segment` of each part of the tour in spawned processes, in order.
 
@@ -301,8 +317,10 @@ def _in_processes(
     ) as pool:
         futures = [pool.submit(_segment, i, part, s, frames) for i, part in enumerate(parts)]
         try:
-            for f in as_completed(futures):
+            for done, f in enumerate(as_completed(futures), 1):
                 f.result()  # raises the segment's error (BrokenProcessPool: a worker died)
+                if tell is not None:
+                    tell(done, len(futures))
         except BaseException:
             abandon(pool)
             raise

@@ -26,7 +26,7 @@ only reeled low cables in: ending at 2.5 N instead, with rests of 0.3 s instead 
 ``acquire.SETTLE``'s 0.6 s, was 4 % faster over robots 1–20, 64.1 s against 66.8 s median,
 but left 1–2 % of robot 8's poses with a cable under 1 N by the readings, against none, and
 its calibrated exit points' shape 0.60, 0.46 and 0.38 mm off against 0.32, 0.27 and 0.34 mm
-in sessions with other noise; over the 20 robots paired with the run before, no trend either
+in calibrations with other noise; over the 20 robots paired with the run before, no trend either
 way. Kept: the cautious settings.)"""
 
 TIGHTEN_AIM = TIGHTEN_TARGET + 0.5

@@ -11,7 +11,7 @@ against 20.90 in 14 with exact steps); a test holds the two to the same minimum.
 
 :func:`solve_weighted` solves again with each residual group's noise re-estimated from its own
 residuals (variance components, :mod:`cdpr_twin.calibrate.variance`), which is what
-:func:`cdpr_twin.calibrate.session.calibrate` does.
+:func:`cdpr_twin.calibrate.pipeline.calibrate` does.
 
 Uncertainty: the covariance (JᵀJ)⁻¹ at the solution, scaled by the residuals' variance
 χ²/(n − p). Identifiability: the singular values of the *data's* Jacobian (priors left out),
@@ -52,7 +52,7 @@ are still rejected and λ raised, and λ shrinks up to 10× per accepted step.""
 GROSS_CHI2 = 22.46
 """A tag view whose squared normalised residual exceeds this after the first solve is a gross
 error, left out (χ² with 6 degrees of freedom at 0.1 % false alarms, under the starting noise
-model, an upper bound: in a session with an earlier drive, robot 1 read one view 86° off the
+model, an upper bound: in a calibration with an earlier drive, robot 1 read one view 86° off the
 truth, its 4 frames alike, whose 86 σ inflated the tags' rotation noise 3.9× and put the exit
 points 1.08 mm out of shape, 0.72 mm once left out). One at a time, the worst first, each
 followed by a solve: a gross error pulls the solution and spreads residuals onto honest views
@@ -179,7 +179,8 @@ def solve_weighted(
     """
     started, told = time.perf_counter(), problem.noise
     res = _minimise(problem, max_iterations, None)
-    nfev, history, total, settled, note = res.nfev, [], {}, False, ""
+    total: dict = {}
+    nfev, history, settled, note = res.nfev, [], False, ""
     pruned = _leave_out_gross_views(problem, res, max_iterations)
     problem, res, gross = pruned.problem, pruned.solution, pruned.left_out
     nfev += pruned.evaluations

@@ -1,6 +1,6 @@
 """A calibration's noise model, and each residual group's noise from its own scatter (numpy, scipy).
 
-A calibration starts from a noise model written down beforehand (:data:`session.NOISE`): the
+A calibration starts from a noise model written down beforehand (:data:`pipeline.NOISE`): the
 encoders' count, the tag's error growing with distance, the balance's floor. Those are upper
 bounds, chosen before the data existed, and they decide how much each kind of measurement
 counts against the others and against the builder's tolerances. Too loose a bound leaves

@@ -32,6 +32,7 @@ from cdpr_twin.files.transaction import (
     write_json_atomic,
     writing,
 )
+from cdpr_twin.provenance import software
 from cdpr_twin.run.interrupts import interruption, shielded
 
 CAMPAIGN_FILES = (RESULTS, "report.md", "*.png", "campaign.json")
@@ -143,7 +144,13 @@ def _outdated(out: Path, campaign, todo: list, inputs: dict) -> None:
     state = {"campaign": campaign.name, "source": str(campaign.source), "status": "running"}
     write_json_atomic(
         out / "campaign.json",
-        {**state, "runs": len(campaign.tasks), "to_run": len(todo), "inputs": inputs},
+        {
+            **state,
+            "runs": len(campaign.tasks),
+            "to_run": len(todo),
+            "inputs": inputs,
+            "software": software(),
+        },
     )
 
 
@@ -190,6 +197,7 @@ def _execute(campaign, out, table, todo, workers, ray_address, progress, inputs)
                 "wall_time_s": time.perf_counter() - start,
                 "executor": "local" if ray_address is False else "ray",
                 "inputs": inputs,  # the files the runs read: a --resume checks them
+                "software": software(),
             }
             if any(Path(out, "parts").glob("part-*.parquet")):
                 summary["table"] = str(table.gather([t.run_id for t in campaign.tasks]))

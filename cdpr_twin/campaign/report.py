@@ -107,9 +107,16 @@ def _miss_vectors(rows: list[dict]) -> np.ndarray:
     return np.array(out)
 
 
-def _figure(path: Path, draw) -> None:
-    import matplotlib
+NO_FIGURE = "(figure not drawn: matplotlib is not installed; pip install 'cdpr-twin[plots]')"
+"""What the report says where a figure would be, without the ``plots`` extra."""
 
+
+def _figure(path: Path, draw, alt: str) -> str:
+    """Draw a figure into ``path``; its Markdown line (a note when matplotlib is absent)."""
+    try:
+        import matplotlib
+    except ModuleNotFoundError:
+        return NO_FIGURE
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -120,6 +127,7 @@ def _figure(path: Path, draw) -> None:
         save_figure(fig, path, format="png")
     finally:
         plt.close(fig)
+    return f"![{alt}]({path.name})"
 
 
 def _axis_section(columns: dict, key: str, metric: str, label: str, out: Path) -> list[str]:
@@ -139,8 +147,7 @@ def _axis_section(columns: dict, key: str, metric: str, label: str, out: Path) -
         ax.set_xlabel(key)
         ax.set_ylabel(label)
 
-    _figure(out / name, draw)
-    return [*lines, "", f"![{key}]({name})", ""]
+    return [*lines, "", _figure(out / name, draw, key), ""]
 
 
 def _levels(values: np.ndarray) -> list:
@@ -256,6 +263,16 @@ def _failure_section(columns: dict, ok: np.ndarray) -> list[str]:
     return [*lines, ""]
 
 
+def cpu_time(seconds: float) -> str:
+    """The runs' summed time, in the unit that shows it: CPU-s below a minute, else CPU-min.
+
+    A campaign of short runs took seconds: in minutes to one decimal it read "0.0 CPU-min".
+    """
+    if seconds < 60:
+        return f"{seconds:.1f} CPU-s"
+    return f"{seconds / 60:.1f} CPU-min"
+
+
 def report_files(out: Path) -> list[Path]:
     """What :func:`write_report` writes into ``out``: ``report.md`` and its figures."""
     return [out / "report.md", out / "distribution.png", *sorted(out.glob("effect_*.png"))]
@@ -274,6 +291,12 @@ def write_report(out: str | Path, campaign: Campaign) -> Path:
     y = columns[metric] * 1e3
     ok = columns["ok"].astype(bool)
     faults = [f for f in columns["fault"].tolist() if f]
+
+    def hist(ax):
+        ax.hist(y[np.isfinite(y)], bins=min(50, max(5, int(np.sqrt(ok.sum())))))
+        ax.set_xlabel(label)
+        ax.set_ylabel("runs")
+
     lines = [
         f"# Campaign `{campaign.name}`",
         "",
@@ -282,22 +305,15 @@ def write_report(out: str | Path, campaign: Campaign) -> Path:
         f"{len(rows)} runs: {int(ok.sum())} ran, {int((~ok).sum())} failed, "
         f"{len(faults)} stopped by a fault of the robot"
         + (f" ({', '.join(sorted(set(faults)))})" if faults else "")
-        + f". Total run time {np.nansum(columns['wall_time_s']) / 60:.1f} CPU-min.",
+        + f". Total run time {cpu_time(np.nansum(columns['wall_time_s']))}.",
         "",
         f"## {label[0].upper()}{label[1:]}",
         "",
         _quantiles(y),
         "",
-        "![distribution](distribution.png)",
+        _figure(out / "distribution.png", hist, "distribution"),
         "",
     ]
-
-    def hist(ax):
-        ax.hist(y[np.isfinite(y)], bins=min(50, max(5, int(np.sqrt(ok.sum())))))
-        ax.set_xlabel(label)
-        ax.set_ylabel("runs")
-
-    _figure(out / "distribution.png", hist)
     grid = [  # grid axes: few values, each repeated; a seed names a draw (its spread: above)
         c
         for c in table.column_names

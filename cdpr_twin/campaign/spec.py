@@ -3,7 +3,7 @@
 A campaign file (TOML) names a base scenario and how to vary it::
 
     name = "pbvs_gain_sweep"
-    scenario = "../scenarios/paper_pbvs.toml"   # relative to this file, or a shipped name
+    scenario = "paper_pbvs"                     # a shipped name, or a file relative to this one
     seed = 1                                    # seeds the random draws below
     samples = 1                                 # random draws per grid point
     artefacts = "none"                          # per-run files: "none", "csv" or "all"
@@ -37,6 +37,7 @@ override applied), so a campaign can be resumed, and re-running a finished one d
 from __future__ import annotations
 
 import copy
+import dataclasses
 import itertools
 import json
 import math
@@ -342,10 +343,16 @@ def _tasks(source: Path, block: _Block, seed: int, where: str) -> list[Task]:
 def load_campaign(path: str | Path) -> Campaign:
     """Read a campaign file and build and validate every run's scenario.
 
+    Args:
+        path: a campaign file, or a shipped campaign's name (``pbvs_gain_sweep``).
+
     Raises:
         CampaignError: naming the file and the field (and the scenario's own error).
     """
-    source = Path(path)
+    try:
+        source = resources.campaign_file(path)
+    except resources.ResourceError as exc:
+        raise CampaignError(str(exc)) from None
     top = _read_toml(source, "campaign file")
     seed = top.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -382,3 +389,22 @@ def load_campaign(path: str | Path) -> Campaign:
             raise _fail(source, "axes", f"runs {seen[key]} and {t.name} are identical")
         seen[key] = t.name
     return Campaign(name, source, description, tuple(tasks))
+
+
+def shortened(campaign: Campaign, duration: float) -> Campaign:
+    """The campaign with every run's duration capped at ``duration`` [s] (quick checks).
+
+    A capped run is another scenario, so it gets another id: its row never mixes with the full
+    runs' in a table (``--resume`` in a directory of the full campaign refuses).
+
+    Raises:
+        CampaignError: ``duration`` is not a finite time > 0 s.
+    """
+    if not (isinstance(duration, float | int) and math.isfinite(duration) and duration > 0):
+        raise CampaignError(f"--duration must be a time > 0 s, got {duration!r}")
+    tasks = []
+    for task in campaign.tasks:
+        data = copy.deepcopy(task.data)
+        data["duration"] = min(float(data.get("duration", duration)), float(duration))
+        tasks.append(dataclasses.replace(task, data=data, run_id=run_id(data)))
+    return dataclasses.replace(campaign, tasks=tuple(tasks))

@@ -172,6 +172,11 @@ class ResultTable:
 def _write(table, path: Path) -> None:
     import pyarrow.parquet as pq
 
+    from cdpr_twin.provenance import software
+
+    # what computed the rows, in the file's own metadata (key b"cdpr_twin.software", JSON)
+    meta = {**(table.schema.metadata or {}), b"cdpr_twin.software": json.dumps(software())}
+    table = table.replace_schema_metadata(meta)
     out = Partial(path)  # created afresh, never through a link; pyarrow writes into it
     with writing(out.partial), out.file("wb") as f:
         pq.write_table(table, f)

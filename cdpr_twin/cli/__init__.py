@@ -13,6 +13,8 @@ import numpy as np
 from cdpr_twin.cli import demo as cli_demo
 from cdpr_twin.cli import model as model_cli
 from cdpr_twin.cli.campaign import add_campaign_parser
+from cdpr_twin.cli.plots import missing_plots
+from cdpr_twin.cli.progress import Progress
 from cdpr_twin.files.transaction import out_path
 from cdpr_twin.run.interrupts import closed_stdout
 
@@ -29,30 +31,18 @@ REPRODUCE_DOC = (  # `reproduce --help`: what the study writes, and what it remo
 )
 
 
-class _Progress:
-    """A one-line progress bar on stderr (a line per 10 % when stderr is not a terminal)."""
+class _RunProgress:
+    """A run's progress line: simulated time, its rate, the time left (a terminal only)."""
 
-    def __init__(self, label: str, stream=None) -> None:
-        self.label = label
-        self.stream = sys.stderr if stream is None else stream  # now: not the import's
-        self.tty = self.stream.isatty()
-        self._last = -1
+    def __init__(self, label: str, duration: float) -> None:
+        self.line, self.duration = Progress(label, "s simulated"), duration
 
     def __call__(self, fraction: float, t: float) -> None:
-        pct = int(100 * fraction)
-        if self.tty:
-            if pct != self._last:
-                bar = "#" * (pct // 4) + "." * (25 - pct // 4)
-                self.stream.write(f"\r{self.label} [{bar}] {pct:3d}%  t = {t:6.2f} s")
-                self.stream.flush()
-        elif pct // 10 != self._last // 10:
-            self.stream.write(f"{self.label}: {pct}% (t = {t:.2f} s)\n")
-        self._last = pct
+        self.line.update(round(t, 2), round(self.duration, 2))
 
     def done(self) -> None:
-        """End the bar's line (if one was drawn)."""
-        if self.tty and self._last >= 0:
-            self.stream.write("\n")
+        """End the progress line (if one was drawn)."""
+        self.line.done()
 
 
 def _table(summary: dict) -> str:
@@ -165,7 +155,7 @@ def _run(args: argparse.Namespace) -> int:
     out = args.out if args.out is not None else Path("runs") / scenario.name
     for note in run_notes(scenario, args.spawn):
         print(f"cdpr-twin: note: {note}", file=sys.stderr)
-    progress, since = _Progress(scenario.name), time.time()
+    progress, since = _RunProgress(scenario.name, scenario.duration), time.time()
     try:
         with sigterm_raises():
             result = run(scenario, out, progress=progress, spawn=args.spawn, connect=connect)
@@ -187,18 +177,24 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _reproduce(args: argparse.Namespace) -> int:
+    if message := missing_plots("reproduce"):
+        print(message, file=sys.stderr)
+        return 2
     from cdpr_twin import study
     from cdpr_twin.robot.realism import RUN_SOURCES
     from cdpr_twin.run.interrupts import sigterm_raises
 
     count, failed = [0, 0], []  # runs finished, planned
+    line = Progress("reproduce", "runs")
 
     def progress(n: int, total: int, record: dict) -> None:
         count[0] = n
         if not record["ok"]:
             failed.append(record)
         mark = "ok" if record["ok"] else "FAILED"
-        print(f"[{n:3d}/{total}] {record['name']}: {mark} ({record['status']})", file=sys.stderr)
+        # each finished run stays as a line (a log's record too); the rate and time left below
+        line.log(f"[{n:3d}/{total}] {record['name']}: {mark} ({record['status']})")
+        line.update(n, total, f"{len(failed)} failed" if failed else "")
 
     try:
         with sigterm_raises():
@@ -215,9 +211,12 @@ def _reproduce(args: argparse.Namespace) -> int:
                 print(f"cdpr-twin: error: {exc}", file=sys.stderr)
                 return 2
             count[1] = len(specs)
+            line.update(0, len(specs))
             rep = study.reproduce_runs(args.out, specs, workers, progress)
     except (Exception, KeyboardInterrupt) as exc:
+        line.done()
         return _study_failure(exc, args, (count[0], count[1]))
+    line.done()
     print(
         f"{rep['runs']['ok']}/{rep['runs']['total']} runs in {rep['wall_time_s'] / 60:.1f} min;"
         f" report: {args.out}/report.md"
@@ -277,7 +276,17 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _parser() -> argparse.ArgumentParser:
+    from cdpr_twin.provenance import software
+
     parser = argparse.ArgumentParser(prog="cdpr-twin", description=__doc__)
+    v = software()
+    # twelve digits name a commit and keep the line within a terminal's width
+    commit = f", commit {v['git_commit'][:12]}" if v["git_commit"] else ""
+    parser.add_argument(
+        "--version",
+        action="version",
+        version=f"cdpr-twin {v['cdpr_twin']} (MuJoCo {v['mujoco']}, Python {v['python']}{commit})",
+    )
     sub = parser.add_subparsers(dest="command", required=True)
     cli_demo.add_parser(sub)  # cdpr-twin demo
     runp = sub.add_parser("run", help="run a scenario headless and write its outputs")

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cdpr_twin.cli.progress import Progress, duration
+
 MAX_POSES, MAX_FRAMES = 10_000, 1_000
 """Upper bounds of ``--poses`` (40× the default: ≈ 40 min) and ``--frames``: beyond them a typo
 would run for days, its memory growing, before saying anything."""
@@ -142,29 +144,40 @@ def _guarded(args, s, source: Path, out: Path, started: float) -> int:
 def _solve_and_write(args, s, source: Path, out: Path, started: float) -> int:
     """Excite, record, solve; write the description and the report (the long part)."""
     from cdpr_twin.calibrate.output import clear, write
-    from cdpr_twin.calibrate.session import calibrate, truth_check, weighting_report
+    from cdpr_twin.calibrate.pipeline import calibrate, truth_check, weighting_report
     from cdpr_twin.sim import build_robot
 
     clear(out)  # an earlier calibration's files go first: none survives a failed one
-    session = calibrate(s, args.poses, args.frames, args.workers)
+    line = Progress("calibrate", "segments")
+
+    def progress(stage: str, done: int, total: int) -> None:
+        if stage == "recording":
+            line.update(done, total, f"{args.poses} poses, {args.workers} workers")
+        else:
+            line.stage(f"{stage} (recorded in {duration(time.perf_counter() - line.start)})")
+
+    try:
+        outcome = calibrate(s, args.poses, args.frames, args.workers, progress=progress)
+    finally:
+        line.done()
     nominal = build_robot(s.model.file, nominal_path=s.model.nominal).nominal
-    cal, rec = session.calibration, session.recording
+    cal, rec = outcome.calibration, outcome.recording
     extra = {
         "scenario": str(s.source),
         "robot_seed": s.truth.seed,
         "run_seed": s.seed,
         "poses": rec.obs.n_poses,
-        "poses_without_redundancy_left_out": session.dropped,
+        "poses_without_redundancy_left_out": outcome.dropped,
         "tag_seen": int(rec.obs.seen.sum()),
         "timing_s": {
-            "excitation": session.excitation_s,
+            "excitation": outcome.excitation_s,
             "recording": rec.wall_time,
             "solve": cal.wall_time,
             "total": time.perf_counter() - started,
             "simulated": rec.simulated_time,
         },
-        **weighting_report(session),
-        "check_against_truth": truth_check(session, nominal.geometry, nominal.T_base_tag),
+        **weighting_report(outcome),
+        "check_against_truth": truth_check(outcome, nominal.geometry, nominal.T_base_tag),
     }
     robot, report = write(out, source, cal, extra, rec.drum_radii)
     _print(cal, extra, robot, report)

@@ -7,40 +7,28 @@ import sys
 import time
 from pathlib import Path
 
+from cdpr_twin.cli.progress import Progress
+
 
 class CampaignProgress:
-    """One line on stderr: runs done, failed, rate (runs/min) and ETA, across every worker.
+    """Runs done of the total, failed, rate and time left, across every worker.
 
-    A terminal gets a redrawn line; a log gets a line per 10 % of the runs.
+    A terminal gets a redrawn line (:class:`~cdpr_twin.cli.progress.Progress`); a log gets the
+    command's final line only.
     """
 
     def __init__(self, label: str, stream=None) -> None:
-        self.label = label
-        self.stream = sys.stderr if stream is None else stream  # now: not the import's
-        self.tty = self.stream.isatty()
-        self.start, self.failed, self._decile = time.perf_counter(), 0, -1
+        self.line = Progress(label, "runs", stream)
+        self.failed = 0
 
     def __call__(self, done: int, total: int, row: dict) -> None:
         """Account one finished run and redraw."""
         self.failed += 0 if row["ok"] else 1
-        elapsed = time.perf_counter() - self.start
-        rate = done / max(elapsed, 1e-9)
-        eta = (total - done) / rate if rate > 0 else float("inf")
-        line = (
-            f"{self.label}: {done}/{total} runs, {self.failed} failed, {60 * rate:.1f} runs/min,"
-            f" ETA {eta / 60:.1f} min"
-        )
-        if self.tty:
-            self.stream.write("\r" + line + " " * 8)
-            self.stream.flush()
-        elif (10 * done) // max(total, 1) != self._decile:
-            self._decile = (10 * done) // max(total, 1)
-            self.stream.write(line + "\n")
+        self.line.update(done, total, f"{self.failed} failed" if self.failed else "")
 
     def done(self) -> None:
         """End the line."""
-        if self.tty:
-            self.stream.write("\n")
+        self.line.done()
 
 
 def campaign_command(args: argparse.Namespace) -> int:
@@ -53,6 +41,7 @@ def campaign_command(args: argparse.Namespace) -> int:
     )
     from cdpr_twin.campaign.executor import check_address
     from cdpr_twin.campaign.report import write_report
+    from cdpr_twin.campaign.spec import shortened
     from cdpr_twin.files.transaction import OutputDirError, OutputError, Terminated
     from cdpr_twin.run.interrupts import sigterm_raises
 
@@ -61,6 +50,8 @@ def campaign_command(args: argparse.Namespace) -> int:
         return 2
     try:
         campaign = load_campaign(args.campaign)
+        if args.duration is not None:
+            campaign = shortened(campaign, args.duration)
     except CampaignError as exc:
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
         return 2
@@ -125,10 +116,15 @@ def add_campaign_parser(sub) -> None:
     from cdpr_twin.files.transaction import out_path
 
     cp = sub.add_parser("campaign", help="run a campaign file: many varied runs into one table")
-    cp.add_argument("campaign", type=Path, help="campaign file (campaigns/*.toml)")
+    cp.add_argument(
+        "campaign", type=Path, help="campaign file, or a shipped one's name (campaigns list)"
+    )
     cp.add_argument("--out", type=out_path, default=None, help="output directory (runs/<name>)")
     cp.add_argument("--workers", type=int, default=None, help="parallel runs (default: cores)")
     cp.add_argument("--resume", action="store_true", help="run only the runs not in the table")
+    cp.add_argument(
+        "--duration", type=float, default=None, help="cap every run's duration [s] (quick checks)"
+    )
     cp.add_argument(
         "--ray",
         nargs="?",

@@ -47,14 +47,31 @@ def _out_dir(description: Path, out: Path | None) -> Path:
     return out
 
 
+def _named(ref: Path) -> tuple[Path, bool]:
+    """A description's file, and whether it was given as a shipped robot's name.
+
+    Raises:
+        ValueError: a bare name that is neither a file nor a shipped robot (the choices said).
+    """
+    from cdpr_twin import resources
+
+    try:
+        path = resources.robot_description(ref)
+    except resources.ResourceError as exc:
+        raise ValueError(str(exc)) from None
+    return path, path != ref
+
+
 def _build(args: argparse.Namespace) -> int:
     from cdpr_twin.files.transaction import OutputError
     from cdpr_twin.robot.description import RobotError
     from cdpr_twin.sim.mjcf_from_robot import build_files
 
     try:
-        out = _out_dir(args.description, args.out)
-        paths = build_files(args.description, out)  # both whole, or neither renamed
+        description, named = _named(args.description)
+        # a shipped robot builds into ./<name>/, never into the installed package
+        out = _out_dir(description, args.out or (Path(args.description.name) if named else None))
+        paths = build_files(description, out)  # both whole, or neither renamed
     except (RobotError, ValueError) as exc:  # a bad description or --out, an infeasible home
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
         return 2
@@ -79,13 +96,20 @@ def _build(args: argparse.Namespace) -> int:
 
 
 def _workspace(args: argparse.Namespace) -> int:
+    from cdpr_twin.cli.plots import missing_plots
+
+    if message := missing_plots("model workspace"):
+        print(message, file=sys.stderr)
+        return 2
     from cdpr_twin.files.transaction import OutputError
     from cdpr_twin.math.workspace import geometry_of, sample_workspace, spacing_problem
     from cdpr_twin.robot.description import RobotError, load_robot
 
-    out = args.out or Path(args.description).parent / "workspace.png"
     try:  # every input checked before the (long) sampling
-        robot = load_robot(args.description)
+        description, named = _named(args.description)
+        beside = Path(f"{args.description.name}_workspace.png") if named else None
+        out = args.out or beside or description.parent / "workspace.png"
+        robot = load_robot(description)
         geom = geometry_of(robot)
         if problem := spacing_problem(geom, args.spacing):
             raise ValueError(f"--spacing {args.spacing:g}: {problem}")
@@ -96,7 +120,13 @@ def _workspace(args: argparse.Namespace) -> int:
     except (RobotError, ValueError) as exc:
         print(f"cdpr-twin: error: {exc}", file=sys.stderr)
         return 2
-    ws = sample_workspace(geom, spacing=args.spacing)
+    from cdpr_twin.cli.progress import Progress
+
+    line = Progress(f"workspace of {robot.name}", "points")
+    try:
+        ws = sample_workspace(geom, spacing=args.spacing, progress=line.update)
+    finally:
+        line.done()
     try:
         draw_workspace(ws, out, title=robot.name)
     except OutputError as exc:
@@ -205,15 +235,24 @@ def add_parser(sub) -> None:
     model = sub.add_parser("model", help="robot descriptions: build MJCF, map the workspace")
     msub = model.add_subparsers(dest="model_command", required=True)
     build = msub.add_parser("build", help="write <robot>.xml and scene.xml from robot.toml")
-    build.add_argument("description", type=Path, help="models/<robot>/robot.toml")
-    build.add_argument("--out", type=Path, default=None, help="directory (default: beside it)")
+    build.add_argument(
+        "description", type=Path, help="a robot.toml, or a shipped robot's name (robots list)"
+    )
+    build.add_argument(
+        "--out", type=Path, default=None, help="directory (default: beside it; a name: ./NAME)"
+    )
     build.set_defaults(func=_build)
     ws = msub.add_parser("workspace", help="sample and draw the wrench-feasible workspace")
-    ws.add_argument("description", type=Path, help="models/<robot>/robot.toml")
+    ws.add_argument(
+        "description", type=Path, help="a robot.toml, or a shipped robot's name (robots list)"
+    )
     ws.add_argument(
         "--spacing", type=float, default=0.05, help="grid step [m] (default 0.05; ≤ 1e6 points)"
     )
     ws.add_argument(
-        "--out", type=Path, default=None, help="figure, .png/.pdf/.svg… (default: beside it)"
+        "--out",
+        type=Path,
+        default=None,
+        help="figure, .png/.pdf/.svg… (default: beside it; a name: ./NAME_workspace.png)",
     )
     ws.set_defaults(func=_workspace)

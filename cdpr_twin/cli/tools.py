@@ -1,9 +1,12 @@
-"""The ``scenarios`` and ``view`` subcommands of ``cdpr-twin``, and ``run --connect``'s address.
+"""Subcommands ``scenarios``, ``campaigns``, ``robots`` and ``view``; ``--connect``'s address.
 
 - ``cdpr-twin scenarios list`` — the shipped scenarios, with their descriptions;
 - ``cdpr-twin scenarios copy NAME DIR`` — a shipped scenario copied into ``DIR`` to start one's
   own (it names its robot, so it runs from anywhere); the copy is written whole or not at all
   (:func:`cdpr_twin.files.transaction.write_whole`), so a failed copy can simply be retried;
+- ``cdpr-twin campaigns list|copy`` — the same for the shipped campaigns (they name their
+  scenarios by shipped name);
+- ``cdpr-twin robots list|copy`` — the shipped robots; a copy holds what the description needs;
 - ``cdpr-twin view RUN_DIR`` — the run's ``recording.rrd`` in the Rerun viewer.
 """
 
@@ -151,39 +154,76 @@ def _description(path: Path) -> str:
         return "(unreadable)"
 
 
-def _scenarios(args: argparse.Namespace) -> int:
-    if args.action == "list":
+def _listed(kind: str) -> list[tuple[str, str]]:
+    """The shipped resources of one kind: (name, one line about it)."""
+    if kind == "scenarios":
         folder = resources.scenarios_dir()
-        for name in resources.scenarios():
-            print(f"{name:20s} {_description(folder / f'{name}.toml')}")
+        return [(n, _description(folder / f"{n}.toml")) for n in resources.scenarios()]
+    if kind == "campaigns":
+        folder = resources.campaigns_dir()
+        return [(n, _description(folder / f"{n}.toml")) for n in resources.campaigns()]
+    folder = resources.models_dir()
+    return [(n, _robot_line(folder / n / resources.DESCRIPTION_FILE)) for n in resources.robots()]
+
+
+def _robot_line(path: Path) -> str:
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
+        return "(unreadable)"
+    cables = len(data.get("cables", {}).get("exit_points_m", [])) or "?"
+    return f"{cables} cables; {path.parent / resources.SCENE_FILE}"
+
+
+COPIERS = {
+    "scenarios": (resources.copy_scenario, "run it: cdpr-twin run {}"),
+    "campaigns": (resources.copy_campaign, "run it: cdpr-twin campaign {}"),
+    "robots": (resources.copy_robot, "build it: cdpr-twin model build {}"),
+}
+"""Each kind's copy function, and the command that uses the copy."""
+
+
+def _shipped(args: argparse.Namespace) -> int:
+    kind = args.kind
+    if args.action == "list":
+        for name, line in _listed(kind):
+            print(f"{name:24s} {line}")
         return 0
     from cdpr_twin.files.transaction import OutputError
 
+    copy, then = COPIERS[kind]
     try:
-        target = resources.copy_scenario(args.name, args.dir)
+        target = copy(args.name, args.dir)
     except resources.ResourceError as exc:
-        print(f"cdpr-twin scenarios copy: error: {exc}", file=sys.stderr)
+        print(f"cdpr-twin {kind} copy: error: {exc}", file=sys.stderr)
         return 2
     except OutputError as exc:
         print(
-            f"cdpr-twin scenarios copy: error: cannot write {exc.path}: {exc.cause}; nothing "
+            f"cdpr-twin {kind} copy: error: cannot write {exc.path}: {exc.cause}; nothing "
             f"was copied ({exc.fix('copy into another directory')})",
             file=sys.stderr,
         )
         return 1
-    print(f"{target} (run it: cdpr-twin run {shlex.quote(str(target))})")
+    print(f"{target} ({then.format(shlex.quote(str(target)))})")
     return 0
 
 
 def add_parsers(sub) -> None:
-    """Add the ``scenarios`` and ``view`` subcommands to ``cdpr-twin``'s subparsers."""
-    sc = sub.add_parser("scenarios", help="list the shipped scenarios, or copy one to edit")
-    actions = sc.add_subparsers(dest="action", required=True)
-    actions.add_parser("list", help="the shipped scenarios and what each reproduces")
-    copy = actions.add_parser("copy", help="copy a shipped scenario into a directory")
-    copy.add_argument("name", help="a shipped scenario (see: cdpr-twin scenarios list)")
-    copy.add_argument("dir", type=out_path, help="directory to copy it into (created if needed)")
-    sc.set_defaults(func=_scenarios)
+    """Add the ``scenarios``, ``campaigns``, ``robots`` and ``view`` subcommands."""
+    for kind, one, helps in (
+        ("scenarios", "scenario", "list the shipped scenarios, or copy one to edit"),
+        ("campaigns", "campaign", "list the shipped campaigns, or copy one to edit"),
+        ("robots", "robot", "list the shipped robots, or copy one's description to edit"),
+    ):
+        sc = sub.add_parser(kind, help=helps)
+        actions = sc.add_subparsers(dest="action", required=True)
+        actions.add_parser("list", help=f"the shipped {kind}")
+        copy = actions.add_parser("copy", help=f"copy a shipped {one} into a directory")
+        copy.add_argument("name", help=f"a shipped {one} (see: cdpr-twin {kind} list)")
+        copy.add_argument(
+            "dir", type=out_path, help="directory to copy it into (created if needed)"
+        )
+        sc.set_defaults(func=_shipped, kind=kind)
     view = sub.add_parser("view", help="open a run's recording in the Rerun viewer")
     view.add_argument("run_dir", type=Path, help="a run's output directory (or a .rrd file)")
     view.add_argument(

@@ -30,7 +30,9 @@ def path_kind(path: Path, error: Callable[[str], Exception]) -> str | None:
         raise error(f"{str(path)!r}: a path cannot hold a NUL character; give another") from None
     except OSError as exc:
         fix = {errno.ENAMETOOLONG: "give shorter names", errno.EACCES: "check its permissions"}
-        raise error(f"{path}: {exc.strerror}; {fix.get(exc.errno, 'give another path')}") from None
+        raise error(
+            f"{path}: {exc.strerror}; {fix.get(exc.errno or 0, 'give another path')}"
+        ) from None
     return "dir" if stat.S_ISDIR(mode) else "file" if stat.S_ISREG(mode) else "other"
 
 

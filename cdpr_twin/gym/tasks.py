@@ -174,7 +174,7 @@ def _score(dt: float, dr: float, weight: float, tol: float, tol_deg: float) -> S
     return Score(-(dt + weight * dr), success, dt, dr)
 
 
-TASKS = {"reach": ReachPose, "servo": ServoToTag}
+TASKS: dict[str, type[ReachPose] | type[ServoToTag]] = {"reach": ReachPose, "servo": ServoToTag}
 """The tasks by name."""
 
 

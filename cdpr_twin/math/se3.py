@@ -1,10 +1,10 @@
-"""SO(3)/SE(3) helpers: exp/log, adjoint, θu, quaternions, file poses, pose distance.
+"""SO(3)/SE(3) functions: exp/log, adjoint, θu, quaternions, file poses, pose distance.
 
 Quaternion conversions and the pose distance take one pose or any stack (leading axes), one
 implementation each (jaxlie's style); one pose takes a bit-identical fast path in plain floats,
 as the Newton kernels of :mod:`cdpr_twin.estimators.model_based` do (a test holds them to these).
 
-Conventions (DESIGN §3): homogeneous transforms are 4×4 arrays named ``T_<to>_<from>``;
+Conventions: homogeneous transforms are 4×4 arrays named ``T_<to>_<from>``;
 twists are ``[v, ω]`` (linear first); quaternions are ``quat_wxyz`` (scalar first, the MuJoCo
 order); poses in files are ``[x, y, z, rx, ry, rz]`` in metres and degrees with
 R = Rx(rx)·Ry(ry)·Rz(rz) (intrinsic XYZ). Everything here imports numpy only.
@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 
 _SMALL = 1e-8
 _SERIES = 1e-4
@@ -345,16 +346,16 @@ def euler_xyz_from_matrix(R: np.ndarray) -> np.ndarray:
     return np.array([a, b, c])
 
 
-def pose_from_vector(p: np.ndarray) -> np.ndarray:
+def pose_from_vector(pose: npt.ArrayLike) -> np.ndarray:
     """Transform from a file pose ``[x, y, z, rx, ry, rz]`` (m, degrees, intrinsic XYZ).
 
     Args:
-        p: (6,) pose as written in scenario files and the paper.
+        pose: (6,) pose as written in scenario files and the paper (a list or an array).
 
     Returns:
         (4, 4) transform, e.g. ``T_base_platform``.
     """
-    p = np.asarray(p, dtype=float)
+    p = np.asarray(pose, dtype=float)
     if p.shape != (6,) or not np.all(np.isfinite(p)):
         raise ValueError(f"pose {p!r} must be 6 finite numbers [x, y, z (m), rx, ry, rz (deg)]")
     return transform(matrix_from_euler_xyz(np.deg2rad(p[3:])), p[:3])

@@ -14,6 +14,7 @@ be used (not a finite positive number, no grid point in the frame, more than
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -158,7 +159,10 @@ def spacing_problem(geom: CdprGeometry, spacing: float) -> str | None:
 
 
 def sample_workspace(
-    geom: CdprGeometry, spacing: float = 0.05, rotation: np.ndarray | None = None
+    geom: CdprGeometry,
+    spacing: float = 0.05,
+    rotation: np.ndarray | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> Workspace:
     """Sample the wrench-feasible workspace on a grid over the frame's inner box.
 
@@ -166,6 +170,7 @@ def sample_workspace(
         geom: the robot, with its tension limits and frame.
         spacing: grid spacing [m].
         rotation: (3, 3) platform orientation (default: level, identity).
+        progress: called with (points done, points) after each grid plane.
 
     Returns:
         The sampled :class:`Workspace`.
@@ -180,10 +185,13 @@ def sample_workspace(
     axes = [np.arange(lo[k] + spacing / 2, hi[k], spacing) for k in range(3)]
     inside = np.zeros(tuple(len(a) for a in axes), dtype=bool)
     feasible = np.zeros_like(inside)
+    plane = inside.shape[1] * inside.shape[2]
     for idx in np.ndindex(inside.shape):
         T = transform(R, [axes[k][idx[k]] for k in range(3)])
         inside[idx] = inside_frame(geom, T)
         feasible[idx] = inside[idx] and is_feasible(geom, T)
+        if progress is not None and idx[1] == inside.shape[1] - 1 and idx[2] == inside.shape[2] - 1:
+            progress((idx[0] + 1) * plane, inside.size)
     return Workspace(*axes, inside, feasible, R, (geom.tension_min, geom.tension_max), spacing)
 
 

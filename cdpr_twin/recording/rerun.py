@@ -5,7 +5,7 @@
 
 Written as ``recording.rrd.partial``, renamed when complete (:mod:`cdpr_twin.files.transaction`).
 
-Rerun entity paths (they follow the frame tree, DESIGN §9):
+Rerun entity paths (they follow the frame tree, docs/concepts/frames.md):
 
 | path | content |
 |---|---|
@@ -105,7 +105,8 @@ class RerunRecorder:
     ) -> None:
         import rerun as rr
 
-        self.covariance, self._ended = tuple(covariance), None  # _ended: disconnect returned
+        self.covariance = tuple(covariance)
+        self._ended: bool | None = None  # what disconnect returned, once it has
         self.rr = rr
         self.path = path
         self.scene, self.estimators, self.jpeg_quality = scene, estimators, jpeg_quality

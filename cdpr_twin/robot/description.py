@@ -168,7 +168,7 @@ def _simulation(t: _Table) -> dict:
 
 
 def _frame(t: _Table) -> dict:
-    out = {
+    out: dict[str, Any] = {
         "frame_min": t.array("inner_min_m", (3,)),
         "frame_max": t.array("inner_max_m", (3,)),
         "frame_outer_min": t.array("outer_min_m", (3,)),
@@ -359,13 +359,19 @@ def load_robot(path: str | Path) -> Robot:
     top = _Table(path, data, "")
     top.where = "robot"
 
-    def table(name: str, required: bool = True) -> _Table | None:
+    def optional(name: str, required: bool = False) -> _Table | None:
         v = top.get(name, ... if required else None)
         if v is None:
             return None
         if not isinstance(v, dict):
             raise RobotError(f"{path}: [{name}] must be a table")
         return _Table(path, v, name)
+
+    def table(name: str) -> _Table:
+        found = optional(name, required=True)
+        # a required table: _Table.get raised for a missing one, and None is no table
+        assert found is not None
+        return found
 
     name = top.string("name")  # it names the MJCF files `model build` writes: a plain name
     if name.startswith(".") or not all(c.isalnum() or c in "_-." for c in name):
@@ -386,16 +392,16 @@ def load_robot(path: str | Path) -> Robot:
     check_gravity(sim, fields["gravity"], fields["sag"])
     fields["drum_radius_scale"] = _drum_scale(tables[3], fields["exit_points"].shape[0])
     for key, reader in (("camera", _camera), ("tag", _tag)):
-        t = table(key, required=False)
+        t = optional(key)
         fields[key] = None if t is None else reader(t)
         tables += [t] if t is not None else []
-    mon = table("monitor", required=False) or _Table(path, {}, "monitor")
+    mon = optional("monitor") or _Table(path, {}, "monitor")
     for field, key in (
         ("max_speed", "platform_max_speed_m_s"),
         ("max_angular_speed", "platform_max_angular_speed_rad_s"),
     ):
         fields[field] = mon.number(key, math.inf, positive=True, infinite=True)
-    scene = table("scene", required=False) or _Table(path, {}, "scene")
+    scene = optional("scene") or _Table(path, {}, "scene")
     fields.update(_scene(scene, fields["frame_outer_min"], fields["frame_outer_max"]))
     for t in [*tables, mon, scene, top]:
         t.done()

@@ -59,7 +59,8 @@ class _Table:
     """Typed access to one TOML table; errors name the file and ``table.key``."""
 
     def __init__(self, source: Path, table: dict, where: str) -> None:
-        self.source, self.table, self.where, self.used = source, table, where, set()
+        self.source, self.table, self.where = source, table, where
+        self.used: set[str] = set()
 
     def fail(self, key: str, problem: str) -> RobotError:
         return RobotError(f"{self.source}: {self.where}.{key}: {problem}")

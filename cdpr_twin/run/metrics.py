@@ -189,7 +189,12 @@ def run_summary(
         end: ground truth at the end: ``time`` [s], ``T_base_platform`` (4, 4), ``tensions`` (m,).
         goal: (4, 4) the controller's goal pose, or ``None``.
         extra: the controller's own summary fields.
+
+    The last key, ``software``, names what computed the run: the package's, MuJoCo's, NumPy's
+    and Python's versions and the git commit (:func:`cdpr_twin.provenance.software`).
     """
+    from cdpr_twin.provenance import software
+
     s, T_end = scenario, end["T_base_platform"]
     return {
         "scenario": s.name,
@@ -213,4 +218,5 @@ def run_summary(
         "segment_ends": metrics.segment_ends,
         "final_tensions_n": end["tensions"].tolist(),
         **extra,
+        "software": software(),
     }

@@ -21,6 +21,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -42,6 +43,11 @@ from cdpr_twin.scenario.preflight import check_goal, controller_for
 from cdpr_twin.sim.events import EventSchedule, TagOcclusion
 from cdpr_twin.types import Measurement, PoseEstimate, Status
 
+if TYPE_CHECKING:
+    from cdpr_twin.sim.monitor import Monitor
+    from cdpr_twin.sim.physics import Physics
+    from cdpr_twin.sim.sensors import NominalRobot, Sensors
+
 __all__ = ["RunResult", "RunSetup", "prepare", "run", "start"]
 
 
@@ -51,7 +57,7 @@ class RunSetup:
 
     Attributes:
         scenario: the scenario.
-        physics: the simulated robot (:class:`cdpr_twin.sim.Physics`; untyped: no mujoco here).
+        physics: the simulated robot (:class:`cdpr_twin.sim.Physics`).
         sensors: its sensors (:class:`cdpr_twin.sim.Sensors`).
         nominal: what the robot's software believes (:class:`cdpr_twin.sim.NominalRobot`).
         estimators: by name, in recording order (the in-loop one first).
@@ -70,15 +76,15 @@ class RunSetup:
     """
 
     scenario: Scenario
-    physics: object
-    sensors: object
-    nominal: object
+    physics: Physics
+    sensors: Sensors
+    nominal: NominalRobot
     estimators: dict[str, Estimator]
     order: tuple[str, ...]
     controller: Controller | None
     goal_pose: np.ndarray | None
     events: EventSchedule
-    monitor: object = None
+    monitor: Monitor | None = None
     true_start: np.ndarray | None = None
     homing_offset: np.ndarray | None = None
     shown_view: np.ndarray | None = None

@@ -99,7 +99,7 @@ class Event:
     def end(self, physics: Any, sensors: Any) -> None:
         """Undo :meth:`apply` at :attr:`end_time`."""
 
-    def fields(self) -> dict[str, float]:
+    def fields(self) -> dict[str, float | None]:
         """The event's fields but ``at`` (what it does); NaN and ``inf`` (never) as ``None``."""
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "at"}
         return {k: (v if math.isfinite(v) else None) for k, v in out.items()}

@@ -1,6 +1,6 @@
 """The thin physics core: winches, elastic cables through kinematic swivel pulleys, stepping.
 
-Physics (DESIGN §5). Each cable is a spatial tendon entry site → sheave (cylinder wrap) → B_i.
+Physics (docs/concepts). Each cable is a spatial tendon entry site → sheave (cylinder wrap) → B_i.
 Its winch actuator carries the unstretched length l0_i as activation state (``dyntype=
 integrator``: MuJoCo integrates ctrl, the rate of :mod:`~cdpr_twin.sim.winch`) and pulls with
 

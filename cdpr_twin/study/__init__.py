@@ -1,6 +1,6 @@
 """Reproduce the paper's study in one command: runs, figures and a findings report.
 
-The study (DESIGN §8): the open-loop experiment with all six estimators passive (Fig. 5), PBVS
+The study: the open-loop experiment with all six estimators passive (Fig. 5), PBVS
 with each estimator in the loop (Fig. 7), and the accuracy and repeatability campaign of §IV-D
 (Fig. 8): 10 open-loop runs and 30 PBVS runs, 5 per estimator. One robot (the scenarios' truth
 seed) throughout; each run draws its own sensor noise (run seed). The seed-1 runs are also the

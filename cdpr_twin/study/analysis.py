@@ -274,8 +274,12 @@ def analyse(out: Path, records: list[dict]) -> dict:
 
     Args:
         out: the study's output directory.
-        records: the runs, as :func:`cdpr_twin.study.run_study` returns them (``runs.json``).
+        records: the runs, as :func:`cdpr_twin.study.run_study` returns them, or as
+            ``runs.json`` holds them (each run's directory relative to ``out``).
     """
+    from cdpr_twin.study.plan import with_dirs_in
+
+    records = with_dirs_in(out, records)
     ok = [r for r in records if r["ok"]]
     rep: dict = {
         "runs": {

@@ -145,7 +145,7 @@ def accuracy_bars(groups: dict[str, dict[str, list[float]]], path: Path) -> Path
     """Final accuracy at p1: mean and spread over repetitions (Fig. 8).
 
     Args:
-        groups: bar label → {"translation_m": [...], "rotation_deg": [...]}.
+        groups: each column's label → {"translation_m": [...], "rotation_deg": [...]}.
         path: output PNG.
     """
     fig = Figure(figsize=FIGSIZE)

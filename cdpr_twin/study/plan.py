@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import signal
 import traceback
 from collections.abc import Callable
@@ -229,5 +230,17 @@ def run_study(
         raise
     order = {s.name: i for i, s in enumerate(specs)}
     records.sort(key=lambda r: order[r["name"]])
-    write_json_atomic(out / "runs.json", records)
+    # the file names each run's directory relative to the study's: it stays true wherever the
+    # study was run from, and wherever the directory is moved (the notebook reads it so)
+    write_json_atomic(out / "runs.json", [{**r, "dir": relative_dir(r, out)} for r in records])
     return records
+
+
+def relative_dir(record: dict, out: Path) -> str:
+    """A run record's directory, relative to the study's directory ``out`` (POSIX form)."""
+    return Path(os.path.relpath(Path(record["dir"]).resolve(), Path(out).resolve())).as_posix()
+
+
+def with_dirs_in(out: Path, records: list[dict]) -> list[dict]:
+    """Records whose ``dir`` is a path to open: a relative one (``runs.json``) joined to ``out``."""
+    return [{**r, "dir": str(Path(out) / r["dir"])} for r in records]

@@ -35,8 +35,9 @@ def make_figures(out: Path, rep: dict, records: list[dict]) -> list[Path]:
         OutputError: a figure cannot be written (it is left ``*.partial``).
     """
     from cdpr_twin.study import figures
+    from cdpr_twin.study.plan import with_dirs_in
 
-    open_loop, pbvs = figure_runs(records)
+    open_loop, pbvs = figure_runs(with_dirs_in(out, records))
     paths: list[Path] = []
     if open_loop is not None:
         ts = Timeseries.load(open_loop / "timeseries.csv")

@@ -13,6 +13,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import spearmanr
 
 from cdpr_twin.estimators import PAPER_ESTIMATORS  # display order and colours only
 from cdpr_twin.recording.timeseries import Timeseries, load_timeseries
@@ -74,8 +75,9 @@ def image_noise_vs_distance(ts: Timeseries) -> dict:
     order = np.argsort(d_step)
     third = max(1, len(order) // 3)
     near, far = order[:third], order[-third:]
-    rank = lambda v: np.argsort(np.argsort(v)).astype(float)  # noqa: E731
-    rho = float(np.corrcoef(rank(d_step), rank(step))[0, 1]) if len(step) > 2 else float("nan")
+    # ties (a distance or a step repeated: the detections' and the CSV's rounding) share their
+    # mean rank, as Spearman's coefficient defines it
+    rho = float(spearmanr(d_step, step).statistic) if len(step) > 2 else float("nan")
     ok_dev = np.isfinite(dist) & np.isfinite(dev)
     dd, dv = dist[ok_dev], dev[ok_dev]
     od = np.argsort(dd)

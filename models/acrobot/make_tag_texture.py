@@ -6,8 +6,11 @@ holds the same codes that pupil-apriltags detects.
 
 The image is PLATE_CELLS × PLATE_CELLS cells: the tag's 8 × 8 black-bordered code (the 4 cm
 "tag size" that pose estimation uses) centred on white, so that the plate geom (7 cm wide in
-scene.xml) shows the code 4 cm wide. Upright in the file = +y of the base frame up when the
-plate is seen from above (checked by tests/sim/test_camera.py against detection).
+scene.xml) shows the code 4 cm wide. Seen from above, the file's top edge lies towards −y of
+the base frame: a band drawn along it renders in the top of the platform camera's frame at p1,
+whose image-up is the base's −y (the camera's OpenCV y, image-down, is the base's +y there).
+The tag body's frame, the pupil-apriltags tag frame, agrees with detection
+(tests/sim/test_camera.py).
 """
 
 from pathlib import Path

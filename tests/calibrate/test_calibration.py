@@ -107,7 +107,7 @@ def test_recovers_a_synthetic_robot_within_its_stated_uncertainty():
 
 def test_a_tag_view_turned_by_a_wrong_solution_is_left_out_and_the_robot_still_recovered():
     # truth: the drawn robot; one view replaced by the tag turned 80° about its normal, 1 mm off
-    # (robot 1's session 2 read one view 86° off, its four frames alike)
+    # (robot 1's second calibration read one view 86° off, its four frames alike)
     from cdpr_twin.calibrate.solver import solve_weighted
 
     g, T_tag, obs, truth = _synthetic(camera_error=False)
@@ -218,16 +218,16 @@ def test_rank_report_finds_the_platform_frame_left_free():
 @pytest.mark.slow
 def test_calibrates_robot_19_and_its_open_loop_run_improves(tmp_path):
     from cdpr_twin.calibrate.output import write
-    from cdpr_twin.calibrate.session import calibrate, truth_check
+    from cdpr_twin.calibrate.pipeline import calibrate, truth_check
     from cdpr_twin.run.runner import run
     from cdpr_twin.scenario.loading import load_scenario
     from cdpr_twin.sim import build_robot
 
     s = load_scenario("paper_open_loop")  # robot 19, acrobot realism profile
-    session = calibrate(replace(s, seed=s.seed + 1), n_poses=60)  # a session homed on its own
+    outcome = calibrate(replace(s, seed=s.seed + 1), n_poses=60)  # homed on its own
     nominal = build_robot(s.model.file).nominal
-    check = truth_check(session, nominal.geometry, nominal.T_base_tag)
-    robot, _ = write(tmp_path, ROBOT, session.calibration, {}, session.recording.drum_radii)
+    check = truth_check(outcome, nominal.geometry, nominal.T_base_tag)
+    robot, _ = write(tmp_path, ROBOT, outcome.calibration, {}, outcome.recording.drum_radii)
     p1 = {}
     for name, nom in (("nominal", None), ("calibrated", robot)):
         sc = replace(s, model=replace(s.model, nominal=nom)).with_overrides(
@@ -240,9 +240,9 @@ def test_calibrates_robot_19_and_its_open_loop_run_improves(tmp_path):
     assert exit_cal < 0.7 * check["nominal"]["exit_error_median_mm"]
     assert check["calibrated"]["exit_shape_error_median_mm"] < 5.0
     assert p1["calibrated"] < 0.5 * p1["nominal"]
-    # the issue's goals (1 mm median exit error, < 1 mm at p1): see the README's
-    # "Self-calibration" (what only the tag's and the homing's tolerances place stays, and a run
-    # homed anew misses p1 by its homing's offset); this prints where this robot stands
+    # the calibration's goals (1 mm median exit error, < 1 mm at p1): see
+    # docs/results/calibration.md (what only the tag's and the homing's tolerances place stays,
+    # and a run homed anew misses p1 by its homing's offset); this prints where this robot stands
     print(
         f"exit points {exit_cal:.2f} mm median (goal 1 mm); open-loop error at p1 "
         f"{p1['calibrated'] * 1e3:.2f} mm (goal 1 mm; nominal model {p1['nominal'] * 1e3:.2f} mm)"

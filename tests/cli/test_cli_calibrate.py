@@ -133,7 +133,7 @@ def no_recording(monkeypatch):
         raise AssertionError("the recording started before the input was checked")
 
     monkeypatch.setattr("cdpr_twin.calibrate.acquire.ProcessPoolExecutor", refuse)
-    monkeypatch.setattr("cdpr_twin.calibrate.session.record", refuse)
+    monkeypatch.setattr("cdpr_twin.calibrate.pipeline.record", refuse)
 
 
 def test_calibrate_start_outside_the_frame_is_refused_as_run_refuses_it(
@@ -177,7 +177,7 @@ def test_calibrate_failing_before_writing_leaves_no_directory_it_made(
     def fail(*args, **kwargs):
         raise CalibrationError("the tag was never detected at the excitation poses")
 
-    monkeypatch.setattr("cdpr_twin.calibrate.session.calibrate", fail)
+    monkeypatch.setattr("cdpr_twin.calibrate.pipeline.calibrate", fail)
     out = tmp_path / "runs" / "cal"
     assert cli.main(["calibrate", "paper_open_loop", "--poses", "12", "--out", str(out)]) == 2
     assert "never detected" in _error(capsys)

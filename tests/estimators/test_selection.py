@@ -2,7 +2,7 @@
 
 Where the paper's rule jumps. On today's twin the open-loop run has no ill-conditioned
 most-tensioned set (condition number ≤ 26 with the ``acrobot`` profile, ≤ 203 with ``ideal``,
-seeds 1-10); the jumps the issue describes happen at the start of the PBVS run with the
+seeds 1-10); the jumps the paper's rule is known for happen at the start of the PBVS run with the
 ``acrobot`` profile: at t = 0.08 s the servo's start swings the tensions, two cables read < 1 N
 and the six most-tensioned ones have a condition number ≈ 1 700, and Algorithm 1 jumps by
 ≈ 13 mm / 5°. The test records that run and replays its measurements into each selection,

@@ -1,4 +1,4 @@
-"""SE(3) helpers on one pose or a stack: against scipy, and a stack equal to its elements one by
+"""SE(3) functions on one pose or a stack: against scipy, and a stack equal to its elements one by
 one (the branch masks of Shepperd's method), including the branch cases near θ = π."""
 
 import numpy as np

@@ -1,8 +1,9 @@
 """CoGiRo (models/cogiro/): the paper's open-loop experiment transposed to a large robot.
 
-Truth: the twin's ground truth; the claims checked are the README's, that on CoGiRo the choice of
-cable model matters (on ACROBOT it does not, within the paper's millimetres), and that the
-scenario's 250 kg payload is carried (MuJoCo's own masses and the tensions' vertical balance).
+Truth: the twin's ground truth; the claims checked are docs/cogiro/README.md's, that on CoGiRo
+the choice of cable model matters (on ACROBOT it does not, within the paper's millimetres), and
+that the scenario's 250 kg payload is carried (MuJoCo's own masses and the tensions' vertical
+balance).
 """
 
 import tomllib

@@ -1,8 +1,8 @@
 """The homing floor of open-loop accuracy: a robot whose geometry is known exactly still misses
 p1 by its start error carried through the move, δ₁ = A(p1)⁺ A(p0) δ₀
 (:func:`cdpr_twin.math.kinematics.start_error_transfer`), checked here against the simulated robot;
-with the ``acrobot`` profile's homing repeatability that floor is above the 1 mm goal of issue
-11's calibration, whatever the calibration."""
+with the ``acrobot`` profile's homing repeatability that floor is above the self-calibration's 1 mm
+goal, whatever the calibration."""
 
 import tomllib
 from pathlib import Path

@@ -1,4 +1,4 @@
-"""Scenario runs against the paper's observations and the twin's ground truth (DESIGN §8)."""
+"""Scenario runs against the paper's observations and the twin's ground truth."""
 
 import dataclasses
 import json
@@ -159,5 +159,5 @@ def test_recording_verifies_and_has_the_documented_entities(short_run):
     documented += [f"/world/estimates/{n}" for n in s.estimators.names]
     missing = [p for p in documented if f"{p}:" not in stats]
     assert not missing, missing
-    readme = (ROOT / "README.md").read_text()
-    assert all(f"`{p[1:]}" in readme for p in documented if "estimates/" not in p)
+    page = (ROOT / "docs" / "how-to" / "rerun.md").read_text()
+    assert all(f"`{p[1:]}" in page for p in documented if "estimates/" not in p)

@@ -9,7 +9,7 @@ from cdpr_twin.sim import camera
 from cdpr_twin.vision import detection as vision
 
 
-# The issue's bars are 2 mm / 0.5° at p1 and 1 cm / 2° at p0; the twin's rendering and the
+# The requirement is 2 mm / 0.5° at p1 and 1 cm / 2° at p0; the twin's rendering and the
 # refined detection do far better (p1: ≈ 5 µm, p0: 0.38 mm / 0.21°, p2: 0.14 mm), and these
 # tighter bounds are what pins the pixel and frame conventions (a half-pixel slip breaks them).
 @pytest.mark.parametrize(
@@ -32,7 +32,7 @@ def test_intrinsics_reproject_true_corners_onto_detected(camera_twin, name):
     true_corners = vision.project_points(
         camera_twin.nominal.intrinsics, camera_twin.T_cam_tag, vision.tag_corners_object(0.04)
     )
-    # bar: 1 px; measured 0.007 px at p1, 0.07 px at p0
+    # required: 1 px; measured 0.007 px at p1, 0.07 px at p0
     assert np.max(np.linalg.norm(m.tag.corners - true_corners, axis=1)) < 0.2
 
 
@@ -54,7 +54,7 @@ def test_camera_frame_conventions(camera_twin):
 
 
 def test_goal_pose_at_p1_and_paper_view_at_p0(camera_twin):
-    """DESIGN §4: the tag is placed so that cp_o1 (ViSP frame) holds at p1; at p0 the camera
+    """The tag is placed so that cp_o1 (ViSP frame) holds at p1; at p0 the camera
     sees it within a few cm of the paper's cp_o0."""
     visp = vision.T_TAGPUPIL_TAGVISP
     camera_twin.reset(paper_pose("p1"))

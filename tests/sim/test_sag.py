@@ -1,7 +1,7 @@
 """Cables with mass in the physics (cdpr_twin/sim/sag.py): Irvine's catenary on every free span.
 
 Truth: the massless twin (the same model, the same rest lengths): sagging cables must move the
-settled platform by what the issue expects on ACROBOT (< 10 µm: 2.4 g/m Dyneema, ≈ 0.9 mm sag)
+settled platform by what is expected on ACROBOT (< 10 µm: 2.4 g/m Dyneema, ≈ 0.9 mm sag)
 and measurably more on CoGiRo (0.064 kg/m steel over ≈ 10 m). The catenary element itself is
 checked against a discretised MuJoCo cable in tests/math/test_catenary.py.
 """

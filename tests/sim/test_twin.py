@@ -25,7 +25,7 @@ def _mujoco_pull_directions(twin):
     return np.array(out)
 
 
-# ACROBOT's cable (paper §IV-A, DESIGN §4): Dyneema SK78, E = 111 GPa, Ø 2 mm
+# ACROBOT's cable (paper §IV-A, models/acrobot/README.md): Dyneema SK78, E = 111 GPa, Ø 2 mm
 ES_PAPER = 111e9 * np.pi * 0.001**2  # E·S = 348 716.78 N
 
 
@@ -70,7 +70,7 @@ def test_pulley_length_matches_mujoco_wrap(twin):
         straight = kin.cable_lengths(twin.true_geometry, T, "straight")
         worst = max(worst, np.max(np.abs(paper - mj)))
         wrap_min = min(wrap_min, np.min(paper - straight))
-    assert worst < 1e-12  # measured ≈ 4e-16 m (the issue asks for 1 µm)
+    assert worst < 1e-12  # measured ≈ 4e-16 m (required: 1 µm)
     # the wrap makes the cable longer than the straight A_i-B_i segment (order r_p)
     assert 0.0 < wrap_min < twin.true_geometry.pulley_radius.max() * np.pi / 2
 

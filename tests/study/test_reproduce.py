@@ -110,25 +110,36 @@ def test_report_numbers_are_recomputed_from_the_run_files(small):
 
 
 @pytest.mark.slow
-def test_notebook_executes_against_the_output(small):
+def test_notebook_runs_as_its_text_says(small, tmp_path):
+    """As a user follows the text: the study's output in ``runs/reproduce`` beside
+    ``notebooks/``, the notebook run from its own directory with no variable set. The output
+    is a copy elsewhere, so a run directory recorded as an absolute path (or relative to where
+    ``reproduce`` ran) would not be found."""
     import nbformat
     from nbclient import NotebookClient
 
     out, _ = small
+    checkout = tmp_path / "checkout"
+    shutil.copytree(out, checkout / "runs" / "reproduce")
+    (checkout / "notebooks").mkdir()
     nb = nbformat.read(ROOT / "notebooks" / "paper_figures.ipynb", as_version=4)
     assert all(not c.get("outputs") for c in nb.cells if c.cell_type == "code")  # committed bare
-    os.environ["CDPR_TWIN_RESULTS"] = str(out)
+    assert "cdpr-twin reproduce --out runs/reproduce" in nb.cells[0].source
+    records = json.loads((checkout / "runs" / "reproduce" / "runs.json").read_text())
+    assert all(not Path(r["dir"]).is_absolute() for r in records)
+    env_before = os.environ.pop("CDPR_TWIN_RESULTS", None)
     try:
         NotebookClient(
             nb,
             timeout=600,
             kernel_name="python3",
-            resources={"metadata": {"path": str(ROOT / "notebooks")}},
+            resources={"metadata": {"path": str(checkout / "notebooks")}},
         ).execute()
     finally:
-        del os.environ["CDPR_TWIN_RESULTS"]
+        if env_before is not None:
+            os.environ["CDPR_TWIN_RESULTS"] = env_before
     outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]
-    assert not [o for o in outputs if o["output_type"] == "error"]
+    assert not [o for o in outputs if o["output_type"] == "error"], outputs
     images = [o for o in outputs if "image/png" in o.get("data", {})]
     assert len(images) == 5
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
@@ -39,7 +40,7 @@ gain fitted, the balance's residual is 0.006–0.010 N per axis (acrobot profile
 
 
 @dataclass(frozen=True, eq=False)
-class Session:
+class Outcome:
     """A calibration and what it came from.
 
     Attributes:
@@ -110,11 +111,18 @@ def priors_of(s: Scenario, focal_px: float, tension: tuple[float, float, float])
     )
 
 
-def calibrate(s: Scenario, n_poses: int = 240, frames: int = 4, workers: int = 1) -> Session:
+def calibrate(
+    s: Scenario,
+    n_poses: int = 240,
+    frames: int = 4,
+    workers: int = 1,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> Outcome:
     """Excite, record and calibrate the robot of scenario ``s``.
 
     ``workers`` processes record the tour's segments side by side (the result does not depend
-    on their number).
+    on their number). ``progress`` is told each stage: ``("recording", done, segments)`` as
+    segments end, then ``("solving", 0, 0)``.
 
     Raises:
         ScenarioError: the scenario's robot cannot be built or has no camera.
@@ -136,7 +144,9 @@ def calibrate(s: Scenario, n_poses: int = 240, frames: int = 4, workers: int = 1
     except ValueError as exc:
         raise CalibrationError(str(exc)) from None
     chosen = time.perf_counter() - started
-    rec = record(s, poses, frames, workers)
+    tell = progress or (lambda stage, done, total: None)
+    tell("recording", 0, 1)
+    rec = record(s, poses, frames, workers, lambda done, total: tell("recording", done, total))
     if not rec.obs.seen.any():
         raise CalibrationError(
             "the tag was never detected at the excitation poses; check the camera and tag in "
@@ -147,8 +157,9 @@ def calibrate(s: Scenario, n_poses: int = 240, frames: int = 4, workers: int = 1
     priors = priors_of(s, rec.detector.focal_px, rec.tension_sensors)
     noise = noise_of(rec, frames)
     problem = Problem(nominal.geometry, nominal.T_base_tag, rec.obs, priors, noise, rec.detector)
+    tell("solving", 0, 0)
     cal, weighting = solve_weighted(problem)
-    return Session(
+    return Outcome(
         cal, rec, priors, chosen, int(np.count_nonzero(~keep)), weighting.noise, weighting
     )
 
@@ -166,9 +177,9 @@ def _mm(x: np.ndarray) -> list[float]:
     return np.round(np.asarray(x) * 1e3, 3).tolist()
 
 
-def truth_check(session: Session, nominal_geometry, nominal_T_base_tag) -> dict:
+def truth_check(outcome: Outcome, nominal_geometry, nominal_T_base_tag) -> dict:
     """The calibrated and nominal models' errors against the twin's truth (report only)."""
-    cal, truth = session.calibration.model, session.recording.truth
+    cal, truth = outcome.calibration.model, outcome.recording.truth
     g = truth.geometry
     out: dict = {}
     for name, a, b, T_cam, T_tag in (
@@ -204,13 +215,13 @@ def truth_check(session: Session, nominal_geometry, nominal_T_base_tag) -> dict:
         float(np.degrees(np.median(dr))),
     ]
     out["calibrated"]["drum_scale_error"] = np.round(cal.scale - truth.drum_scale, 6).tolist()
-    if any(n.startswith("tension_bias") for n in session.calibration.names):  # force balance
+    if any(n.startswith("tension_bias") for n in outcome.calibration.names):  # force balance
         out["nominal"]["tension_bias_n"] = np.round(truth.tension_bias, 4).tolist()
         out["calibrated"]["tension_bias_error_n"] = np.round(
             cal.tension_bias - truth.tension_bias, 4
         ).tolist()
-    if "intrinsics" in session.calibration.names[-1]:  # the detector's intrinsics estimated
-        est = session.calibration.estimate[-8:]
+    if "intrinsics" in outcome.calibration.names[-1]:  # the detector's intrinsics estimated
+        est = outcome.calibration.estimate[-8:]
         out["nominal"]["intrinsics_error"] = np.round(truth.intrinsics_error, 6).tolist()
         out["calibrated"]["intrinsics_error"] = np.round(est - truth.intrinsics_error, 6).tolist()
     out["note"] = (
@@ -220,9 +231,9 @@ def truth_check(session: Session, nominal_geometry, nominal_T_base_tag) -> dict:
     return out
 
 
-def weighting_report(session: Session) -> dict:
+def weighting_report(outcome: Outcome) -> dict:
     """The noise model the solution was weighted with and how it came about (JSON-ready)."""
-    w = session.weighting
+    w = outcome.weighting
     components = None
     if w is not None:
         components = {
@@ -231,4 +242,4 @@ def weighting_report(session: Session) -> dict:
             "note": w.note,
             "tag_views_left_out": list(w.left_out),
         }
-    return {"noise_model": asdict(session.noise), "variance_components": components}
+    return {"noise_model": asdict(outcome.noise), "variance_components": components}

@@ -1,0 +1,1 @@
+"""Campaign files shipped with cdpr-twin (installed as cdpr_twin.campaigns)."""
