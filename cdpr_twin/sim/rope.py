@@ -1,0 +1,317 @@
+"""Cables as ropes and pulleys as built: the truth beyond the paper's cable and pulley models.
+
+:class:`RopePhysics` is :class:`~cdpr_twin.sim.physics.Physics` with the effects of
+:class:`~cdpr_twin.robot.realism.CableRealism` and :class:`~cdpr_twin.robot.realism.PulleyRealism`
+(magnitudes and sources: ``models/acrobot/README.md``); the estimators keep the paper's models.
+
+**The cable.** Cable i runs from its drum to the pulley (the *drum segment*, a fixed length
+l_d) and from the pulley's point A_i over the sheave to B_i (the *platform segment*, MuJoCo's
+tendon less its entry segment, length L). The winch pays out l0 (``act``, as in
+:class:`Physics`); the two segments share the unstretched length u_w + u_p = l0 + l_d. Each
+segment is a standard linear solid (a spring k∞ in parallel with a Maxwell arm k_m, dashpot
+η): with the strain ε = L/u − 1 and the dashpot's strain ε_d,
+
+    τ = E₀·ε − E_m·ε_d,      dε_d/dt = (ε − ε_d)/t_σ,
+
+where E₀ = ρ_i·E·S (the rope's instantaneous stiffness, ρ_i drawn per cable), E∞ = r·E₀ its
+relaxed one, E_m = E₀ − E∞ and t_σ = r·t_c, t_c the retardation (creep) time. Under a constant
+tension τ the strain creeps as τ/E∞ − τ(1/E∞ − 1/E₀)·exp(−t/t_c).
+
+**The sheave.** The cable slides over the sheave only when the tensions on its sides reach
+the sheave's efficiency η (bearing and bending losses, lumped): τ_low = η·τ_high, the high
+side the one pulling the cable over the sheave: reeling in, the winch side, τ_p = η·τ_w;
+paying out, the platform side, τ_w = η·τ_p. Between these
+the cable sticks (u_p fixed): a stick-slip (Coulomb) law with no rate dependence.
+
+**Integration.** MuJoCo integrates the platform with each platform segment's force affine in
+its length (``gainprm``/``biasprm`` of the winch actuator, implicit in the damping). The
+internal state (u_p, ε_d of each segment) is updated before every physics step: u_p by the
+stick-slip law (in closed form: a quadratic per cable),
+ε_d by the exact exponential of its linear ODE over one step with ε held (unconditionally
+stable for any t_σ). Without creep or friction the two segments share one strain, and the
+winch's stiffness is simply E₀/(l0 + l_d) (updated with the swivels, as :class:`Physics`).
+
+**The pulleys as built.** The cable's centreline wraps the sheave at r_p + d/2, the sheave's
+centre sits r_p + d/2 from the swivel axis (the cable comes down the axis), offset by a
+per-robot draw, and each swivel axis is tilted by a per-robot draw; the swivel turns about its
+tilted axis toward B_i.
+"""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+
+from cdpr_twin.math.se3 import quat_wxyz_from_matrix, so3_exp
+from cdpr_twin.robot.realism import CableRealism, PulleyRealism, robot_rng
+from cdpr_twin.sim.events import fire_due
+from cdpr_twin.sim.model import ModelError, as_slice, sheave_geom, side_site
+from cdpr_twin.sim.physics import Physics
+
+
+def sls_tension(
+    eps: np.ndarray, eps_d: np.ndarray, es0: np.ndarray, es_m: np.ndarray
+) -> np.ndarray:
+    """A standard linear solid's tension τ = E₀·ε − E_m·ε_d [N].
+
+    Args:
+        eps: strains ε = L/u − 1.
+        eps_d: the dashpots' strains ε_d.
+        es0: instantaneous stiffness E₀ = E∞ + E_m [N].
+        es_m: the Maxwell arm's stiffness E_m [N].
+    """
+    return es0 * eps - es_m * eps_d
+
+
+def relax_dashpots(eps_d: np.ndarray, eps: np.ndarray, decay: float) -> np.ndarray:
+    """Advance the dashpots' strains by one step h, in place: ε_d ← ε + (ε_d − ε)·decay.
+
+    The exact solution of dε_d/dt = (ε − ε_d)/t_σ for ε held over the step, decay =
+    exp(−h/t_σ): stable for any h/t_σ. Returns ``eps_d``.
+    """
+    eps_d -= eps
+    eps_d *= decay
+    eps_d += eps
+    return eps_d
+
+
+def relaxation_decay(cable: CableRealism, timestep: float) -> float:
+    """exp(−h/t_σ) of the dashpots over one physics step h [s], t_σ = r·t_c (1: no creep)."""
+    return math.exp(-timestep / (cable.relaxed_ratio * cable.creep_time))
+
+
+def draw_rope_ratios(cable: CableRealism, robot_seed: int, n: int) -> np.ndarray:
+    """One robot's rope stiffness ratios ρ_i = ρ·(1 + N(0, σ)) per cable. (n,)."""
+    rng = robot_rng(robot_seed, "cable")
+    return cable.rope_stiffness_ratio * (1.0 + rng.normal(0.0, cable.rope_stiffness_std, n))
+
+
+def draw_pulley_geometry(pulley: PulleyRealism, robot_seed: int, n: int) -> np.ndarray:
+    """One robot's swivel tilts and sheave offsets. (n, 4): [tilt x, tilt y (rad), δx, δy (m)].
+
+    δx moves the sheave's centre along its radius through the swivel axis, δy across its plane.
+    """
+    rng = robot_rng(robot_seed, "pulley")
+    tilt = rng.normal(0.0, pulley.swivel_tilt_std, (n, 2))
+    offset = rng.normal(0.0, pulley.sheave_offset_std, (n, 2))
+    return np.hstack([tilt, offset])
+
+
+def apply_pulley_geometry(
+    model: mujoco.MjModel, pulley: PulleyRealism, draws: np.ndarray, n: int
+) -> None:
+    """Move each sheave as built: wrap radius r_p + d/2, centre r_p + d/2 + δx from the axis, δy.
+
+    Edits the compiled model in place (the tendon wrap reads ``geom_size``/``geom_pos``).
+    """
+    name2id, obj = mujoco.mj_name2id, mujoco.mjtObj
+    for i in range(n):
+        geom = name2id(model, obj.mjOBJ_GEOM, sheave_geom(i))
+        side = name2id(model, obj.mjOBJ_SITE, side_site(i))
+        r = float(model.geom_size[geom, 0]) + 0.5 * pulley.wrap_diameter
+        model.geom_size[geom, 0] = r
+        centre = np.array([r + draws[i, 2], draws[i, 3], 0.0])
+        model.geom_pos[geom] = centre
+        model.site_pos[side] = centre - np.array([0.0, 0.0, 2.0 * r])
+
+
+class RopePhysics(Physics):
+    """:class:`Physics` with ropes for cables and pulleys as built (see the module).
+
+    Args:
+        model: as :class:`Physics` (its pulleys are moved as built here).
+        *args: as :class:`Physics`.
+        cable: the cables as ropes.
+        pulley: the pulleys as mechanisms and as built.
+        robot_seed: the truth seed (per-robot draws).
+        **kwargs: as :class:`Physics`.
+
+    Raises:
+        ModelError: a sheave with friction and no drum segment (the cable has nothing to
+            slide into).
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        *args,
+        cable: CableRealism,
+        pulley: PulleyRealism,
+        robot_seed: int = 0,
+        **kwargs,
+    ) -> None:
+        from cdpr_twin.sim.model import cable_count
+
+        n = cable_count(model)
+        self.pulley_draws = draw_pulley_geometry(pulley, robot_seed, n)
+        apply_pulley_geometry(model, pulley, self.pulley_draws, n)
+        super().__init__(model, *args, robot_seed=robot_seed, **kwargs)
+        if pulley.sheave_efficiency < 1.0 and cable.drum_segment <= 0.0:
+            raise ModelError(
+                "realism.pulley.sheave_efficiency: a sheave with friction needs "
+                "realism.cable.drum_segment > 0 m (the cable between drum and pulley)"
+            )
+        self.cable, self.pulley = cable, pulley
+        self.rope_ratio = draw_rope_ratios(cable, robot_seed, n)
+        self.es0 = self.geometry.es * self.rope_ratio
+        self._es = self.es0 * cable.relaxed_ratio  # the relaxed stiffness holds a rest
+        self.es_m = self.es0 - self._es
+        self.drum_segment = float(cable.drum_segment)
+        self.efficiency = float(pulley.sheave_efficiency)
+        self.stepwise = cable.viscoelastic or self.efficiency < 1.0
+        self._decay = relaxation_decay(cable, self.timestep)
+        self.u_p = np.zeros(n)  # the platform segments' unstretched lengths [m]
+        self.eps_d = np.zeros((2, n))  # the dashpots' strains: platform, drum segments
+        self.drum_tensions = np.zeros(n)  # the drum segments' tensions [N]
+        self._eps = np.zeros((2, n))
+        self._tendon_ids = as_slice(self._tendons)
+        self._tilt_rot = np.array([so3_exp(np.array([t[0], t[1], 0.0])) for t in self.pulley_draws])
+        self._tilt_quat = np.array([quat_wxyz_from_matrix(R) for R in self._tilt_rot])
+
+    # ------------------------------------------------------------------ truth
+    @property
+    def pulley_tensions(self) -> np.ndarray:
+        """The tensions on the winch side of the sheaves (the drum segments') (m,) [N]."""
+        if self.stepwise:
+            # (a slack drum segment pulls nothing)
+            return np.where(self.cable_enabled, np.maximum(self.drum_tensions, 0.0), 0.0)
+        return self.tensions
+
+    @property
+    def sensed_tensions(self) -> np.ndarray:
+        """What the tension sensors measure (m,) [N]: at the pulleys or at B_i (robot data)."""
+        at_pulley = mujoco.mj_name2id(
+            self.model, mujoco.mjtObj.mjOBJ_NUMERIC, "tension_sensor_at_pulley"
+        )
+        return self.pulley_tensions if at_pulley >= 0 else self.tensions
+
+    # ------------------------------------------------------------------ physics
+    def _rest_lengths(self, T_base_platform: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """Rest lengths holding τ with every segment relaxed at τ (a robot long at rest).
+
+        The platform segments' lengths are MuJoCo's own (tilted swivels, offset sheaves).
+        """
+        self.data.act[self._actuators] = 1.0  # (any state: only the lengths are read)
+        self.u_p, self.eps_d[:] = np.ones(self.n_cables), 0.0
+        self.place(T_base_platform)
+        length = self.data.ten_length[self._tendons] - self._entry
+        eps = tau / self._es
+        self.u_p = length / (1.0 + eps)
+        self.eps_d[:] = eps
+        self.drum_tensions = tau.copy()
+        return self.u_p + self.drum_segment / (1.0 + eps) - self.drum_segment
+
+    def refresh(self) -> None:
+        """Point each (tilted) swivel at its B_i and set the cables' forces."""
+        d = self.data
+        lvec = d.site_xpos[self._anchors] - self._a
+        local = np.einsum("nji,nj->ni", self._tilt_rot, lvec)  # in each swivel's tilted frame
+        half = 0.5 * np.arctan2(local[:, 1], local[:, 0])
+        yaw = np.zeros((self.n_cables, 4))
+        yaw[:, 0], yaw[:, 3] = np.cos(half), np.sin(half)
+        quat = self._quat_buf
+        for i in range(self.n_cables):
+            mujoco.mju_mulQuat(quat[i], self._tilt_quat[i], yaw[i])
+        d.mocap_quat[self._mocap] = quat
+        if self.stepwise:
+            self._update_rope(relax=False)
+            return
+        l0 = d.act[self._actuators]
+        on = (l0 > 0) & self.cable_enabled
+        k = np.divide(self.es0, l0 + self.drum_segment, out=np.zeros(self.n_cables), where=on)
+        self._gain[:, 0] = k
+        self._bias[:, :3] = k[:, None] * self._bias_unit
+
+    def step(self, n: int) -> None:
+        """Advance n physics steps (see :meth:`Physics.step`); ropes with state: one by one."""
+        if not self.stepwise:
+            super().step(n)
+            return
+        dt, m, d = self.timestep, self.model, self.data
+        while n > 0:
+            chunk = min(n, self.align_every)
+            chunk = fire_due(self._hooks, d.time, dt, chunk) if self._hooks else chunk
+            self.refresh()
+            if not self._servos.ideal:
+                rate = self._servos.run(chunk * dt)
+                d.ctrl[self._actuators] = self._stalled(rate * self._drum_ratio)
+            mujoco.mj_step(m, d)
+            for _ in range(chunk - 1):
+                self._update_rope(relax=True)
+                mujoco.mj_step(m, d)
+            self._update_rope(relax=True)
+            n -= chunk
+        self._check_state()
+
+    def _update_rope(self, relax: bool) -> None:
+        """Slide the cables over the sheaves, relax the dashpots, set the platform forces.
+
+        The hot path of stepwise ropes (once per physics step): few numpy operations.
+
+        Args:
+            relax: advance the dashpots by one physics step (False: only set the forces).
+        """
+        d, lw = self.data, self.drum_segment
+        length = d.ten_length[self._tendon_ids] - self._entry
+        l0 = d.act[self._actuators]
+        pull = self.es_m * self.eps_d  # (2, m) the Maxwell arms' part −E_m·ε_d, negated
+        if lw > 0.0:
+            total = l0 + lw
+            u = self._slide(length, total, pull)
+            eps_w = lw / (total - u) - 1.0
+            self.drum_tensions = sls_tension(eps_w, self.eps_d[1], self.es0, self.es_m)
+        else:
+            u = l0
+            eps_w = None
+        self.u_p = u
+        on = (l0 > 0) & self.cable_enabled
+        k = np.divide(self.es0, u, out=np.zeros(self.n_cables), where=on)
+        self._gain[:, 0] = 0.0
+        self._bias[:, 0] = k * (self._entry + u) + pull[0] * on
+        self._bias[:, 1] = -k
+        self._bias[:, 2] = k * -self._damping_time
+        if relax:
+            eps = self._eps
+            np.divide(length, u, out=eps[0])
+            eps[0] -= 1.0
+            eps[1] = eps[0] if eps_w is None else eps_w
+            relax_dashpots(self.eps_d, eps, self._decay)
+
+    def _slide(self, length: np.ndarray, total: np.ndarray, pull: np.ndarray) -> np.ndarray:
+        """The platform segments' unstretched lengths u_p after the stick-slip law. (m,) [m].
+
+        On a face of the friction cone, a·τ_w(u) = b·τ_p(u) with τ_w = E₀(l_d/(T − u) − 1) − P_w
+        and τ_p = E₀(L/u − 1) − P_p; times u(T − u) it is the quadratic
+        C u² − (A + B + C T) u + B T = 0 (A = a E₀ l_d, B = b E₀ L,
+        C = b(E₀ + P_p) − a(E₀ + P_w)), whose root near B T/(A + B) is taken in the form that
+        stays exact as C → 0 (no friction, equal arms).
+
+        Args:
+            length: (m,) the platform segments' lengths L [m].
+            total: (m,) the cables' unstretched lengths T = l0 + l_d [m].
+            pull: (2, m) the Maxwell arms' E_m·ε_d, platform and drum segments [N].
+        """
+        es0, lw, eta, u = self.es0, self.drum_segment, self.efficiency, self.u_p
+        if eta == 1.0:  # no friction: equal tensions
+            a = b = 1.0
+            slides = None
+        else:
+            # a slack side pulls nothing
+            tau_p = np.maximum(es0 * (length / u - 1.0) - pull[0], 0.0)
+            tau_w = np.maximum(es0 * (lw / (total - u) - 1.0) - pull[1], 0.0)
+            # the face of the friction cone each cable is on: the winch side pulls the cable
+            # over the sheave (reeling in), the platform side does (paying out), or neither
+            # (stuck: u_p stays)
+            platform_high = tau_w < eta * tau_p
+            slides = platform_high | (tau_p < eta * tau_w)
+            if not slides.any():
+                return u
+            a = np.where(platform_high, 1.0, eta)
+            b = np.where(platform_high, eta, 1.0)
+        big_a, big_b = a * es0 * lw, b * es0 * length
+        c = b * (es0 + pull[0]) - a * (es0 + pull[1])
+        half = big_a + big_b + c * total
+        root = 2.0 * big_b * total / (half + np.sqrt(half * half - 4.0 * c * big_b * total))
+        return root if slides is None else np.where(slides, root, u)

@@ -1,0 +1,187 @@
+"""Cables as ropes and pulleys as built (cdpr_twin/sim/rope.py) against closed forms.
+
+Each test checks one effect against an independent truth: Hooke's law on MuJoCo's own tendon
+length, the standard linear solid's creep and loss compliance, the Coulomb sheave's tension
+ratio and dead band, and the paper's pulley model in each tilted swivel's frame.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cdpr_twin.math.kinematics import anchor_points_base, pulley_lengths
+from cdpr_twin.math.se3 import pose_from_vector
+from cdpr_twin.options import OptionError
+from cdpr_twin.robot.realism import CableRealism, PulleyRealism, profile
+from cdpr_twin.sim import ModelError, build_robot
+from cdpr_twin.sim.rope import relax_dashpots, sls_tension
+
+T_P0 = pose_from_vector(np.array([0.112, -0.032, 0.301, math.radians(-12), math.radians(-10), 0]))
+ES = 348716.8  # ACROBOT's E·S [N] (robot.toml)
+
+
+def _robot(cable=None, pulley=None, seed=0):
+    from cdpr_twin.robot.deviations import DeviationSpec
+
+    return build_robot("acrobot", DeviationSpec(seed=seed), cable=cable, pulley=pulley).physics
+
+
+def test_ideal_and_acrobot_profiles_leave_the_paper_cable():
+    for name in ("ideal", "acrobot"):
+        r = profile(name)
+        assert r.cable == CableRealism() and r.pulley == PulleyRealism()
+        assert type(_robot(r.cable, r.pulley)).__name__ == "Physics"
+
+
+def test_rope_stiffness_and_drum_segment_follow_hookes_law_on_mujocos_length():
+    # τ = ρ_i·E·S·(L + l_d − (l0 + l_d))/(l0 + l_d): the whole cable from drum to B_i stretches
+    cable = CableRealism(rope_stiffness_ratio=0.6, rope_stiffness_std=0.05, drum_segment=1.2)
+    p = _robot(cable, seed=4)
+    ratios = p.rope_ratio
+    assert np.all(np.abs(ratios / 0.6 - 1) < 5 * 0.05) and ratios.std() > 0  # per cable
+    p.reset(T_P0)
+    l0 = p.rest_lengths
+    length = p.cable_lengths  # MuJoCo's wrapped tendon, less the entry segment
+    expected = ratios * ES * (length - l0) / (l0 + 1.2)
+    # the settled platform is at rest: the damping term (η·k·L̇) is below 1e-9 N
+    np.testing.assert_allclose(p.tensions, expected, rtol=0, atol=1e-6)
+
+
+def test_drum_segment_stretches_by_tau_l_over_es():
+    # the same platform pose and tensions with a 1.2 m drum segment need the winches to pay
+    # out τ·l/(E·S) less: the segment's stretch. Without it the tensions would be off by
+    # k·τ·l/(E·S) ≈ 0.4 N.
+    short, long_ = _robot(CableRealism()), _robot(CableRealism(drum_segment=1.2))
+    short.reset(T_P0)
+    tau = short.tensions
+    long_.reset(T_P0)
+    long_.data.act[long_._actuators] = short.rest_lengths - tau * 1.2 / ES
+    long_.place(T_P0)
+    long_.step(200)  # 0.1 s: it stays where it is, pulling as the short-cable robot does
+    # ε² l_d (5e-10 m) and the settle's residue bound the difference: ≪ 1e-3 N
+    np.testing.assert_allclose(long_.tensions, tau, rtol=0, atol=1e-3)
+    assert np.linalg.norm(long_.T_base_platform[:3, 3] - T_P0[:3, 3]) < 1e-8
+
+
+def _force_driven(tau_of_t, steps, h, es0, r, t_c):
+    """Strains of one SLS cable driven by a tension τ(t) [N] (solving τ = E₀ε − E_m ε_d)."""
+    es_m, decay = es0 * (1 - r), math.exp(-h / (r * t_c))
+    eps_d, eps = np.zeros(1), np.zeros(1)
+    out = np.empty(steps)
+    for k in range(steps):
+        eps[0] = (tau_of_t(k * h) + es_m * eps_d[0]) / es0
+        assert sls_tension(eps, eps_d, es0, es_m)[0] == pytest.approx(tau_of_t(k * h))
+        out[k] = eps[0]
+        relax_dashpots(eps_d, eps, decay)
+    return out
+
+
+def test_creep_under_a_tension_step_follows_the_analytic_response():
+    es0, r, t_c, h, tau0 = 2e5, 0.6, 1.0, 5e-4, 10.0
+    eps = _force_driven(lambda t: tau0, 6000, h, es0, r, t_c)
+    t = np.arange(6000) * h
+    j0, j_inf = 1 / es0, 1 / (r * es0)
+    analytic = tau0 * j_inf - tau0 * (j_inf - j0) * np.exp(-t / t_c)
+    # the dashpot sees ε held over each step: a lag of at most one step on the creep curve,
+    # h·max|dε/dt| = h·τ0(J∞ − J0)/t_c
+    np.testing.assert_allclose(eps, analytic, rtol=0, atol=h * tau0 * (j_inf - j0) / t_c)
+    assert eps[-1] - eps[0] > 0.9 * tau0 * (j_inf - j0)  # it did creep (≈ 95 % of ΔJ·τ0)
+
+
+def test_hysteresis_loop_energy_under_sinusoidal_load_equals_the_loss_compliance():
+    es0, r, t_c, h = 2e5, 0.6, 1.0, 5e-4
+    omega, mean, amp = 1.0 / t_c, 10.0, 4.0
+    period = round(2 * math.pi / omega / h)
+    cycles = 8  # the transient decays as exp(−t/t_c): e^(−44) after 7 cycles
+
+    def tau(t):
+        return mean + amp * math.sin(omega * t)
+
+    eps = _force_driven(tau, cycles * period + 1, h, es0, r, t_c)
+    last = slice((cycles - 1) * period, cycles * period + 1)
+    force = np.array([tau(k * h) for k in range(last.start, last.stop)])
+    energy = np.trapezoid(force, eps[last])  # ∮ τ dε (per unit length of cable: J/m)
+    d_j = 1 / (r * es0) - 1 / es0
+    loss = d_j * omega * t_c / (1 + (omega * t_c) ** 2)  # J'' of the SLS
+    # closed form πτ_a²J''; the one-step lag shifts the phase by ωh (5e-4 rad), the
+    # trapezoid errs by O((ωh)²): 1e-3 bounds both
+    assert energy == pytest.approx(math.pi * amp**2 * loss, rel=1e-3)
+
+
+def test_viscoelastic_robot_rests_where_it_was_reset_and_sensors_read_the_platform_side():
+    p = _robot(CableRealism(rope_stiffness_ratio=0.6, relaxed_ratio=0.6, creep_time=2.0))
+    p.reset(T_P0)
+    start = p.tensions.copy()
+    p.step(1000)  # 0.5 s: relaxed at its tensions, nothing creeps
+    assert np.linalg.norm(p.T_base_platform[:3, 3] - T_P0[:3, 3]) < 1e-8
+    np.testing.assert_allclose(p.sensed_tensions, start, rtol=0, atol=1e-5)
+
+
+def test_sheave_friction_gives_the_tension_ratio_and_dead_band_on_reversal():
+    eta, lw, rate = 0.95, 1.2, 2e-5
+    p = _robot(CableRealism(drum_segment=lw), PulleyRealism(sheave_efficiency=eta))
+    p.reset(T_P0)
+    rates = np.zeros(8)
+    rates[0] = -rate  # reel cable 1 in: the winch side pulls the cable over the sheave
+    p.advance(0.2, rates)
+    k = ES / p.rest_lengths[0]
+    # the platform side reads MuJoCo's force, a step behind the sheave and with its
+    # damping: k·(rate·h + η·|L̇|) ≲ 4e-3 N, against a difference of (1/η − 1)·τ ≈ 0.26 N
+    lag = 2 * k * (rate * p.timestep + 5e-4 * abs(p.data.ten_velocity[p._tendons][0]))
+    tau_p = p.tensions[0]
+    assert p.pulley_tensions[0] == pytest.approx(tau_p / eta, abs=lag / eta)
+    # reversal: the cable sticks on the sheave (the platform side keeps its tension) until
+    # the drum segment has gone from τ_p/η to η·τ_p: the winch pays out the segment's
+    # stretch difference, Δτ·l_d/E·S (≈ 2 µm)
+    u_stuck, before = p.u_p[0], p.pulley_tensions[0]
+    rates[0] = rate
+    travel, h = 0.0, p.timestep
+    while p.u_p[0] == u_stuck:
+        p.advance(h, rates)
+        travel += rate * h
+        assert travel < 1e-4, "the cable never slid back"
+    after = p.pulley_tensions[0]
+    assert after == pytest.approx(eta * p.tensions[0], abs=lag)
+    # (the platform still swings a little while stuck: τ_p drifts by ≲ 1 %)
+    assert before - after == pytest.approx((1 / eta - eta) * tau_p, rel=0.02)
+    # within one step of travel (1e-8 m of 1.7e-6 m)
+    assert travel == pytest.approx((before - after) * lw / ES, abs=rate * h)
+    p.advance(0.2, rates)  # paying out: the platform side pulls the cable over the sheave
+    assert p.pulley_tensions[0] == pytest.approx(eta * p.tensions[0], abs=lag)
+
+
+def test_tilted_swivels_and_cable_diameter_match_mujocos_wrapped_tendon():
+    d = 0.002
+    pulley = PulleyRealism(wrap_diameter=d, swivel_tilt_std=math.radians(2.0))
+    p = _robot(pulley=pulley, seed=1)
+    flat = _robot(pulley=PulleyRealism(wrap_diameter=d), seed=1)
+    p.place(T_P0)
+    flat.place(T_P0)
+    # the paper's pulley model in each swivel's tilted frame: A_i at the origin, the axis
+    # z, the wrap radius r_p + d/2 (independent of MuJoCo's wrap)
+    b = anchor_points_base(p.geometry, T_P0)
+    local = np.einsum("nji,nj->ni", p._tilt_rot, b - p.geometry.a_base)
+    r = np.full(8, 0.0045 + d / 2)
+    expected = pulley_lengths(np.zeros((8, 3)), r, local)
+    assert np.all(p.geometry.pulley_radius == r)
+    np.testing.assert_allclose(p.cable_lengths, expected, rtol=0, atol=1e-12)
+    # a 2° tilt moves the lengths by r·(wrap-angle change) + the chord's: tenths of a mm
+    change = np.abs(p.cable_lengths - flat.cable_lengths)
+    assert change.max() > 1e-5
+
+
+def test_bad_rope_and_pulley_fields_get_one_line_errors():
+    with pytest.raises(ModelError, match="drum_segment > 0"):
+        _robot(pulley=PulleyRealism(sheave_efficiency=0.9))
+    for cls, field, value in (
+        (PulleyRealism, "sheave_efficiency", 1.5),
+        (CableRealism, "relaxed_ratio", 2.0),
+        (CableRealism, "rope_stiffness_ratio", 1.2),
+        (CableRealism, "rope_stiffness_std", 0.5),
+    ):
+        with pytest.raises(OptionError, match=field) as err:
+            cls(**{field: value})
+        assert "\n" not in str(err.value)
