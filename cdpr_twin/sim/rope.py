@@ -166,6 +166,7 @@ class RopePhysics(Physics):
         self.eps_d = np.zeros((2, n))  # the dashpots' strains: platform, drum segments
         self.drum_tensions = np.zeros(n)  # the drum segments' tensions [N]
         self._eps = np.zeros((2, n))
+        self._u_rate = np.zeros(n)  # u̇_p over the last step [m/s]
         self._tendon_ids = as_slice(self._tendons)
         self._tilt_rot = np.array([so3_exp(np.array([t[0], t[1], 0.0])) for t in self.pulley_draws])
         self._tilt_quat = np.array([quat_wxyz_from_matrix(R) for R in self._tilt_rot])
@@ -199,6 +200,7 @@ class RopePhysics(Physics):
         length = self.data.ten_length[self._tendons] - self._entry
         eps = tau / self._es
         self.u_p = length / (1.0 + eps)
+        self._u_rate = np.zeros(self.n_cables)
         self.eps_d[:] = eps
         self.drum_tensions = tau.copy()
         return self.u_p + self.drum_segment / (1.0 + eps) - self.drum_segment
@@ -259,18 +261,28 @@ class RopePhysics(Physics):
         pull = self.es_m * self.eps_d  # (2, m) the Maxwell arms' part −E_m·ε_d, negated
         if lw > 0.0:
             total = l0 + lw
-            u = self._slide(length, total, pull)
+            u, follow = self._slide(length, total, pull)
             eps_w = lw / (total - u) - 1.0
             self.drum_tensions = sls_tension(eps_w, self.eps_d[1], self.es0, self.es_m)
         else:
-            u = l0
+            u, follow = l0, 0.0
             eps_w = None
+        if relax:  # the rate cable slides over the sheave (and out of the drum)
+            self._u_rate = (u - self.u_p) / self.timestep
         self.u_p = u
         on = (l0 > 0) & self.cable_enabled
         k = np.divide(self.es0, u, out=np.zeros(self.n_cables), where=on)
+        stretch = length / u
+        tau = k * length - self.es0 * on - pull[0] * on  # the platform segment's, at L
+        # MuJoCo steps from the next length L': τ(L') = τ + k_eff·(L' − L), where a sliding
+        # cable gives way, k_eff = k·(1 − (L/u)·∂u/∂L) (the segments in series)
+        stiff = k * (1.0 - stretch * follow)
         self._gain[:, 0] = 0.0
-        self._bias[:, 0] = k * (self._entry + u) + pull[0] * on
-        self._bias[:, 1] = -k
+        # the damping acts on the strain rate, ∝ L̇ − (L/u)·u̇ (a steady pay-out strains nothing)
+        self._bias[:, 0] = (
+            stiff * (length + self._entry) - tau + k * self._damping_time * stretch * self._u_rate
+        )
+        self._bias[:, 1] = -stiff
         self._bias[:, 2] = k * -self._damping_time
         if relax:
             eps = self._eps
@@ -279,8 +291,10 @@ class RopePhysics(Physics):
             eps[1] = eps[0] if eps_w is None else eps_w
             relax_dashpots(self.eps_d, eps, self._decay)
 
-    def _slide(self, length: np.ndarray, total: np.ndarray, pull: np.ndarray) -> np.ndarray:
-        """The platform segments' unstretched lengths u_p after the stick-slip law. (m,) [m].
+    def _slide(
+        self, length: np.ndarray, total: np.ndarray, pull: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray | float]:
+        """The platform segments' unstretched lengths u_p after the stick-slip law.
 
         On a face of the friction cone, a·τ_w(u) = b·τ_p(u) with τ_w = E₀(l_d/(T − u) − 1) − P_w
         and τ_p = E₀(L/u − 1) − P_p; times u(T − u) it is the quadratic
@@ -292,6 +306,10 @@ class RopePhysics(Physics):
             length: (m,) the platform segments' lengths L [m].
             total: (m,) the cables' unstretched lengths T = l0 + l_d [m].
             pull: (2, m) the Maxwell arms' E_m·ε_d, platform and drum segments [N].
+
+        Returns:
+            (m,) u_p [m], and (m,) ∂u_p/∂L: how a sliding cable follows its platform
+            segment's length (0 where it sticks).
         """
         es0, lw, eta, u = self.es0, self.drum_segment, self.efficiency, self.u_p
         if eta == 1.0:  # no friction: equal tensions
@@ -307,11 +325,16 @@ class RopePhysics(Physics):
             platform_high = tau_w < eta * tau_p
             slides = platform_high | (tau_p < eta * tau_w)
             if not slides.any():
-                return u
+                return u, 0.0
             a = np.where(platform_high, 1.0, eta)
             b = np.where(platform_high, eta, 1.0)
         big_a, big_b = a * es0 * lw, b * es0 * length
         c = b * (es0 + pull[0]) - a * (es0 + pull[1])
         half = big_a + big_b + c * total
         root = 2.0 * big_b * total / (half + np.sqrt(half * half - 4.0 * c * big_b * total))
-        return root if slides is None else np.where(slides, root, u)
+        # ∂u/∂L = −(∂g/∂L)/(∂g/∂u) for g = a·τ_w(u) − b·τ_p(u, L)
+        uw = total - root
+        follow = (b / root) / (a * lw / (uw * uw) + b * length / (root * root))
+        if slides is None:
+            return root, follow
+        return np.where(slides, root, u), np.where(slides, follow, 0.0)
