@@ -362,7 +362,7 @@ class PulleyRealism:
         swivel_tilt_std: per-robot std of each swivel axis' tilt about the base x and y axes
             [rad] (file: ``swivel_tilt_std_deg``).
         sheave_offset_std: per-robot std of each sheave centre's offset from its place, along
-            the sheave's radius through the swivel axis and across the sheave plane [m].
+            the sheave's radius through the swivel axis and along the axis [m].
     """
 
     sheave_efficiency: float = option(1.0, minimum=0.0, exclusive=True)

@@ -89,9 +89,11 @@ def draw_rope_ratios(cable: CableRealism, robot_seed: int, n: int) -> np.ndarray
 
 
 def draw_pulley_geometry(pulley: PulleyRealism, robot_seed: int, n: int) -> np.ndarray:
-    """One robot's swivel tilts and sheave offsets. (n, 4): [tilt x, tilt y (rad), δx, δy (m)].
+    """One robot's swivel tilts and sheave offsets. (n, 4): [tilt x, tilt y (rad), δx, δz (m)].
 
-    δx moves the sheave's centre along its radius through the swivel axis, δy across its plane.
+    δx moves the sheave's centre along its radius through the swivel axis, δz along the swivel
+    axis: both in the sheave's plane (MuJoCo's cylinder is unbounded along its axis, so an
+    offset across the plane would change nothing).
     """
     rng = robot_rng(robot_seed, "pulley")
     tilt = rng.normal(0.0, pulley.swivel_tilt_std, (n, 2))
@@ -102,7 +104,7 @@ def draw_pulley_geometry(pulley: PulleyRealism, robot_seed: int, n: int) -> np.n
 def apply_pulley_geometry(
     model: mujoco.MjModel, pulley: PulleyRealism, draws: np.ndarray, n: int
 ) -> None:
-    """Move each sheave as built: wrap radius r_p + d/2, centre r_p + d/2 + δx from the axis, δy.
+    """Move each sheave as built: wrap radius r_p + d/2, centre r_p + d/2 + δx from the axis, δz.
 
     Edits the compiled model in place (the tendon wrap reads ``geom_size``/``geom_pos``).
     """
@@ -112,7 +114,7 @@ def apply_pulley_geometry(
         side = name2id(model, obj.mjOBJ_SITE, side_site(i))
         r = float(model.geom_size[geom, 0]) + 0.5 * pulley.wrap_diameter
         model.geom_size[geom, 0] = r
-        centre = np.array([r + draws[i, 2], draws[i, 3], 0.0])
+        centre = np.array([r + draws[i, 2], 0.0, draws[i, 3]])
         model.geom_pos[geom] = centre
         model.site_pos[side] = centre - np.array([0.0, 0.0, 2.0 * r])
 
@@ -165,6 +167,9 @@ class RopePhysics(Physics):
         self.u_p = np.zeros(n)  # the platform segments' unstretched lengths [m]
         self.eps_d = np.zeros((2, n))  # the dashpots' strains: platform, drum segments
         self.drum_tensions = np.zeros(n)  # the drum segments' tensions [N]
+        self.sensor_at_pulley = (
+            mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "tension_sensor_at_pulley") >= 0
+        )
         self._eps = np.zeros((2, n))
         self._u_rate = np.zeros(n)  # u̇_p over the last step [m/s]
         self._tendon_ids = as_slice(self._tendons)
@@ -183,10 +188,7 @@ class RopePhysics(Physics):
     @property
     def sensed_tensions(self) -> np.ndarray:
         """What the tension sensors measure (m,) [N]: at the pulleys or at B_i (robot data)."""
-        at_pulley = mujoco.mj_name2id(
-            self.model, mujoco.mjtObj.mjOBJ_NUMERIC, "tension_sensor_at_pulley"
-        )
-        return self.pulley_tensions if at_pulley >= 0 else self.tensions
+        return self.pulley_tensions if self.sensor_at_pulley else self.tensions
 
     # ------------------------------------------------------------------ physics
     def _rest_lengths(self, T_base_platform: np.ndarray, tau: np.ndarray) -> np.ndarray:
@@ -265,7 +267,7 @@ class RopePhysics(Physics):
             eps_w = lw / (total - u) - 1.0
             self.drum_tensions = sls_tension(eps_w, self.eps_d[1], self.es0, self.es_m)
         else:
-            u, follow = l0, 0.0
+            u, follow = l0.copy(), 0.0  # (a copy: u_p is kept, act moves on)
             eps_w = None
         if relax:  # the rate cable slides over the sheave (and out of the drum)
             self._u_rate = (u - self.u_p) / self.timestep

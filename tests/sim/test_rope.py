@@ -173,6 +173,52 @@ def test_tilted_swivels_and_cable_diameter_match_mujocos_wrapped_tendon():
     assert change.max() > 1e-5
 
 
+def _belt(start, centre, r, end):
+    """Length of a cable from ``start`` around a circle counter-clockwise to ``end`` (2D).
+
+    Each straight part meets the circle at the tangent point where it runs along the
+    counter-clockwise direction (−sin θ, cos θ): the cable comes down the swivel axis, under
+    the sheave and out to B_i.
+    """
+
+    def tangent(p, arriving):
+        d = p - centre
+        base, spread = math.atan2(d[1], d[0]), math.acos(r / np.linalg.norm(d))
+        for theta in (base + spread, base - spread):
+            t = centre + r * np.array([math.cos(theta), math.sin(theta)])
+            run = (t - p) if arriving else (p - t)
+            if np.dot(run, [-math.sin(theta), math.cos(theta)]) > 0:
+                return theta, t
+        raise AssertionError("no tangent")
+
+    a, ta = tangent(start, True)
+    b, tb = tangent(end, False)
+    arc = r * ((b - a) % (2 * math.pi))
+    return np.linalg.norm(ta - start) + arc + np.linalg.norm(end - tb)
+
+
+def test_offset_sheaves_on_tilted_swivels_match_mujocos_wrapped_tendon():
+    # each cable in its swivel's plane: the entry point on the (tilted) axis h above A_i, the
+    # sheave's centre r + δx out and δz up, B_i at its distance from the axis and height
+    pulley = PulleyRealism(
+        wrap_diameter=0.002, swivel_tilt_std=math.radians(2.0), sheave_offset_std=0.001
+    )
+    p = _robot(pulley=pulley, seed=2)
+    p.place(T_P0)
+    b = anchor_points_base(p.geometry, T_P0)
+    local = np.einsum("nji,nj->ni", p._tilt_rot, b - p.geometry.a_base)
+    r, h = 0.0045 + 0.001, 0.03
+    for i in range(8):
+        dx, dz = p.pulley_draws[i, 2:]
+        end = np.array([np.hypot(*local[i, :2]), local[i, 2]])
+        expected = _belt(np.array([0.0, h]), np.array([r + dx, dz]), r, end)
+        tendon = p.data.ten_length[p._tendons][i]
+        # MuJoCo's wrap and this construction agree to round-off of metre-sized lengths
+        assert tendon == pytest.approx(expected, abs=1e-12)
+    # the offsets (1 mm here) are drawn: leaving them out of the construction fails
+    assert np.abs(p.pulley_draws[:, 2:]).max() > 1e-4
+
+
 def test_bad_rope_and_pulley_fields_get_one_line_errors():
     with pytest.raises(ModelError, match="drum_segment > 0"):
         _robot(pulley=PulleyRealism(sheave_efficiency=0.9))

@@ -1,0 +1,92 @@
+"""What each cable and pulley effect does to the four model-based estimators, and its price.
+
+Run: ``python benchmarks/rope_effects.py [--duration 25]``.
+
+The paper's open-loop scenario with the robot's geometry errors off (``[truth]`` stds zero,
+its seed kept for the per-robot draws), the camera off and no tension noise, so that the
+ideal twin's ``model_elastic_pulley`` matches the truth to numerical precision. Each case turns
+on one effect of ``[realism.cable]``/``[realism.pulley]`` (the ``acrobot_full`` magnitudes) on
+the ideal profile; the last ones turn them all on, then the whole ``acrobot_full`` profile.
+Per estimator it prints the RMS translation error over the run and the final one, at rest at
+p0 [mm], and the RMS rotation error [°]; and each case's real-time factor (the price of the
+effect; noisy on a shared machine: ``bench_scenarios.py`` measures it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+import cdpr_twin.sim  # noqa: F401  (defaults MUJOCO_GL=egl before mujoco is imported)
+from cdpr_twin.robot.realism import ACROBOT_FULL, CableRealism, PulleyRealism
+from cdpr_twin.run.runner import run
+from cdpr_twin.scenario.loading import load_scenario
+
+ROOT = Path(__file__).resolve().parent.parent
+MODELS = ("model_simple", "model_elastic", "model_pulley", "model_elastic_pulley")
+CABLE, PULLEY = ACROBOT_FULL["cable"], ACROBOT_FULL["pulley"]
+
+
+def _pick(table: dict, *names: str) -> dict:
+    return {n: table[n] for n in names}
+
+
+CASES: tuple[tuple[str, str, dict, dict], ...] = (
+    ("ideal (the paper's model)", "ideal", {}, {}),
+    ("rope stiffness", "ideal", _pick(CABLE, "rope_stiffness_ratio", "rope_stiffness_std"), {}),
+    ("drum segment", "ideal", _pick(CABLE, "drum_segment"), {}),
+    ("viscoelastic rope", "ideal", _pick(CABLE, "relaxed_ratio", "creep_time"), {}),
+    (
+        "sheave friction (+ drum segment)",
+        "ideal",
+        _pick(CABLE, "drum_segment"),
+        _pick(PULLEY, "sheave_efficiency"),
+    ),
+    ("cable diameter in the wrap", "ideal", {}, _pick(PULLEY, "wrap_diameter")),
+    (
+        "swivel tilt, sheave offset",
+        "ideal",
+        {},
+        _pick(PULLEY, "swivel_tilt_std", "sheave_offset_std"),
+    ),
+    ("all cable and pulley effects", "ideal", CABLE, PULLEY),
+    ("acrobot", "acrobot", {}, {}),
+    ("acrobot_full", "acrobot_full", CABLE, PULLEY),
+)
+
+
+def scenario(profile: str, cable: dict, pulley: dict, duration: float):
+    """paper_open_loop without geometry errors, camera or tension noise, with these effects."""
+    s = load_scenario(ROOT / "scenarios" / "paper_open_loop.toml").with_realism(profile)
+    s = s.with_overrides(camera=False, duration=duration)
+    if profile == "ideal":
+        s = s.without("tension_noise")
+    zero = {f: 0.0 for f in vars(s.truth) if f != "seed"}
+    realism = replace(s.realism, cable=CableRealism(**cable), pulley=PulleyRealism(**pulley))
+    return replace(s, truth=replace(s.truth, **zero), realism=realism)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--duration", type=float, default=25.0)
+    args = parser.parse_args()
+    head = " ".join(f"{m[6:]:>21s}" for m in MODELS)
+    print(f"paper_open_loop, {args.duration:g} s, geometry errors off, camera off")
+    print("per estimator: RMS / final translation error [mm], RMS rotation error [°]")
+    print(f"{'case':34s} {head} {'RTF':>6s}")
+    with tempfile.TemporaryDirectory() as tmp:
+        for i, (label, profile, cable, pulley) in enumerate(CASES):
+            result = run(scenario(profile, cable, pulley, args.duration), Path(tmp) / str(i))
+            est = result.summary["estimators"]
+            cells = " ".join(
+                f"{1e3 * e['rms_translation_m']:6.3f}/{1e3 * e['final_translation_m']:8.2e}"
+                f" {e['rms_rotation_deg']:5.3f}"
+                for e in (est[m] for m in MODELS)
+            )
+            print(f"{label:34s} {cells} {result.real_time_factor:5.1f}×", flush=True)
+
+
+if __name__ == "__main__":
+    main()
