@@ -38,9 +38,13 @@ EFFECTS: dict[str, tuple[dict, dict]] = {
         {},
     ),
     "drum segment": ({"drum_segment": _CABLE["drum_segment"]}, {}),
-    "viscoelastic rope": ({k: _CABLE[k] for k in ("relaxed_ratio", "creep_time")}, {}),
+    "strain damping": ({"strain_damping": True}, {}),
+    "viscoelastic rope": (
+        {k: _CABLE[k] for k in ("relaxed_ratio", "creep_time", "strain_damping")},
+        {},
+    ),
     "sheave friction": (
-        {"drum_segment": _CABLE["drum_segment"]},
+        {k: _CABLE[k] for k in ("drum_segment", "strain_damping")},
         {"sheave_efficiency": _PULLEY["sheave_efficiency"]},
     ),
     "pulley geometry": (
@@ -48,8 +52,8 @@ EFFECTS: dict[str, tuple[dict, dict]] = {
         {k: _PULLEY[k] for k in ("wrap_diameter", "swivel_tilt_std", "sheave_offset_std")},
     ),
 }
-"""The ``acrobot_full`` cable and pulley effects, one at a time (sheave friction needs the drum
-segment: its price is the difference of the two)."""
+"""The ``acrobot_full`` cable and pulley effects, one at a time (viscoelastic ropes need the
+strain damping, sheave friction also the drum segment: their price is the difference)."""
 
 
 def physics_only(seconds: float) -> float:

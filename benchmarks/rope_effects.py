@@ -37,11 +37,23 @@ CASES: tuple[tuple[str, str, dict, dict], ...] = (
     ("ideal (the paper's model)", "ideal", {}, {}),
     ("rope stiffness", "ideal", _pick(CABLE, "rope_stiffness_ratio", "rope_stiffness_std"), {}),
     ("drum segment", "ideal", _pick(CABLE, "drum_segment"), {}),
-    ("viscoelastic rope", "ideal", _pick(CABLE, "relaxed_ratio", "creep_time"), {}),
+    ("strain-rate damping", "ideal", _pick(CABLE, "strain_damping"), {}),
     (
-        "sheave friction (+ drum segment)",
+        "viscoelastic rope (+ strain damping)",
         "ideal",
-        _pick(CABLE, "drum_segment"),
+        _pick(CABLE, "relaxed_ratio", "creep_time", "strain_damping"),
+        {},
+    ),
+    (
+        "drum segment, strain damping",
+        "ideal",
+        _pick(CABLE, "drum_segment", "strain_damping"),
+        {},
+    ),
+    (
+        "sheave friction (+ drum, strain damping)",
+        "ideal",
+        _pick(CABLE, "drum_segment", "strain_damping"),
         _pick(PULLEY, "sheave_efficiency"),
     ),
     ("cable diameter in the wrap", "ideal", {}, _pick(PULLEY, "wrap_diameter")),
@@ -75,7 +87,7 @@ def main() -> None:
     head = " ".join(f"{m[6:]:>21s}" for m in MODELS)
     print(f"paper_open_loop, {args.duration:g} s, geometry errors off, camera off")
     print("per estimator: RMS / final translation error [mm], RMS rotation error [°]")
-    print(f"{'case':34s} {head} {'RTF':>6s}")
+    print(f"{'case':42s} {head} {'RTF':>6s}")
     with tempfile.TemporaryDirectory() as tmp:
         for i, (label, profile, cable, pulley) in enumerate(CASES):
             result = run(scenario(profile, cable, pulley, args.duration), Path(tmp) / str(i))
@@ -85,7 +97,7 @@ def main() -> None:
                 f" {e['rms_rotation_deg']:5.3f}"
                 for e in (est[m] for m in MODELS)
             )
-            print(f"{label:34s} {cells} {result.real_time_factor:5.1f}×", flush=True)
+            print(f"{label:42s} {cells} {result.real_time_factor:5.1f}×", flush=True)
 
 
 if __name__ == "__main__":

@@ -315,6 +315,10 @@ class CableRealism:
         relaxed_ratio: the rope's relaxed (long-term) stiffness over its instantaneous one
             (1: elastic, no creep).
         creep_time: the retardation time of the rope's creep under a constant tension [s].
+        strain_damping: the cable's damping (``damping_time_s`` × its stiffness) acts on its
+            strain rate; off, on L̇, the paper's cable's, which pulls k·η·l̇0 more on a cable
+            paid out at l̇0 (a steady pay-out strains nothing). Viscoelastic ropes and sheave
+            friction need it.
     """
 
     rope_stiffness_ratio: float = option(1.0, minimum=0.0, exclusive=True)
@@ -322,6 +326,7 @@ class CableRealism:
     drum_segment: float = option(0.0, minimum=0.0, unit="m")
     relaxed_ratio: float = option(1.0, minimum=0.0, exclusive=True)
     creep_time: float = option(math.inf, minimum=0.0, exclusive=True, infinite=True, unit="s")
+    strain_damping: bool = option(False)
 
     def __post_init__(self) -> None:
         check_relative_std("rope_stiffness_std", self.rope_stiffness_std, "rope's stiffness")
@@ -343,6 +348,11 @@ class CableRealism:
             MAX_POSITION_ERROR_STD * 100,
             " m (cable robots route their cables over tens of metres at most)",
         )
+        if self.viscoelastic and not self.strain_damping:
+            raise OptionError(
+                "strain_damping",
+                "viscoelastic ropes (relaxed_ratio < 1) need strain_damping = true",
+            )
 
     @property
     def viscoelastic(self) -> bool:
@@ -479,6 +489,7 @@ ACROBOT_FULL: dict[str, dict[str, Any]] = {
         "drum_segment": 1.2,
         "relaxed_ratio": 0.6,
         "creep_time": 1800.0,
+        "strain_damping": True,
     },
     "pulley": {
         "sheave_efficiency": 0.95,

@@ -155,12 +155,18 @@ class RopePhysics(Physics):
                 "realism.pulley.sheave_efficiency: a sheave with friction needs "
                 "realism.cable.drum_segment > 0 m (the cable between drum and pulley)"
             )
+        if pulley.sheave_efficiency < 1.0 and not cable.strain_damping:
+            raise ModelError(
+                "realism.pulley.sheave_efficiency: a sheave with friction needs "
+                "realism.cable.strain_damping = true (damping on L̇ would hold a paid-out cable)"
+            )
         self.cable, self.pulley = cable, pulley
         self.rope_ratio = draw_rope_ratios(cable, robot_seed, n)
         self.es0 = self.geometry.es * self.rope_ratio
         self._es = self.es0 * cable.relaxed_ratio  # the relaxed stiffness holds a rest
         self.es_m = self.es0 - self._es
         self.drum_segment = float(cable.drum_segment)
+        self._es0_lw = self.es0 * self.drum_segment
         self.efficiency = float(pulley.sheave_efficiency)
         self.stepwise = cable.viscoelastic or self.efficiency < 1.0
         self._decay = relaxation_decay(cable, self.timestep)
@@ -172,6 +178,7 @@ class RopePhysics(Physics):
         )
         self._eps = np.zeros((2, n))
         self._u_rate = np.zeros(n)  # u̇_p over the last step [m/s]
+        self._on = np.ones(n)  # 1 for an intact cable, 0 for a cut one
         self._tendon_ids = as_slice(self._tendons)
         self._tilt_rot = np.array([so3_exp(np.array([t[0], t[1], 0.0])) for t in self.pulley_draws])
         self._tilt_quat = np.array([quat_wxyz_from_matrix(R) for R in self._tilt_rot])
@@ -191,6 +198,12 @@ class RopePhysics(Physics):
         return self.pulley_tensions if self.sensor_at_pulley else self.tensions
 
     # ------------------------------------------------------------------ physics
+    def disable_cable(self, i: int) -> None:
+        """Cut cable i (from 0): see :meth:`Physics.disable_cable`."""
+        if 0 <= i < self.n_cables:
+            self._on[i] = 0.0
+        super().disable_cable(i)
+
     def _rest_lengths(self, T_base_platform: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """Rest lengths holding τ with every segment relaxed at τ (a robot long at rest).
 
@@ -198,6 +211,7 @@ class RopePhysics(Physics):
         """
         self.data.act[self._actuators] = 1.0  # (any state: only the lengths are read)
         self.u_p, self.eps_d[:] = np.ones(self.n_cables), 0.0
+        self._on[:] = 1.0  # (reset() enables every cable)
         self.place(T_base_platform)
         length = self.data.ten_length[self._tendons] - self._entry
         eps = tau / self._es
@@ -231,7 +245,10 @@ class RopePhysics(Physics):
     def step(self, n: int) -> None:
         """Advance n physics steps (see :meth:`Physics.step`); ropes with state: one by one."""
         if not self.stepwise:
-            super().step(n)
+            if self.cable.strain_damping:
+                self._step_damping_strain(n)
+            else:
+                super().step(n)
             return
         dt, m, d = self.timestep, self.model, self.data
         while n > 0:
@@ -246,6 +263,31 @@ class RopePhysics(Physics):
                 self._update_rope(relax=True)
                 mujoco.mj_step(m, d)
             self._update_rope(relax=True)
+            n -= chunk
+        self._check_state()
+
+    def _step_damping_strain(self, n: int) -> None:
+        """:meth:`Physics.step` with the damping on the strain rate, for ropes without state.
+
+        A cable of stiffness k = E₀/(l0 + l_d) strains at (L̇ − ((L + l_d)/(l0 + l_d))·l̇0)/
+        (l0 + l_d): its damping pulls k·η·(L̇ − ((L + l_d)/(l0 + l_d))·l̇0), l̇0 the winch's
+        rate over the chunk (MuJoCo's ``ctrl``).
+        """
+        dt, d = self.timestep, self.data
+        while n > 0:
+            chunk = min(n, self.align_every)
+            chunk = fire_due(self._hooks, d.time, dt, chunk) if self._hooks else chunk
+            self.refresh()
+            if not self._servos.ideal:
+                rate = self._servos.run(chunk * dt)
+                d.ctrl[self._actuators] = self._stalled(rate * self._drum_ratio)
+            lw = self.drum_segment
+            share = (d.ten_length[self._tendon_ids] - self._entry + lw) / (
+                d.act[self._actuators] + lw
+            )
+            paid = self._damping_time * share * d.ctrl[self._actuators]
+            self._bias[:, 0] = self._gain[:, 0] * (self._entry + paid)
+            mujoco.mj_step(self.model, d, nstep=chunk)
             n -= chunk
         self._check_state()
 
@@ -272,10 +314,10 @@ class RopePhysics(Physics):
         if relax:  # the rate cable slides over the sheave (and out of the drum)
             self._u_rate = (u - self.u_p) / self.timestep
         self.u_p = u
-        on = (l0 > 0) & self.cable_enabled
-        k = np.divide(self.es0, u, out=np.zeros(self.n_cables), where=on)
+        on = self._on  # (a cut cable pulls nothing)
+        k = self.es0 * on / u
         stretch = length / u
-        tau = k * length - self.es0 * on - pull[0] * on  # the platform segment's, at L
+        tau = (k * length - self.es0 - pull[0]) * on  # the platform segment's, at L
         # MuJoCo steps from the next length L': τ(L') = τ + k_eff·(L' − L), where a sliding
         # cable gives way, k_eff = k·(1 − (L/u)·∂u/∂L) (the segments in series)
         stiff = k * (1.0 - stretch * follow)
@@ -330,13 +372,15 @@ class RopePhysics(Physics):
                 return u, 0.0
             a = np.where(platform_high, 1.0, eta)
             b = np.where(platform_high, eta, 1.0)
-        big_a, big_b = a * es0 * lw, b * es0 * length
+        big_b = b * es0 * length
+        bt = big_b * total
         c = b * (es0 + pull[0]) - a * (es0 + pull[1])
-        half = big_a + big_b + c * total
-        root = 2.0 * big_b * total / (half + np.sqrt(half * half - 4.0 * c * big_b * total))
+        half = a * self._es0_lw + big_b + c * total
+        root = 2.0 * bt / (half + np.sqrt(half * half - 4.0 * c * bt))
         # ∂u/∂L = −(∂g/∂L)/(∂g/∂u) for g = a·τ_w(u) − b·τ_p(u, L)
-        uw = total - root
-        follow = (b / root) / (a * lw / (uw * uw) + b * length / (root * root))
+        uw2 = total - root
+        uw2 *= uw2
+        follow = b * root * uw2 / (a * lw * root * root + b * length * uw2)
         if slides is None:
             return root, follow
         return np.where(slides, root, u), np.where(slides, follow, 0.0)

@@ -112,7 +112,10 @@ def test_hysteresis_loop_energy_under_sinusoidal_load_equals_the_loss_compliance
 
 
 def test_viscoelastic_robot_rests_where_it_was_reset_and_sensors_read_the_platform_side():
-    p = _robot(CableRealism(rope_stiffness_ratio=0.6, relaxed_ratio=0.6, creep_time=2.0))
+    cable = CableRealism(
+        rope_stiffness_ratio=0.6, relaxed_ratio=0.6, creep_time=2.0, strain_damping=True
+    )
+    p = _robot(cable)
     p.reset(T_P0)
     start = p.tensions.copy()
     p.step(1000)  # 0.5 s: relaxed at its tensions, nothing creeps
@@ -122,7 +125,8 @@ def test_viscoelastic_robot_rests_where_it_was_reset_and_sensors_read_the_platfo
 
 def test_sheave_friction_gives_the_tension_ratio_and_dead_band_on_reversal():
     eta, lw, rate = 0.95, 1.2, 2e-5
-    p = _robot(CableRealism(drum_segment=lw), PulleyRealism(sheave_efficiency=eta))
+    cable = CableRealism(drum_segment=lw, strain_damping=True)
+    p = _robot(cable, PulleyRealism(sheave_efficiency=eta))
     p.reset(T_P0)
     rates = np.zeros(8)
     rates[0] = -rate  # reel cable 1 in: the winch side pulls the cable over the sheave
@@ -222,6 +226,10 @@ def test_offset_sheaves_on_tilted_swivels_match_mujocos_wrapped_tendon():
 def test_bad_rope_and_pulley_fields_get_one_line_errors():
     with pytest.raises(ModelError, match="drum_segment > 0"):
         _robot(pulley=PulleyRealism(sheave_efficiency=0.9))
+    with pytest.raises(ModelError, match="strain_damping = true"):
+        _robot(CableRealism(drum_segment=1.0), PulleyRealism(sheave_efficiency=0.9))
+    with pytest.raises(OptionError, match="strain_damping"):
+        CableRealism(relaxed_ratio=0.5, creep_time=10.0)
     for cls, field, value in (
         (PulleyRealism, "sheave_efficiency", 1.5),
         (CableRealism, "relaxed_ratio", 2.0),
