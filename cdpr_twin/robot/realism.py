@@ -5,8 +5,9 @@ magnitude from ``models/acrobot/README.md`` (its source named there), and each c
 off. What is robot data — the drum radius, the tension sensors' range, accuracy and
 repeatability — is not here: ``nan`` fields (and ``repeatability_noise``) take it from the
 robot description (``robot.toml`` → the model's ``<numeric>``; :func:`for_robot`).
-Profiles: ``profile = "ideal"`` is the twin before realism, bit for bit. Magnitudes come in two
-kinds, as physics dictates:
+Profiles: ``profile = "ideal"`` is the twin before realism, bit for bit; ``acrobot_full`` is
+``acrobot`` with the cables and pulleys as they are (:class:`CableRealism`,
+:class:`PulleyRealism`). Magnitudes come in two kinds, as physics dictates:
 
 - per robot (drawn from the truth seed, fixed across repetitions, like one physical robot):
   intrinsics calibration error, drum radius error, tension-sensor bias and gain;

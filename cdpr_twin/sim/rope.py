@@ -172,7 +172,8 @@ class RopePhysics(Physics):
         self._decay = relaxation_decay(cable, self.timestep)
         self.u_p = np.zeros(n)  # the platform segments' unstretched lengths [m]
         self.eps_d = np.zeros((2, n))  # the dashpots' strains: platform, drum segments
-        self.drum_tensions = np.zeros(n)  # the drum segments' tensions [N]
+        self.viscoelastic = cable.viscoelastic
+        self._no_pull = np.zeros((2, n))
         self.sensor_at_pulley = (
             mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "tension_sensor_at_pulley") >= 0
         )
@@ -187,10 +188,16 @@ class RopePhysics(Physics):
     @property
     def pulley_tensions(self) -> np.ndarray:
         """The tensions on the winch side of the sheaves (the drum segments') (m,) [N]."""
-        if self.stepwise:
-            # (a slack drum segment pulls nothing)
+        if self.stepwise and self.drum_segment > 0.0:
             return np.where(self.cable_enabled, np.maximum(self.drum_tensions, 0.0), 0.0)
         return self.tensions
+
+    @property
+    def drum_tensions(self) -> np.ndarray:
+        """The drum segments' elastic tensions at the last rope update (m,) [N] (< 0: slack)."""
+        lw = self.drum_segment
+        eps_w = lw / (self.data.act[self._actuators] + lw - self.u_p) - 1.0
+        return sls_tension(eps_w, self.eps_d[1], self.es0, self.es_m)
 
     @property
     def sensed_tensions(self) -> np.ndarray:
@@ -218,7 +225,6 @@ class RopePhysics(Physics):
         self.u_p = length / (1.0 + eps)
         self._u_rate = np.zeros(self.n_cables)
         self.eps_d[:] = eps
-        self.drum_tensions = tau.copy()
         return self.u_p + self.drum_segment / (1.0 + eps) - self.drum_segment
 
     def refresh(self) -> None:
@@ -302,12 +308,12 @@ class RopePhysics(Physics):
         d, lw = self.data, self.drum_segment
         length = d.ten_length[self._tendon_ids] - self._entry
         l0 = d.act[self._actuators]
-        pull = self.es_m * self.eps_d  # (2, m) the Maxwell arms' part −E_m·ε_d, negated
+        # (2, m) the Maxwell arms' part −E_m·ε_d, negated (zero for elastic ropes)
+        pull = self.es_m * self.eps_d if self.viscoelastic else self._no_pull
         if lw > 0.0:
             total = l0 + lw
             u, follow = self._slide(length, total, pull)
-            eps_w = lw / (total - u) - 1.0
-            self.drum_tensions = sls_tension(eps_w, self.eps_d[1], self.es0, self.es_m)
+            eps_w = lw / (total - u) - 1.0 if self.viscoelastic else None
         else:
             u, follow = l0.copy(), 0.0  # (a copy: u_p is kept, act moves on)
             eps_w = None
@@ -328,7 +334,7 @@ class RopePhysics(Physics):
         )
         self._bias[:, 1] = -stiff
         self._bias[:, 2] = k * -self._damping_time
-        if relax:
+        if relax and self.viscoelastic:
             eps = self._eps
             np.divide(length, u, out=eps[0])
             eps[0] -= 1.0
