@@ -123,6 +123,30 @@ def test_viscoelastic_robot_rests_where_it_was_reset_and_sensors_read_the_platfo
     np.testing.assert_allclose(p.sensed_tensions, start, rtol=0, atol=1e-5)
 
 
+def test_held_robot_relaxes_its_tensions_as_the_standard_linear_solid():
+    # the platform held at its pose and the winches idle: each cable's strain is constant, and
+    # a rope loaded at once relaxes as τ(t) = E∞ε + E_m·ε·e^(−t/t_σ), t_σ = r·t_c, which the
+    # tension sensors read from MuJoCo's force
+    r, t_c = 0.6, 0.5
+    cable = CableRealism(relaxed_ratio=r, creep_time=t_c, strain_damping=True)
+    p = _robot(cable)
+    p.reset(T_P0)
+    p.eps_d[:] = 0.0  # the dashpots unstretched: the rope has just been loaded
+    eps = p.cable_lengths / p.rest_lengths - 1.0
+    steps = 600
+    for _ in range(steps):
+        p.step(1)
+        p.place(T_P0)  # (zero velocities: no damping force either)
+    t = steps * p.timestep
+    es0 = ES * np.ones(8)
+    expected = es0 * r * eps + es0 * (1 - r) * eps * math.exp(-t / (r * t_c))
+    # the dashpot's update is exact for a strain held constant; a step's motion before each
+    # hold strains the cable by ~1e-12: round-off of metre lengths
+    np.testing.assert_allclose(p.sensed_tensions, expected, rtol=1e-6)
+    # it did relax, from E₀ε toward E∞ε (at t = t_σ: 0.75·E₀ε)
+    assert np.all(p.sensed_tensions < 0.8 * es0 * eps)
+
+
 def test_sheave_friction_gives_the_tension_ratio_and_dead_band_on_reversal():
     eta, lw, rate = 0.95, 1.2, 2e-5
     cable = CableRealism(drum_segment=lw, strain_damping=True)
