@@ -1,6 +1,8 @@
 """What each cable and pulley effect does to the four model-based estimators, and its price.
 
-Run: ``python benchmarks/rope_effects.py [--duration 25]``.
+Run: ``python benchmarks/rope_effects.py [--duration 25]``, or ``--price`` for the physics
+alone: the time of a physics step with each effect (the fastest of several interleaved
+rounds, which a loaded machine slows least).
 
 The paper's open-loop scenario with the robot's geometry errors off (``[truth]`` stds zero,
 its seed kept for the per-robot draws), the camera off and no tension noise, so that the
@@ -15,14 +17,19 @@ effect; noisy on a shared machine: ``bench_scenarios.py`` measures it).
 from __future__ import annotations
 
 import argparse
+import math
 import tempfile
+import time
 from dataclasses import replace
 from pathlib import Path
+
+import numpy as np
 
 import cdpr_twin.sim  # noqa: F401  (defaults MUJOCO_GL=egl before mujoco is imported)
 from cdpr_twin.robot.realism import ACROBOT_FULL, CableRealism, PulleyRealism
 from cdpr_twin.run.runner import run
 from cdpr_twin.scenario.loading import load_scenario
+from cdpr_twin.sim import build_robot
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ("model_simple", "model_elastic", "model_pulley", "model_elastic_pulley")
@@ -80,10 +87,48 @@ def scenario(profile: str, cable: dict, pulley: dict, duration: float):
     return replace(s, truth=replace(s.truth, **zero), realism=realism)
 
 
+def price(rounds: int = 7, seconds: float = 1.0) -> None:
+    """Print the physics step's time with each effect: ACROBOT at p0, winches swinging."""
+    s = load_scenario(ROOT / "scenarios" / "paper_open_loop.toml")
+    robots = {}
+    for label, profile, cable, pulley in CASES:
+        if profile != "ideal":
+            continue
+        built = build_robot(
+            s.model.file,
+            s.truth,
+            s.model.timestep,
+            s.model.align_every,
+            cable=CableRealism(**cable),
+            pulley=PulleyRealism(**pulley),
+        )
+        built.physics.reset(s.start_pose)
+        robots[label] = built.physics
+    best = dict.fromkeys(robots, math.inf)
+    ticks = round(seconds / s.model.control_period)
+    for _ in range(rounds):
+        for label, physics in robots.items():
+            t0 = time.perf_counter()
+            for k in range(ticks):
+                # ±1 mm/s, reversing every 0.2 s: the sheaves stick and slip
+                rate = 1e-3 * math.copysign(1.0, math.sin(2 * math.pi * 2.5 * k / 25))
+                physics.advance(s.model.control_period, rate * (np.arange(8) % 2 - 0.5))
+            best[label] = min(best[label], time.perf_counter() - t0)
+    steps = ticks * round(s.model.control_period / s.model.timestep)
+    base = best[CASES[0][0]]
+    print(f"physics alone, fastest of {rounds} rounds of {seconds:g} s")
+    for label, t in best.items():
+        print(f"{label:42s} {1e6 * t / steps:6.1f} µs/step  {t / base:5.2f}× the ideal")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=25.0)
+    parser.add_argument("--price", action="store_true", help="time the physics step only")
     args = parser.parse_args()
+    if args.price:
+        price()
+        return
     head = " ".join(f"{m[6:]:>21s}" for m in MODELS)
     print(f"paper_open_loop, {args.duration:g} s, geometry errors off, camera off")
     print("per estimator: RMS / final translation error [mm], RMS rotation error [°]")

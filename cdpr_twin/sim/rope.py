@@ -166,7 +166,6 @@ class RopePhysics(Physics):
         self._es = self.es0 * cable.relaxed_ratio  # the relaxed stiffness holds a rest
         self.es_m = self.es0 - self._es
         self.drum_segment = float(cable.drum_segment)
-        self._es0_lw = self.es0 * self.drum_segment
         self.efficiency = float(pulley.sheave_efficiency)
         self.stepwise = cable.viscoelastic or self.efficiency < 1.0
         self._decay = relaxation_decay(cable, self.timestep)
@@ -362,31 +361,46 @@ class RopePhysics(Physics):
             segment's length (0 where it sticks).
         """
         es0, lw, eta, u = self.es0, self.drum_segment, self.efficiency, self.u_p
-        if eta == 1.0:  # no friction: equal tensions
-            a = b = 1.0
-            slides = None
-        else:
+        if eta == 1.0:  # no friction: equal tensions, every cable slides (numpy, vectorised)
+            return _face(es0, lw, 1.0, 1.0, length, total, pull)
+        # with friction, cable by cable in floats: numpy's per-call cost dominates on 8 cables
+        u_new, follow = u.copy(), np.zeros(len(u))
+        rows = np.stack([es0, length, total, u, pull[0], pull[1]], axis=1).tolist()
+        for i, (e, ln, tot, ui, pp, pw) in enumerate(rows):
             # a slack side pulls nothing
-            tau_p = np.maximum(es0 * (length / u - 1.0) - pull[0], 0.0)
-            tau_w = np.maximum(es0 * (lw / (total - u) - 1.0) - pull[1], 0.0)
-            # the face of the friction cone each cable is on: the winch side pulls the cable
-            # over the sheave (reeling in), the platform side does (paying out), or neither
-            # (stuck: u_p stays)
-            platform_high = tau_w < eta * tau_p
-            slides = platform_high | (tau_p < eta * tau_w)
-            if not slides.any():
-                return u, 0.0
-            a = np.where(platform_high, 1.0, eta)
-            b = np.where(platform_high, eta, 1.0)
-        big_b = b * es0 * length
-        bt = big_b * total
-        c = b * (es0 + pull[0]) - a * (es0 + pull[1])
-        half = a * self._es0_lw + big_b + c * total
-        root = 2.0 * bt / (half + np.sqrt(half * half - 4.0 * c * bt))
-        # ∂u/∂L = −(∂g/∂L)/(∂g/∂u) for g = a·τ_w(u) − b·τ_p(u, L)
-        uw2 = total - root
-        uw2 *= uw2
-        follow = b * root * uw2 / (a * lw * root * root + b * length * uw2)
-        if slides is None:
-            return root, follow
-        return np.where(slides, root, u), np.where(slides, follow, 0.0)
+            tau_p = max(e * (ln / ui - 1.0) - pp, 0.0)
+            tau_w = max(e * (lw / (tot - ui) - 1.0) - pw, 0.0)
+            # the face of the friction cone: the platform side pulls the cable over the sheave
+            # (paying out), the winch side does (reeling in), or neither (stuck: u_p stays)
+            if tau_w < eta * tau_p:
+                a, b = 1.0, eta
+            elif tau_p < eta * tau_w:
+                a, b = eta, 1.0
+            else:
+                continue
+            u_new[i], follow[i] = _face_one(e, lw, a, b, ln, tot, pp, pw)
+        return u_new, follow
+
+
+def _face(es0, lw, a, b, length, total, pull):
+    """u_p and ∂u_p/∂L on a face a·τ_w = b·τ_p of the friction cone (see ``_slide``)."""
+    big_b = b * es0 * length
+    bt = big_b * total
+    c = b * (es0 + pull[0]) - a * (es0 + pull[1])
+    half = a * es0 * lw + big_b + c * total
+    root = 2.0 * bt / (half + np.sqrt(half * half - 4.0 * c * bt))
+    # ∂u/∂L = −(∂g/∂L)/(∂g/∂u) for g = a·τ_w(u) − b·τ_p(u, L)
+    uw2 = total - root
+    uw2 *= uw2
+    return root, b * root * uw2 / (a * lw * root * root + b * length * uw2)
+
+
+def _face_one(e, lw, a, b, length, total, pp, pw) -> tuple[float, float]:
+    """:func:`_face` for one cable, in floats."""
+    big_b = b * e * length
+    bt = big_b * total
+    c = b * (e + pp) - a * (e + pw)
+    half = a * e * lw + big_b + c * total
+    root = 2.0 * bt / (half + math.sqrt(half * half - 4.0 * c * bt))
+    uw2 = (total - root) ** 2
+    return root, b * root * uw2 / (a * lw * root * root + b * length * uw2)
