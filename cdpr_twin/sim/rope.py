@@ -20,16 +20,18 @@ tension τ the strain creeps as τ/E∞ − τ(1/E∞ − 1/E₀)·exp(−t/t_c)
 **The sheave.** The cable slides over the sheave only when the tensions on its sides reach
 the sheave's efficiency η (bearing and bending losses, lumped): τ_low = η·τ_high, the high
 side the one pulling the cable over the sheave: reeling in, the winch side, τ_p = η·τ_w;
-paying out, the platform side, τ_w = η·τ_p. Between these
-the cable sticks (u_p fixed): a stick-slip (Coulomb) law with no rate dependence.
+paying out, the platform side, τ_w = η·τ_p. Between these the cable sticks (u_p fixed): a
+stick-slip (Coulomb) law with no rate dependence.
 
-**Integration.** MuJoCo integrates the platform with each platform segment's force affine in
-its length (``gainprm``/``biasprm`` of the winch actuator, implicit in the damping). The
-internal state (u_p, ε_d of each segment) is updated before every physics step: u_p by the
-stick-slip law (in closed form: a quadratic per cable),
-ε_d by the exact exponential of its linear ODE over one step with ε held (unconditionally
-stable for any t_σ). Without creep or friction the two segments share one strain, and the
-winch's stiffness is simply E₀/(l0 + l_d) (updated with the swivels, as :class:`Physics`).
+**Integration.** The internal state (u_p, ε_d of each segment) is updated before every
+physics step: u_p by the stick-slip law (in closed form: a quadratic per cable), ε_d by the
+exact exponential of its linear ODE over one step with ε held (unconditionally stable for any
+t_σ). MuJoCo then steps the platform with each cable's force linearised about that state in
+the tendon's length (``gainprm``/``biasprm`` of the winch actuator): the platform segment's
+stiffness E₀/u_p while the cable sticks, the two segments' in series while it slides; the
+damping (``cable_damping_time`` × that stiffness, implicit in MuJoCo) acts on the strain rate.
+Without creep or friction the two segments share one strain, and the winch's stiffness is
+simply E₀/(l0 + l_d), refreshed with the swivels as in :class:`Physics`.
 
 **The pulleys as built.** The cable's centreline wraps the sheave at r_p + d/2, the sheave's
 centre sits r_p + d/2 from the swivel axis (the cable comes down the axis), offset by a
