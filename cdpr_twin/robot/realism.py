@@ -296,6 +296,11 @@ MAX_WRAP_DIAMETER = 0.05
 of 1–12 mm; a 5 cm one is a hawser on another machine."""
 
 
+MAX_BEARING_FRICTION = 0.05
+"""The largest bearing friction coefficient μ: a rolling bearing has 0.001–0.002, a plain one
+0.01–0.02 (Koyo catalogue, "Friction coefficient of bearings", Table 4-1)."""
+
+
 @dataclass(frozen=True)
 class CableRealism:
     """The cables as ropes (all off: Hooke's law with the robot's E·S, the paper's cable).
@@ -374,12 +379,19 @@ class PulleyRealism:
             [rad] (file: ``swivel_tilt_std_deg``).
         sheave_offset_std: per-robot std of each sheave centre's offset from its place, along
             the sheave's radius through the swivel axis and along the axis [m].
+        swivel_friction: the swivel bearing's friction coefficient μ (Coulomb: the friction
+            moment μ·(d/2)·P under the cable's load P on the swivel); the swivel turns toward
+            B_i only where the cable's moment about its axis exceeds it (0: it always points
+            at B_i, the paper's eq. 20).
+        swivel_bore: the swivel bearing's bore d [m].
     """
 
     sheave_efficiency: float = option(1.0, minimum=0.0, exclusive=True)
     wrap_diameter: float = option(0.0, minimum=0.0, unit="m")
     swivel_tilt_std: float = option(0.0, minimum=0.0, unit="deg")
     sheave_offset_std: float = option(0.0, minimum=0.0, unit="m")
+    swivel_friction: float = option(0.0, minimum=0.0)
+    swivel_bore: float = option(0.008, minimum=0.0, exclusive=True, unit="m")
 
     def __post_init__(self) -> None:
         check_at_most(
@@ -402,6 +414,15 @@ class PulleyRealism:
             self.sheave_offset_std,
             MAX_PULLEY_RADIUS_STD,
             " m (sheaves are placed within tenths of a millimetre; set the exit points)",
+        )
+        check_at_most(
+            "swivel_friction",
+            self.swivel_friction,
+            MAX_BEARING_FRICTION,
+            " (rolling bearings 0.001–0.002, plain bearings 0.01–0.02)",
+        )
+        check_at_most(
+            "swivel_bore", self.swivel_bore, 0.05, " m (a small pulley's swivel turns on mm bores)"
         )
 
     @property
@@ -497,6 +518,8 @@ ACROBOT_FULL: dict[str, dict[str, Any]] = {
         "wrap_diameter": 0.002,
         "swivel_tilt_std": math.radians(0.5),
         "sheave_offset_std": 0.0002,
+        "swivel_friction": 0.0015,
+        "swivel_bore": 0.008,
     },
 }
 """The ``acrobot_full`` profile: ``acrobot`` and the cables and pulleys as they are (each

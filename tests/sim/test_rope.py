@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import math
 
+import mujoco
 import numpy as np
 import pytest
+from scipy.optimize import brentq
 
-from cdpr_twin.math.kinematics import anchor_points_base, pulley_lengths
+from cdpr_twin.math.kinematics import anchor_points_base, cable_lengths, pulley_lengths
 from cdpr_twin.math.se3 import pose_from_vector
 from cdpr_twin.options import OptionError
 from cdpr_twin.robot.realism import CableRealism, PulleyRealism, profile
@@ -259,7 +261,147 @@ def test_bad_rope_and_pulley_fields_get_one_line_errors():
         (CableRealism, "relaxed_ratio", 2.0),
         (CableRealism, "rope_stiffness_ratio", 1.2),
         (CableRealism, "rope_stiffness_std", 0.5),
+        (PulleyRealism, "swivel_friction", 0.2),
     ):
         with pytest.raises(OptionError, match=field) as err:
             cls(**{field: value})
         assert "\n" not in str(err.value)
+
+
+def _groove_length(i, p, xyz, h=0.03):
+    """The cable from the entry (h up the axis) in the groove of swivel i, out to B at xyz.
+
+    xyz is B in the swivel's frame (x in the sheave's plane, z up the axis): the cable wraps
+    the sheave as the belt to B's projection (x, z) on the plane, and its free span, a
+    tangent of length √(|(x, z) − c|² − r²), takes B's offset y from the plane.
+    """
+    r = p._wrap_radius[i]
+    c = np.array([r + p.pulley_draws[i, 2], p.pulley_draws[i, 3]])
+    end = np.array([xyz[0], xyz[2]])
+    span = math.sqrt(np.sum((end - c) ** 2) - r * r)
+    return _belt(np.array([0.0, h]), c, r, end) - span + math.hypot(span, xyz[1])
+
+
+def _static_lag(i, p, rho, z, friction_arm, e=1e-6):
+    """The lag α* where the cable's moment meets the bearing's friction, by virtual work.
+
+    The moment per newton of tension is ∂L/∂α of the groove's length (B turned by α about
+    the axis), the bearing's load per newton |û + ẑ| with û = ∂L/∂B (central differences,
+    truncation O(e²) ≈ 1e-12 relative).
+    """
+
+    def at(a):
+        return np.array([rho * math.cos(a), rho * math.sin(a), z])
+
+    def balance(a):
+        moment = (_groove_length(i, p, at(a + e)) - _groove_length(i, p, at(a - e))) / (2 * e)
+        steps = e * np.eye(3)
+        u = [_groove_length(i, p, at(a) + s) - _groove_length(i, p, at(a) - s) for s in steps]
+        return moment - friction_arm * np.linalg.norm(np.array(u) / (2 * e) + [0, 0, 1])
+
+    return brentq(balance, 1e-4, 0.5, xtol=1e-14)
+
+
+def _swivel_frame(p, T):
+    b = anchor_points_base(p.geometry, T)
+    local = np.einsum("nji,nj->ni", p._tilt_rot, b - p.geometry.a_base)
+    return np.arctan2(local[:, 1], local[:, 0]), np.hypot(local[:, 0], local[:, 1]), local[:, 2]
+
+
+def test_swivel_lags_where_the_cables_moment_meets_its_bearings_friction():
+    mu, bore = 0.01, 0.008
+    pulley = PulleyRealism(
+        wrap_diameter=0.002,
+        swivel_tilt_std=math.radians(2.0),
+        sheave_offset_std=0.0002,
+        swivel_friction=mu,
+        swivel_bore=bore,
+    )
+    p = _robot(pulley=pulley, seed=2)
+    p.reset(T_P0)
+    p.place(p.T_base_platform)  # (at rest, each swivel aligned with its B_i)
+    psi0 = _swivel_frame(p, p.T_base_platform)[0]
+    T1 = T_P0.copy()
+    T1[0, 3] += 0.03
+    # 3 cm along x in 0.5 s: each azimuth ψ moves one way by up to 0.05 rad
+    rates = (
+        cable_lengths(p.geometry, T1, "pulley") - cable_lengths(p.geometry, T_P0, "pulley")
+    ) / 0.5
+    p.advance(0.5, rates)
+    # the law at the last pose (mj_step leaves the sites one step behind qpos), where the
+    # platform still moves the same way
+    mujoco.mj_forward(p.model, p.data)
+    p.refresh()
+    psi, rho, z = _swivel_frame(p, p.T_base_platform)
+    turned = psi - psi0
+    slid = 0
+    for i in range(8):
+        a_star = _static_lag(i, p, rho[i], z[i], mu * bore / 2)
+        if abs(turned[i]) < a_star:
+            # within the friction cone all along: the swivel never moved
+            assert p.swivel_lag[i] == pytest.approx(turned[i], abs=1e-9)
+            continue
+        slid += 1
+        # the cable leaves the groove where its projection is tangent, which is not where
+        # the groove's length is stationary: the exit's moment and the virtual work differ
+        # by cos θ(1 + cos θ)·α²/2 ≤ α² relative
+        assert p.swivel_lag[i] == pytest.approx(math.copysign(a_star, turned[i]), rel=a_star**2)
+    assert slid >= 2 and slid <= 6  # both cases seen
+    # the winches stop (the platform overshoots a little), then reverse by less than 2α*:
+    # every swivel sticks where the stop left it, its lag follows ψ back
+    p.advance(0.05, np.zeros(8))
+    mujoco.mj_forward(p.model, p.data)
+    p.refresh()
+    psi = _swivel_frame(p, p.T_base_platform)[0]
+    yaw, lag = p._swivel_yaw.copy(), p.swivel_lag.copy()
+    p.advance(0.125, -rates)
+    mujoco.mj_forward(p.model, p.data)
+    p.refresh()
+    psi_back = _swivel_frame(p, p.T_base_platform)[0]
+    assert np.abs(psi_back - psi).max() > 0.005
+    # (a swivel left on the cone's face may re-slip by round-off of ψ − φ: 1e-11 rad)
+    np.testing.assert_allclose(p._swivel_yaw, yaw, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(p.swivel_lag - lag, psi_back - psi, rtol=0, atol=1e-9)
+
+
+def test_lagging_swivel_lengthens_its_cable_in_the_groove_not_as_mujocos_helix():
+    p = _robot(pulley=PulleyRealism(wrap_diameter=0.002, swivel_friction=0.05), seed=3)
+    p.reset(T_P0)
+    T = p.T_base_platform
+    p.place(T)
+    aligned = p.data.ten_length[p._tendons].copy()
+    psi, rho, z = _swivel_frame(p, T)
+    lag = np.linspace(-0.03, 0.03, 8)  # within the friction cone (α* ≥ 0.1 rad): held
+    p._swivel_yaw = psi - lag
+    p.refresh()
+    mujoco.mj_forward(p.model, p.data)
+    np.testing.assert_allclose(p.swivel_lag, lag, rtol=0, atol=1e-12)
+    groove = np.array(
+        [
+            _groove_length(i, p, [rho[i] * math.cos(lag[i]), rho[i] * math.sin(lag[i]), z[i]])
+            - _groove_length(i, p, [rho[i], 0.0, z[i]])
+            for i in range(8)
+        ]
+    )
+    assert np.all(groove[lag != 0] > 0)  # a lagging swivel lengthens its cable
+    # metre-sized lengths differenced: round-off 1e-15 m
+    np.testing.assert_allclose(p.groove_stretch, groove, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(p.cable_lengths, aligned - 0.03 + groove, rtol=0, atol=1e-15)
+    # Hooke's law on that length (at rest, no damping force): ≈ 0.1 N more at 0.03 rad
+    l0 = p.rest_lengths
+    np.testing.assert_allclose(p.tensions, ES * (p.cable_lengths - l0) / l0, rtol=0, atol=1e-8)
+    # MuJoCo's wrap of a turned sheave is a helix over the whole tendon, √(D² + y²) with D
+    # the belt to B's projection: shorter than the aligned cable where the groove is longer
+    for i in range(8):
+        half = 0.5 * (psi[i] - lag[i])
+        p.data.mocap_quat[p._mocap][i] = [math.cos(half), 0.0, 0.0, math.sin(half)]
+    mujoco.mj_kinematics(p.model, p.data)
+    mujoco.mj_tendon(p.model, p.data)
+    r = p._wrap_radius[0]
+    for i in range(8):
+        end = np.array([rho[i] * math.cos(lag[i]), z[i]])
+        belt = _belt(np.array([0.0, 0.03]), np.array([r, 0.0]), r, end)
+        helix = math.hypot(belt, rho[i] * math.sin(lag[i]))
+        assert p.data.ten_length[p._tendons][i] == pytest.approx(helix, abs=1e-12)
+        if lag[i] != 0:
+            assert helix < aligned[i]
