@@ -1,6 +1,7 @@
 """What each cable and pulley effect does to the four model-based estimators, and its price.
 
-Run: ``python benchmarks/rope_effects.py [--duration 25]``, or ``--price`` for the physics
+Run: ``python benchmarks/rope_effects.py [--duration 25] [--only WORD…]`` (the cases whose
+label holds a word), or ``--price`` for the physics
 alone: the time of a physics step with each effect (the fastest of several interleaved
 rounds, which a loaded machine slows least).
 
@@ -70,6 +71,7 @@ CASES: tuple[tuple[str, str, dict, dict], ...] = (
         {},
         _pick(PULLEY, "swivel_tilt_std", "sheave_offset_std"),
     ),
+    ("swivel friction", "ideal", {}, _pick(PULLEY, "swivel_friction", "swivel_bore")),
     ("all cable and pulley effects", "ideal", CABLE, PULLEY),
     ("acrobot", "acrobot", {}, {}),
     ("acrobot_full", "acrobot_full", CABLE, PULLEY),
@@ -125,6 +127,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=25.0)
     parser.add_argument("--price", action="store_true", help="time the physics step only")
+    parser.add_argument(
+        "--only", nargs="+", metavar="WORD", help="the cases whose label holds one of these"
+    )
     args = parser.parse_args()
     if args.price:
         price()
@@ -135,6 +140,8 @@ def main() -> None:
     print(f"{'case':42s} {head} {'RTF':>6s}")
     with tempfile.TemporaryDirectory() as tmp:
         for i, (label, profile, cable, pulley) in enumerate(CASES):
+            if args.only and not any(word in label for word in args.only):
+                continue
             result = run(scenario(profile, cable, pulley, args.duration), Path(tmp) / str(i))
             est = result.summary["estimators"]
             cells = " ".join(

@@ -37,6 +37,16 @@ simply E₀/(l0 + l_d), refreshed with the swivels as in :class:`Physics`.
 centre sits r_p + d/2 from the swivel axis (the cable comes down the axis), offset by a
 per-robot draw, and each swivel axis is tilted by a per-robot draw; the swivel turns about its
 tilted axis toward B_i.
+
+**The swivels' friction.** A swivel is a massless rotation about its axis: the cable pulls at
+the groove's exit point T (x_t from the axis) toward B_i, a moment τ·x_t·ρ·sin α/ℓ about the
+axis when the swivel lags B_i's azimuth by α (ρ B_i's distance from the axis, ℓ the free
+span), against the bearing's Coulomb friction μ·(d/2)·τ·|û + ẑ| (the cable's load on the
+bearing, û its direction out of the groove). Both scale with τ: a swivel turns only to keep
+|α| ≤ α*, sin α* ≈ μ·d/(2·r·sin(θ/2)·sin θ) for a cable leaving at θ from the axis (exact:
+:func:`swivel_slip`), applied at each refresh. MuJoCo's swivels stay aligned; a lagging
+cable is longer in its groove by ΔL ≈ x_t·ρ·α²/(2ℓ) (:func:`groove_stretch`), added to its
+force law.
 """
 
 from __future__ import annotations
