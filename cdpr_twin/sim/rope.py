@@ -30,8 +30,9 @@ t_σ). MuJoCo then steps the platform with each cable's force linearised about t
 the tendon's length (``gainprm``/``biasprm`` of the winch actuator): the platform segment's
 stiffness E₀/u_p while the cable sticks, the two segments' in series while it slides; the
 damping (``cable_damping_time`` × that stiffness, implicit in MuJoCo) acts on the strain rate.
-Without creep or friction the two segments share one strain, and the winch's stiffness is
-simply E₀/(l0 + l_d), refreshed with the swivels as in :class:`Physics`.
+The update runs compiled, one call per step (:mod:`cdpr_twin.sim.rope_kernel`). Without
+creep or friction the two segments share one strain, and the winch's stiffness is simply
+E₀/(l0 + l_d), refreshed with the swivels as in :class:`Physics`.
 
 **The pulleys as built.** The cable's centreline wraps the sheave at r_p + d/2, the sheave's
 centre sits r_p + d/2 from the swivel axis (the cable comes down the axis), offset by a
@@ -58,6 +59,7 @@ import numpy as np
 
 from cdpr_twin.math.se3 import quat_wxyz_from_matrix, so3_exp
 from cdpr_twin.robot.realism import CableRealism, PulleyRealism, robot_rng
+from cdpr_twin.sim import rope_kernel as kernel
 from cdpr_twin.sim.events import fire_due
 from cdpr_twin.sim.model import ModelError, as_slice, sheave_geom, side_site
 from cdpr_twin.sim.physics import Physics
@@ -308,26 +310,40 @@ class RopePhysics(Physics):
         self.efficiency = float(pulley.sheave_efficiency)
         self.stepwise = cable.viscoelastic or self.efficiency < 1.0
         self._decay = relaxation_decay(cable, self.timestep)
-        self.u_p = np.zeros(n)  # the platform segments' unstretched lengths [m]
-        self.eps_d = np.zeros((2, n))  # the dashpots' strains: platform, drum segments
         self.viscoelastic = cable.viscoelastic
-        self._no_pull = np.zeros((2, n))
         self.sensor_at_pulley = (
             mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "tension_sensor_at_pulley") >= 0
         )
-        self._eps = np.zeros((2, n))
-        self._u_rate = np.zeros(n)  # u̇_p over the last step [m/s]
-        self._on = np.ones(n)  # 1 for an intact cable, 0 for a cut one
+        # the ropes' state, one array for the compiled update (rope_kernel); the names below
+        # are views of its rows, updated in place
+        self._state = np.zeros((6, n))
+        self.u_p = self._state[kernel.U_P]  # the platform segments' unstretched lengths [m]
+        self._u_rate = self._state[kernel.U_RATE]  # u̇_p over the last step [m/s]
+        # the dashpots' strains: platform, drum segments
+        self.eps_d = self._state[kernel.EPS_D_P : kernel.EPS_D_W + 1]
+        self._on = self._state[kernel.ON]  # 1 for an intact cable, 0 for a cut one
+        self._on[:] = 1.0
+        # the cable's extra length in the groove of a lagging swivel [m]
+        self.groove_stretch = self._state[kernel.GROOVE]
+        self._consts = np.array([self.es0, self.es_m])
+        self._params = np.zeros(7)
+        self._params[kernel.ENTRY] = self._entry
+        self._params[kernel.DRUM] = self.drum_segment
+        self._params[kernel.EFFICIENCY] = self.efficiency
+        self._params[kernel.DAMPING] = self._damping_time
+        self._params[kernel.TIMESTEP] = self.timestep
+        self._params[kernel.DECAY] = self._decay
+        self._params[kernel.VISCOELASTIC] = float(self.viscoelastic)
+        self._tendon_index = np.asarray(self._tendons, dtype=np.int64)
+        self._act_index = np.asarray(self._actuator_ids, dtype=np.int64)
         self._tendon_ids = as_slice(self._tendons)
         self._tilt_rot = np.array([so3_exp(np.array([t[0], t[1], 0.0])) for t in self.pulley_draws])
         self._tilt_quat = np.array([quat_wxyz_from_matrix(R) for R in self._tilt_rot])
         # the swivels' bearing friction: each swivel's yaw φ in its tilted frame (None: aligned
-        # with its B_i at the next refresh, as after place()), its lag α = ψ − φ and the
-        # cable's extra length in the groove of a lagging sheave
+        # with its B_i at the next refresh, as after place()) and its lag α = ψ − φ
         self.swivel_arm = 0.5 * pulley.swivel_friction * pulley.swivel_bore
         self._swivel_yaw: np.ndarray | None = None
         self.swivel_lag = np.zeros(n)
-        self.groove_stretch = np.zeros(n)
         sheaves = [
             mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, sheave_geom(i)) for i in range(n)
         ]
@@ -381,13 +397,13 @@ class RopePhysics(Physics):
         The platform segments' lengths are MuJoCo's own (tilted swivels, offset sheaves).
         """
         self.data.act[self._actuators] = 1.0  # (any state: only the lengths are read)
-        self.u_p, self.eps_d[:] = np.ones(self.n_cables), 0.0
+        self.u_p[:], self.eps_d[:] = 1.0, 0.0
         self._on[:] = 1.0  # (reset() enables every cable)
         self.place(T_base_platform)
         length = self.data.ten_length[self._tendons] - self._entry
         eps = tau / self._es
-        self.u_p = length / (1.0 + eps)
-        self._u_rate = np.zeros(self.n_cables)
+        self.u_p[:] = length / (1.0 + eps)
+        self._u_rate[:] = 0.0
         self.eps_d[:] = eps
         return self.u_p + self.drum_segment / (1.0 + eps) - self.drum_segment
 
@@ -443,7 +459,7 @@ class RopePhysics(Physics):
         self._swivel_yaw = np.where(turned == alpha, self._swivel_yaw, psi - turned)
         alpha = turned
         self.swivel_lag = alpha
-        self.groove_stretch = groove_stretch(alpha, *args)
+        self.groove_stretch[:] = groove_stretch(alpha, *args)
 
     def step(self, n: int) -> None:
         """Advance n physics steps (see :meth:`Physics.step`); ropes with state: one by one."""
@@ -462,10 +478,12 @@ class RopePhysics(Physics):
                 rate = self._servos.run(chunk * dt)
                 d.ctrl[self._actuators] = self._stalled(rate * self._drum_ratio)
             mujoco.mj_step(m, d)
+            # the compiled update (the hot path: one call per physics step)
+            update, args = kernel.update_ropes, self._kernel_args()
             for _ in range(chunk - 1):
-                self._update_rope(relax=True)
+                update(*args, True)
                 mujoco.mj_step(m, d)
-            self._update_rope(relax=True)
+            update(*args, True)
             n -= chunk
         self._check_state()
 
@@ -492,110 +510,25 @@ class RopePhysics(Physics):
             n -= chunk
         self._check_state()
 
+    def _kernel_args(self) -> tuple:
+        """The arrays :func:`~cdpr_twin.sim.rope_kernel.update_ropes` reads and writes."""
+        d = self.data
+        return (
+            d.ten_length,
+            d.act,
+            self._tendon_index,
+            self._act_index,
+            self._state,
+            self._consts,
+            self._params,
+            self._gain,
+            self._bias,
+        )
+
     def _update_rope(self, relax: bool) -> None:
         """Slide the cables over the sheaves, relax the dashpots, set the platform forces.
-
-        The hot path of stepwise ropes (once per physics step): few numpy operations.
 
         Args:
             relax: advance the dashpots by one physics step (False: only set the forces).
         """
-        d, lw = self.data, self.drum_segment
-        tendon = d.ten_length[self._tendon_ids]
-        length = tendon - self._entry + self.groove_stretch
-        l0 = d.act[self._actuators]
-        # (2, m) the Maxwell arms' part −E_m·ε_d, negated (zero for elastic ropes)
-        pull = self.es_m * self.eps_d if self.viscoelastic else self._no_pull
-        if lw > 0.0:
-            total = l0 + lw
-            u, follow = self._slide(length, total, pull)
-            eps_w = lw / (total - u) - 1.0 if self.viscoelastic else None
-        else:
-            u, follow = l0.copy(), 0.0  # (a copy: u_p is kept, act moves on)
-            eps_w = None
-        if relax:  # the rate cable slides over the sheave (and out of the drum)
-            self._u_rate = (u - self.u_p) / self.timestep
-        self.u_p = u
-        on = self._on  # (a cut cable pulls nothing)
-        k = self.es0 * on / u
-        stretch = length / u
-        tau = (k * length - self.es0 - pull[0]) * on  # the platform segment's, at L
-        # MuJoCo steps from the next length L': τ(L') = τ + k_eff·(L' − L), where a sliding
-        # cable gives way, k_eff = k·(1 − (L/u)·∂u/∂L) (the segments in series)
-        stiff = k * (1.0 - stretch * follow)
-        self._gain[:, 0] = 0.0
-        # the damping acts on the strain rate, ∝ L̇ − (L/u)·u̇ (a steady pay-out strains nothing)
-        self._bias[:, 0] = stiff * tendon - tau + k * self._damping_time * stretch * self._u_rate
-        self._bias[:, 1] = -stiff
-        self._bias[:, 2] = k * -self._damping_time
-        if relax and self.viscoelastic:
-            eps = self._eps
-            np.divide(length, u, out=eps[0])
-            eps[0] -= 1.0
-            eps[1] = eps[0] if eps_w is None else eps_w
-            relax_dashpots(self.eps_d, eps, self._decay)
-
-    def _slide(
-        self, length: np.ndarray, total: np.ndarray, pull: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray | float]:
-        """The platform segments' unstretched lengths u_p after the stick-slip law.
-
-        On a face of the friction cone, a·τ_w(u) = b·τ_p(u) with τ_w = E₀(l_d/(T − u) − 1) − P_w
-        and τ_p = E₀(L/u − 1) − P_p; times u(T − u) it is the quadratic
-        C u² − (A + B + C T) u + B T = 0 (A = a E₀ l_d, B = b E₀ L,
-        C = b(E₀ + P_p) − a(E₀ + P_w)), whose root near B T/(A + B) is taken in the form that
-        stays exact as C → 0 (no friction, equal arms).
-
-        Args:
-            length: (m,) the platform segments' lengths L [m].
-            total: (m,) the cables' unstretched lengths T = l0 + l_d [m].
-            pull: (2, m) the Maxwell arms' E_m·ε_d, platform and drum segments [N].
-
-        Returns:
-            (m,) u_p [m], and (m,) ∂u_p/∂L: how a sliding cable follows its platform
-            segment's length (0 where it sticks).
-        """
-        es0, lw, eta, u = self.es0, self.drum_segment, self.efficiency, self.u_p
-        if eta == 1.0:  # no friction: equal tensions, every cable slides (numpy, vectorised)
-            return _face(es0, lw, 1.0, 1.0, length, total, pull)
-        # with friction, cable by cable in floats: numpy's per-call cost dominates on 8 cables
-        u_new, follow = u.copy(), np.zeros(len(u))
-        rows = np.stack([es0, length, total, u, pull[0], pull[1]], axis=1).tolist()
-        for i, (e, ln, tot, ui, pp, pw) in enumerate(rows):
-            # a slack side pulls nothing
-            tau_p = max(e * (ln / ui - 1.0) - pp, 0.0)
-            tau_w = max(e * (lw / (tot - ui) - 1.0) - pw, 0.0)
-            # the face of the friction cone: the platform side pulls the cable over the sheave
-            # (paying out), the winch side does (reeling in), or neither (stuck: u_p stays)
-            if tau_w < eta * tau_p:
-                a, b = 1.0, eta
-            elif tau_p < eta * tau_w:
-                a, b = eta, 1.0
-            else:
-                continue
-            u_new[i], follow[i] = _face_one(e, lw, a, b, ln, tot, pp, pw)
-        return u_new, follow
-
-
-def _face(es0, lw, a, b, length, total, pull):
-    """u_p and ∂u_p/∂L on a face a·τ_w = b·τ_p of the friction cone (see ``_slide``)."""
-    big_b = b * es0 * length
-    bt = big_b * total
-    c = b * (es0 + pull[0]) - a * (es0 + pull[1])
-    half = a * es0 * lw + big_b + c * total
-    root = 2.0 * bt / (half + np.sqrt(half * half - 4.0 * c * bt))
-    # ∂u/∂L = −(∂g/∂L)/(∂g/∂u) for g = a·τ_w(u) − b·τ_p(u, L)
-    uw2 = total - root
-    uw2 *= uw2
-    return root, b * root * uw2 / (a * lw * root * root + b * length * uw2)
-
-
-def _face_one(e, lw, a, b, length, total, pp, pw) -> tuple[float, float]:
-    """:func:`_face` for one cable, in floats."""
-    big_b = b * e * length
-    bt = big_b * total
-    c = b * (e + pp) - a * (e + pw)
-    half = a * e * lw + big_b + c * total
-    root = 2.0 * bt / (half + math.sqrt(half * half - 4.0 * c * bt))
-    uw2 = (total - root) ** 2
-    return root, b * root * uw2 / (a * lw * root * root + b * length * uw2)
+        kernel.update_ropes(*self._kernel_args(), relax)
