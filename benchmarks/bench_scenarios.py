@@ -51,6 +51,7 @@ EFFECTS: dict[str, tuple[dict, dict]] = {
         {},
         {k: _PULLEY[k] for k in ("wrap_diameter", "swivel_tilt_std", "sheave_offset_std")},
     ),
+    "swivel friction": ({}, {k: _PULLEY[k] for k in ("swivel_friction", "swivel_bore")}),
 }
 """The ``acrobot_full`` cable and pulley effects, one at a time (viscoelastic ropes need the
 strain damping, sheave friction also the drum segment: their price is the difference)."""

@@ -45,9 +45,9 @@ axis when the swivel lags B_i's azimuth by α (ρ B_i's distance from the axis, 
 span), against the bearing's Coulomb friction μ·(d/2)·τ·|û + ẑ| (the cable's load on the
 bearing, û its direction out of the groove). Both scale with τ: a swivel turns only to keep
 |α| ≤ α*, sin α* ≈ μ·d/(2·r·sin(θ/2)·sin θ) for a cable leaving at θ from the axis (exact:
-:func:`swivel_slip`), applied at each refresh. MuJoCo's swivels stay aligned; a lagging
-cable is longer in its groove by ΔL ≈ x_t·ρ·α²/(2ℓ) (:func:`groove_stretch`), added to its
-force law.
+:func:`~cdpr_twin.sim.rope_kernel.swivel_slip`), applied at each refresh. MuJoCo's swivels
+stay aligned; a lagging cable is longer in its groove by ΔL ≈ x_t·ρ·α²/(2ℓ)
+(:func:`~cdpr_twin.sim.rope_kernel.groove_stretch`), added to its force law.
 """
 
 from __future__ import annotations
@@ -100,133 +100,6 @@ def draw_rope_ratios(cable: CableRealism, robot_seed: int, n: int) -> np.ndarray
     """One robot's rope stiffness ratios ρ_i = ρ·(1 + N(0, σ)) per cable. (n,)."""
     rng = robot_rng(robot_seed, "cable")
     return cable.rope_stiffness_ratio * (1.0 + rng.normal(0.0, cable.rope_stiffness_std, n))
-
-
-def groove_exit(
-    x: np.ndarray, z: np.ndarray, centre: np.ndarray, r: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Where the cable leaves the sheave toward a point (x, z) of the sheave's plane.
-
-    The cable runs counter-clockwise in the (x, z) plane (down the swivel axis, under the
-    sheave, out): it leaves at the tangent point T = c + r(cos θ, sin θ) with θ = β − γ, β the
-    direction of (x, z) from the centre c and cos γ = r/|(x, z) − c|.
-
-    Args:
-        x: (m,) the point's distance from the swivel axis in the sheave's plane [m].
-        z: (m,) the point's height along the swivel axis [m].
-        centre: (m, 2) the sheave centres (x, z) in the swivel frame [m].
-        r: (m,) the wrap radii [m].
-
-    Returns:
-        (m,) each: the exit angle θ [rad], T's distance from the axis x_t and height z_t [m],
-        and the free span |(x, z) − T| [m].
-    """
-    dx, dz = x - centre[:, 0], z - centre[:, 1]
-    dist2 = dx * dx + dz * dz
-    theta = np.arctan2(dz, dx) - np.arccos(r / np.sqrt(dist2))
-    return (
-        theta,
-        centre[:, 0] + r * np.cos(theta),
-        centre[:, 1] + r * np.sin(theta),
-        np.sqrt(dist2 - r * r),
-    )
-
-
-def swivel_equilibrium(
-    alpha: np.ndarray,
-    rho: np.ndarray,
-    z: np.ndarray,
-    centre: np.ndarray,
-    r: np.ndarray,
-    friction_arm: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """The swivel's restoring moment and bearing friction per newton of cable tension.
-
-    The swivel lags its cable by α: B_i sits at (ρ cos α, ρ sin α, z) in the swivel's frame
-    (x in the sheave's plane, z up its axis). The cable stays in the groove and leaves it
-    where its projection on the plane is tangent (:func:`groove_exit`), then runs straight to
-    B_i at a fleet angle. Its pull at T, τ·û, turns the swivel toward B_i by
-    τ·x_t·ρ sin α/ℓ (ℓ the free span); the cable loads the bearing with
-    P = τ·|û + ẑ| (it arrives down the axis, −ẑ, and leaves along û).
-
-    Args:
-        alpha: (m,) the lag α = ψ − φ [rad].
-        rho: (m,) B_i's distance from the swivel axis [m].
-        z: (m,) B_i's height along the swivel axis [m].
-        centre: (m, 2) the sheave centres (x, z) in the swivel frame [m].
-        r: (m,) the wrap radii [m].
-        friction_arm: μ·d/2, the bearing's friction moment per newton of load [m].
-
-    Returns:
-        (m,) the restoring moment x_t·ρ·sin α/ℓ and the friction moment μ(d/2)·|û + ẑ|,
-        both per newton of tension [m].
-    """
-    y = rho * np.sin(alpha)
-    x = rho * np.cos(alpha)
-    _, x_t, z_t, span = groove_exit(x, z, centre, r)
-    span3 = np.sqrt(span * span + y * y)
-    ux, uy, uz = (x - x_t) / span3, y / span3, (z - z_t) / span3
-    load = np.sqrt(ux * ux + uy * uy + (uz + 1.0) ** 2)
-    return x_t * y / span3, friction_arm * load
-
-
-def groove_stretch(
-    alpha: np.ndarray, rho: np.ndarray, z: np.ndarray, centre: np.ndarray, r: np.ndarray
-) -> np.ndarray:
-    """How much longer the cable in its groove is on a swivel lagging by α than on one aligned.
-
-    ΔL = r·(θ(α) − θ(0)) + √(ℓ(α)² + (ρ sin α)²) − ℓ(0) (arc and free span, see
-    :func:`swivel_equilibrium`), ≈ x_t·ρ·α²/(2ℓ) ≥ 0. (m,) [m].
-    """
-    theta0, _, _, span0 = groove_exit(rho, z, centre, r)
-    theta, _, _, span = groove_exit(rho * np.cos(alpha), z, centre, r)
-    y = rho * np.sin(alpha)
-    return r * (theta - theta0) + (np.sqrt(span * span + y * y) - span0)
-
-
-def swivel_slip(
-    alpha: np.ndarray,
-    taut: np.ndarray,
-    rho: np.ndarray,
-    z: np.ndarray,
-    centre: np.ndarray,
-    r: np.ndarray,
-    friction_arm: float,
-) -> np.ndarray:
-    """The lags after Coulomb's law for massless swivels: stuck, or turned to the friction cone.
-
-    A swivel whose cable's moment exceeds its bearing's friction turns toward B_i until they
-    balance, sin α* = μ(d/2)·|û + ẑ|·ℓ/(x_t·ρ) (:func:`swivel_equilibrium`; both moments
-    scale with τ, so α* does not depend on it); one whose moment is within the friction, or
-    whose cable is slack, stays. α* is found by fixed-point iteration: its terms move with
-    cos α only, so each iteration gains a factor O(α*²).
-
-    Args:
-        alpha: (m,) the lags with the swivels held where they were [rad].
-        taut: (m,) which cables pull.
-        rho: (m,) B_i's distance from the swivel axis [m].
-        z: (m,) B_i's height along the swivel axis [m].
-        centre: (m, 2) the sheave centres (x, z) in the swivel frame [m].
-        r: (m,) the wrap radii [m].
-        friction_arm: μ·d/2, the bearing's friction moment per newton of load [m].
-
-    Returns:
-        (m,) the lags α after the swivels have turned [rad].
-    """
-    moment, friction = swivel_equilibrium(alpha, rho, z, centre, r, friction_arm)
-    # (a swivel whose cable leaves the sheave across its axis, x_t ≤ 0 — a sheave offset
-    # inward by more than r(1 − cos θ) — has no aligning moment: it is held where it is)
-    slip = taut & (moment * np.sign(alpha) > friction)
-    if not slip.any():
-        return alpha
-    a = alpha[slip]
-    sub = rho[slip], z[slip], centre[slip], r[slip], friction_arm
-    for _ in range(3):
-        moment, friction = swivel_equilibrium(a, *sub)
-        a = np.copysign(np.arcsin(np.abs(friction * np.sin(a) / moment)), a)
-    out = alpha.copy()
-    out[slip] = a
-    return out
 
 
 def draw_pulley_geometry(pulley: PulleyRealism, robot_seed: int, n: int) -> np.ndarray:
@@ -356,7 +229,7 @@ class RopePhysics(Physics):
         """The platform segments' lengths, A_i over the sheave to B_i (m,) [m].
 
         MuJoCo's wrapped tendon less the entry segment, with the swivels aligned, plus the
-        groove's stretch of each lagging swivel (:func:`groove_stretch`).
+        groove's stretch of each lagging swivel (:func:`~cdpr_twin.sim.rope_kernel.groove_stretch`).
         """
         return self.data.ten_length[self._tendons] - self._entry + self.groove_stretch
 
@@ -413,8 +286,8 @@ class RopePhysics(Physics):
         MuJoCo's swivels stay aligned with B_i: its cylinder wrap of a turned sheave is a helix
         that spreads the sideways offset over the whole tendon, entry segment included, and
         shortens the cable (by ≈ ρ·α²·(h + r·θ)/(2ℓ), 0.7 µm at 0.01 rad) where the cable in
-        a groove lengthens (:func:`groove_stretch`, 0.05 µm). A lagging swivel's cable is
-        MuJoCo's aligned one plus its groove stretch; its exit point moves sideways by
+        a groove lengthens (``rope_kernel.groove_stretch``, 0.05 µm). A lagging swivel's cable
+        is MuJoCo's aligned one plus its groove stretch; its exit point moves sideways by
         x_t·sin α (≤ 10 µm at ACROBOT's lags), which turns the cable's direction at B_i by
         ≤ 2e-5 rad, left out.
         """
@@ -450,16 +323,19 @@ class RopePhysics(Physics):
         """
         if self._swivel_yaw is None:
             self._swivel_yaw = psi.copy()
-        alpha = np.remainder(psi - self._swivel_yaw + np.pi, 2.0 * np.pi) - np.pi
-        rho, z = np.hypot(local[:, 0], local[:, 1]), local[:, 2]
         taut = (Physics.tensions.fget(self) > 0.0) & self.cable_enabled
-        args = rho, z, self._sheave_centre, self._wrap_radius
-        turned = swivel_slip(alpha, taut, *args, self.swivel_arm)
-        # (a held swivel keeps its yaw exactly: no round-off creeps in through ψ − α)
-        self._swivel_yaw = np.where(turned == alpha, self._swivel_yaw, psi - turned)
-        alpha = turned
-        self.swivel_lag = alpha
-        self.groove_stretch[:] = groove_stretch(alpha, *args)
+        kernel.turn_swivels(
+            psi,
+            np.hypot(local[:, 0], local[:, 1]),
+            np.ascontiguousarray(local[:, 2]),
+            self._swivel_yaw,
+            taut,
+            self._sheave_centre,
+            self._wrap_radius,
+            self.swivel_arm,
+            self.swivel_lag,
+            self._state,
+        )
 
     def step(self, n: int) -> None:
         """Advance n physics steps (see :meth:`Physics.step`); ropes with state: one by one."""

@@ -124,3 +124,128 @@ def update_ropes(
             # exact for the strain held over the step: ε_d ← ε + (ε_d − ε)·exp(−h/t_σ)
             state[EPS_D_P, i] = (state[EPS_D_P, i] - eps_p) * decay + eps_p
             state[EPS_D_W, i] = (state[EPS_D_W, i] - eps_w) * decay + eps_w
+
+
+# ------------------------------------------------------------------------------ the swivels
+@jit
+def groove_exit(x, z, cx, cz, r):
+    """Where the cable leaves the sheave toward a point (x, z) of the sheave's plane.
+
+    The cable runs counter-clockwise in the (x, z) plane of the swivel's frame (down the
+    swivel axis, under the sheave, out): it leaves at the tangent point
+    T = c + r(cos θ, sin θ) with θ = β − γ, β the direction of (x, z) from the sheave's
+    centre c and cos γ = r/|(x, z) − c|.
+
+    Args:
+        x: the point's distance from the swivel axis in the sheave's plane [m].
+        z: the point's height along the swivel axis [m].
+        cx: the sheave centre's distance from the axis [m].
+        cz: the sheave centre's height along the axis [m].
+        r: the wrap radius [m].
+
+    Returns:
+        The exit angle θ [rad], T's distance from the axis x_t and height z_t [m], and the
+        free span |(x, z) − T| [m].
+    """
+    dx, dz = x - cx, z - cz
+    dist2 = dx * dx + dz * dz
+    theta = math.atan2(dz, dx) - math.acos(r / math.sqrt(dist2))
+    return theta, cx + r * math.cos(theta), cz + r * math.sin(theta), math.sqrt(dist2 - r * r)
+
+
+@jit
+def swivel_equilibrium(alpha, rho, z, cx, cz, r, friction_arm):
+    """The swivel's restoring moment and bearing friction per newton of cable tension.
+
+    The swivel lags its cable by α: B_i sits at (ρ cos α, ρ sin α, z) in the swivel's frame
+    (x in the sheave's plane, z up its axis). The cable stays in the groove and leaves it
+    where its projection on the plane is tangent (:func:`groove_exit`), then runs straight to
+    B_i at a fleet angle. Its pull at T, τ·û, turns the swivel toward B_i by
+    τ·x_t·ρ sin α/ℓ (ℓ the free span); the cable loads the bearing with P = τ·|û + ẑ| (it
+    arrives down the axis, −ẑ, and leaves along û).
+
+    Args:
+        alpha: the lag α = ψ − φ [rad].
+        rho: B_i's distance from the swivel axis [m].
+        z: B_i's height along the swivel axis [m].
+        cx: the sheave centre's distance from the axis [m].
+        cz: the sheave centre's height along the axis [m].
+        r: the wrap radius [m].
+        friction_arm: μ·d/2, the bearing's friction moment per newton of load [m].
+
+    Returns:
+        The restoring moment x_t·ρ·sin α/ℓ and the friction moment μ(d/2)·|û + ẑ|, both
+        per newton of tension [m].
+    """
+    y = rho * math.sin(alpha)
+    x = rho * math.cos(alpha)
+    _, x_t, z_t, span = groove_exit(x, z, cx, cz, r)
+    span3 = math.sqrt(span * span + y * y)
+    ux, uy, uz = (x - x_t) / span3, y / span3, (z - z_t) / span3
+    return x_t * y / span3, friction_arm * math.sqrt(ux * ux + uy * uy + (uz + 1.0) ** 2)
+
+
+@jit
+def groove_stretch(alpha, rho, z, cx, cz, r):
+    """How much longer the cable in its groove is on a swivel lagging by α than on one aligned.
+
+    ΔL = r·(θ(α) − θ(0)) + √(ℓ(α)² + (ρ sin α)²) − ℓ(0) (arc and free span, see
+    :func:`swivel_equilibrium` for the arguments), ≈ x_t·ρ·α²/(2ℓ) ≥ 0 [m].
+    """
+    theta0, _, _, span0 = groove_exit(rho, z, cx, cz, r)
+    theta, _, _, span = groove_exit(rho * math.cos(alpha), z, cx, cz, r)
+    y = rho * math.sin(alpha)
+    return r * (theta - theta0) + (math.sqrt(span * span + y * y) - span0)
+
+
+@jit
+def swivel_slip(alpha, rho, z, cx, cz, r, friction_arm):
+    """The lag after Coulomb's law for a massless swivel: held, or turned to the friction cone.
+
+    A swivel whose cable's moment exceeds its bearing's friction turns toward B_i until they
+    balance, sin α* = μ(d/2)·|û + ẑ|·ℓ/(x_t·ρ) (:func:`swivel_equilibrium`, which gives the
+    arguments; both moments scale with τ, so α* does not depend on it). α* is found by
+    fixed-point iteration: its terms move with cos α only, so each gains a factor O(α*²).
+    A swivel whose cable leaves the sheave across its axis (x_t ≤ 0: a sheave offset inward
+    by more than r(1 − cos θ)) has no aligning moment: it is held.
+
+    Returns:
+        The lag α after the swivel has turned (α itself when held) [rad].
+    """
+    moment, friction = swivel_equilibrium(alpha, rho, z, cx, cz, r, friction_arm)
+    if moment * math.copysign(1.0, alpha) <= friction:
+        return alpha
+    a = alpha
+    for _ in range(3):
+        moment, friction = swivel_equilibrium(a, rho, z, cx, cz, r, friction_arm)
+        a = math.copysign(math.asin(abs(friction * math.sin(a) / moment)), a)
+    return a
+
+
+@jit
+def turn_swivels(psi, rho, z, yaw, taut, centre, r, friction_arm, lag, state):
+    """Let the swivels follow their cables' azimuths by Coulomb's law, in place.
+
+    Args:
+        psi: (m,) B_i's azimuths in the swivels' tilted frames [rad].
+        rho: (m,) B_i's distances from the swivel axes [m].
+        z: (m,) B_i's heights along the swivel axes [m].
+        yaw: (m,) the swivels' yaws φ [rad], updated (a held swivel's exactly kept).
+        taut: (m,) which cables pull (a slack cable's swivel is held).
+        centre: (m, 2) the sheave centres (x, z) in the swivels' frames [m].
+        r: (m,) the wrap radii [m].
+        friction_arm: μ·d/2 [m].
+        lag: (m,) the lags α = ψ − φ [rad], set.
+        state: (6, m) the ropes' state: the groove's stretch row is set [m].
+    """
+    for i in range(psi.shape[0]):
+        alpha = (psi[i] - yaw[i] + math.pi) % (2.0 * math.pi) - math.pi
+        if taut[i]:
+            turned = swivel_slip(
+                alpha, rho[i], z[i], centre[i, 0], centre[i, 1], r[i], friction_arm
+            )
+            if turned != alpha:
+                yaw[i] = psi[i] - turned
+                alpha = turned
+        lag[i] = alpha
+        state[GROOVE, i] = groove_stretch(alpha, rho[i], z[i], centre[i, 0], centre[i, 1], r[i])
