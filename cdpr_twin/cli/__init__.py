@@ -215,7 +215,9 @@ def _reproduce(args: argparse.Namespace) -> int:
                 print(f"cdpr-twin: error: {exc}", file=sys.stderr)
                 return 2
             count[1] = len(specs)
-            rep = study.reproduce_runs(args.out, specs, workers, progress)
+            rep = study.reproduce_runs(
+                args.out, specs, workers, progress, args.population, _population_progress
+            )
     except (Exception, KeyboardInterrupt) as exc:
         return _study_failure(exc, args, (count[0], count[1]))
     print(
@@ -227,6 +229,12 @@ def _reproduce(args: argparse.Namespace) -> int:
     for r in failed:
         print(f"failed: {r['name']}: {r['status']}", file=sys.stderr)
     return 0 if not failed else 1
+
+
+def _population_progress(n: int, total: int, row: dict) -> None:
+    """One line per population run (the campaign's), on stderr."""
+    mark = "ok" if row.get("ok") else "FAILED"
+    print(f"[population {n:3d}/{total}] {row.get('name')}: {mark}", file=sys.stderr)
 
 
 def _study_failure(exc: BaseException, args: argparse.Namespace, finished: tuple[int, int]) -> int:
@@ -351,6 +359,15 @@ def _reproduce_parser(sub) -> None:
         help="also run PBVS (control in the loop) with this goal",
     )
     rep.add_argument("--robot", choices=model_cli.STUDY_ROBOTS, default="acrobot", help="robot")
+    rep.add_argument(
+        "--population",
+        type=out_path,
+        default=None,
+        metavar="DIR",
+        help="judge the findings over the robots of campaigns/paper_population.toml, run into "
+        "DIR (resumed: the runs already there are kept); the verdicts follow "
+        "cdpr_twin/study/criteria.toml",
+    )
     rep.add_argument("--traceback", action="store_true", help=TRACEBACK_HELP)
     rep.set_defaults(func=_reproduce)
 

@@ -104,6 +104,7 @@ def reproduce(
     scenarios: Scenarios | tuple[str | Path, str | Path] | None = None,
     decompose: tuple[str, ...] = (),
     other_goal: str | None = None,
+    population: Path | None = None,
 ) -> dict:
     """Run the study and write ``runs/``, ``runs.json``, figures, ``report.json``, ``report.md``.
 
@@ -120,6 +121,8 @@ def reproduce(
         decompose: per-run sources of variation (:data:`cdpr_twin.robot.realism.RUN_SOURCES`) to
             switch off in turn, repeating the open-loop and control-in-the-loop PBVS runs.
         other_goal: a second PBVS goal (``"nominal"``/``"taught"``) for the control runs.
+        population: the population campaign's directory (:mod:`.population`): its missing
+            runs are run (those there are kept) and the findings judged over it.
 
     Returns:
         The report numbers (as in ``report.json``), plus ``"wall_time_s"``.
@@ -132,11 +135,16 @@ def reproduce(
     """
     workers = check_workers(workers)
     specs = study_runs(runs_scale, duration, scenarios, decompose, other_goal)
-    return reproduce_runs(out, specs, workers, progress)
+    return reproduce_runs(out, specs, workers, progress, population)
 
 
 def reproduce_runs(
-    out: Path, specs: list[RunSpec], workers: int, progress: Progress | None = None
+    out: Path,
+    specs: list[RunSpec],
+    workers: int,
+    progress: Progress | None = None,
+    population: Path | None = None,
+    population_progress=None,
 ) -> dict:
     """Claim ``out``, remove an earlier study's files, run ``specs``, write the report.
 
@@ -164,8 +172,31 @@ def reproduce_runs(
         records = run_study(specs, out, workers, progress)
         rep = analyse(out, records)
         figs = make_figures(out, rep, records)
+        sections: list[str] = []
+        if population is not None:
+            sections = _population(rep, population, workers, population_progress)
+            write_json_atomic(out / "report.json", rep)
         wall = time.perf_counter() - start
-        write_report(out, rep, figs, wall)
+        write_report(out, rep, figs, wall, sections)
     finally:
         owner.release()
     return {**rep, "wall_time_s": wall}
+
+
+def _population(rep: dict, out: Path, workers: int, progress) -> list[str]:
+    """Run the population's missing runs, judge the findings over it; its report sections.
+
+    ``rep`` gets the population's numbers (``"population"``).
+    """
+    from cdpr_twin.campaign import load_campaign, run_campaign
+    from cdpr_twin.study.population import (
+        POPULATION_CAMPAIGN,
+        population_json,
+        population_report,
+    )
+    from cdpr_twin.study.population_report import population_sections
+
+    run_campaign(load_campaign(POPULATION_CAMPAIGN), out, workers, resume=True, progress=progress)
+    pop = population_report(out)
+    rep["population"] = population_json(pop)
+    return population_sections(pop, pop["illustration"])
