@@ -189,6 +189,12 @@ def _population(rep: dict, out: Path, workers: int, progress) -> list[str]:
     ``rep`` gets the population's numbers (``"population"``).
     """
     from cdpr_twin.campaign import load_campaign, run_campaign
+    from cdpr_twin.study.calibration_gauge import (
+        CALIBRATION_DIR,
+        CALIBRATION_SCENARIO,
+        calibration_rows,
+        calibration_section,
+    )
     from cdpr_twin.study.population import (
         POPULATION_CAMPAIGN,
         population_json,
@@ -199,4 +205,10 @@ def _population(rep: dict, out: Path, workers: int, progress) -> list[str]:
     run_campaign(load_campaign(POPULATION_CAMPAIGN), out, workers, resume=True, progress=progress)
     pop = population_report(out)
     rep["population"] = population_json(pop)
-    return population_sections(pop, pop["illustration"])
+    sections = population_sections(pop, pop["illustration"])
+    if (CALIBRATION_DIR / "results.json").is_file():
+        rows = calibration_rows(CALIBRATION_DIR, CALIBRATION_SCENARIO)
+        rep["population"]["calibration"] = rows
+        confidence = next(iter(pop["rules"].values())).confidence
+        sections += calibration_section(rows, confidence)
+    return sections
