@@ -205,7 +205,7 @@ def _population(rep: dict, out: Path, workers: int, progress) -> list[str]:
     run_campaign(load_campaign(POPULATION_CAMPAIGN), out, workers, resume=True, progress=progress)
     pop = population_report(out)
     rep["population"] = population_json(pop)
-    sections = population_sections(pop, pop["illustration"])
+    sections = population_sections(pop, pop["illustration"], CALIBRATION_SCENARIO)
     if (CALIBRATION_DIR / "results.json").is_file():
         rows = calibration_rows(CALIBRATION_DIR, CALIBRATION_SCENARIO)
         rep["population"]["calibration"] = rows

@@ -217,3 +217,35 @@ def test_nees_of_errors_drawn_from_the_covariance_is_chi2():
     lo, hi = chi2.ppf([0.0005, 0.9995], 6 * k) / k
     assert lo < eps.mean() < hi
     assert np.allclose(axes.mean(axis=0), 1.0, atol=0.25)
+
+
+def _run(seed: int, x: float) -> dict:
+    return {"truth_seed": seed, "seed": 0, "ok": True, "open_loop_miss_m": x}
+
+
+def test_repeatability_shares_and_spread_have_intervals_around_the_truth():
+    # two normal samples with variances 4σ² and σ²: the source's true share is 3/4, the std 2σ
+    rng = np.random.default_rng(5)
+    sigma = 1e-4
+    blocks = {
+        "repeat_open_loop": [_run(1, x) for x in rng.normal(0.01, 2 * sigma, 30)],
+        "repeat_open_loop_without_homing": [_run(1, x) for x in rng.normal(0.01, sigma, 30)],
+    }
+    (row,) = [r for r in population.repeatability(blocks, 0.95) if r["quantity"].endswith("_m")]
+    low, high = row["std_ci"]
+    assert low < 2 * sigma < high and high - low < 2 * sigma
+    _, (low, high), n = row["shares"]["homing"]
+    assert n == 30 and low < 0.75 < high and low > 0.0
+
+
+def test_verdict_cell_names_population_share_interval_and_entry():
+    rules = load_criteria()
+    rule = rules["open_loop_miss"]
+    runs = [_run(i, 0.01 if i % 5 else 0.03) for i in range(50)]
+    verdict = judge(rule, population.values(runs, rule.metric))
+    pop = {"blocks": {rule.population: runs}, "verdicts": [verdict]}
+    (row,) = [ln for ln in population_report.verdict_table(pop, {}) if "`open_loop_miss`" in ln]
+    low, high = verdict.interval
+    assert f"`{rule.population}` (50 robots)" in row
+    assert f"40/50 = 80 % [{low * 100:.0f}, {high * 100:.0f}] %" in row
+    assert f"**{verdict.verdict}**" in row and rule.paper in row
