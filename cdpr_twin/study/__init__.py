@@ -24,6 +24,9 @@ from cdpr_twin.study.analysis import accuracy_at_p1, analyse
 from cdpr_twin.study.findings import FINDINGS, Finding, evaluate
 from cdpr_twin.study.output_dir import STUDY_FILES, STUDY_MARKER, clear_earlier_study
 from cdpr_twin.study.plan import (
+    OPEN_LOOP_SCENARIO as POPULATION_SCENARIO,
+)
+from cdpr_twin.study.plan import (
     Progress,
     RunSpec,
     Scenarios,
@@ -172,43 +175,31 @@ def reproduce_runs(
         records = run_study(specs, out, workers, progress)
         rep = analyse(out, records)
         figs = make_figures(out, rep, records)
-        sections: list[str] = []
         if population is not None:
-            sections = _population(rep, population, workers, population_progress)
+            _population(rep, population, workers, population_progress)
             write_json_atomic(out / "report.json", rep)
         wall = time.perf_counter() - start
-        write_report(out, rep, figs, wall, sections)
+        write_report(out, rep, figs, wall)
     finally:
         owner.release()
     return {**rep, "wall_time_s": wall}
 
 
-def _population(rep: dict, out: Path, workers: int, progress) -> list[str]:
-    """Run the population's missing runs, judge the findings over it; its report sections.
+def _population(rep: dict, out: Path, workers: int, progress) -> None:
+    """Run the population's missing runs; ``rep["population"]``: its numbers.
 
-    ``rep`` gets the population's numbers (``"population"``).
+    ``report.md``'s population sections are written from them (:mod:`.population_report`).
     """
     from cdpr_twin.campaign import load_campaign, run_campaign
-    from cdpr_twin.study.calibration_gauge import (
-        CALIBRATION_DIR,
-        CALIBRATION_SCENARIO,
-        calibration_rows,
-        calibration_section,
-    )
+    from cdpr_twin.study.calibration_gauge import CALIBRATION_DIR, calibration_rows
     from cdpr_twin.study.population import (
         POPULATION_CAMPAIGN,
         population_json,
         population_report,
     )
-    from cdpr_twin.study.population_report import population_sections
 
     run_campaign(load_campaign(POPULATION_CAMPAIGN), out, workers, resume=True, progress=progress)
-    pop = population_report(out)
-    rep["population"] = population_json(pop)
-    sections = population_sections(pop, pop["illustration"], CALIBRATION_SCENARIO)
+    rep["population"] = population_json(population_report(out))
+    rep["population"]["scenario"] = POPULATION_SCENARIO.name  # of the shipped scenarios
     if (CALIBRATION_DIR / "results.json").is_file():
-        rows = calibration_rows(CALIBRATION_DIR, CALIBRATION_SCENARIO)
-        rep["population"]["calibration"] = rows
-        confidence = next(iter(pop["rules"].values())).confidence
-        sections += calibration_section(rows, confidence)
-    return sections
+        rep["population"]["calibration"] = calibration_rows(CALIBRATION_DIR, POPULATION_SCENARIO)

@@ -232,7 +232,8 @@ def _pair_accuracy(blocks: dict[str, list[dict]]) -> None:
 
 def values(runs: list[dict], metric: str) -> np.ndarray:
     """A metric over a block's runs (NaN where a run lacks it)."""
-    return np.array([float(r.get(metric, math.nan)) for r in runs])
+    out = [r.get(metric) for r in runs]
+    return np.array([math.nan if v is None else float(v) for v in out])
 
 
 def bootstrap_interval(samples: tuple, statistic: Callable, confidence: float) -> tuple:
@@ -336,20 +337,20 @@ def illustration(blocks: dict[str, list[dict]], rules: dict[str, Rule]) -> dict:
     return out
 
 
-def population_report(out: Path, criteria: str | Path | None = None) -> dict:
-    """The population's verdicts, sensitivities, repeatability and NEES (JSON-ready).
+def judge_population(
+    blocks: dict[str, list[dict]], rules: dict[str, Rule], repeat: list, nees_numbers: dict
+) -> dict:
+    """Apply the criteria to a population's metrics: verdicts, sensitivities, illustration.
 
     Args:
-        out: the population campaign's directory (its table and ``runs/``).
-        criteria: the criteria file (default: the shipped one).
+        blocks: each block's runs with their metrics (:func:`collect`, or ``report.json``).
+        rules: the criteria (:func:`~cdpr_twin.study.criteria.load_criteria`).
+        repeat: the repetitions' rows (:func:`repeatability`).
+        nees_numbers: the NEES summary (:func:`nees_summary`).
     """
-    rules = load_criteria() if criteria is None else load_criteria(criteria)
-    confidence = next(iter(rules.values())).confidence
-    blocks = collect(out, confidence)
     verdicts, sensitivity = [], []
     for rule in rules.values():
-        v = judge(rule, values(blocks.get(rule.population, []), rule.metric))
-        verdicts.append(v)
+        verdicts.append(judge(rule, values(blocks.get(rule.population, []), rule.metric)))
         for block in rule.sensitivity:
             if block in blocks:
                 sensitivity.append((rule, block, judge(rule, values(blocks[block], rule.metric))))
@@ -358,10 +359,31 @@ def population_report(out: Path, criteria: str | Path | None = None) -> dict:
         "blocks": blocks,
         "verdicts": verdicts,
         "sensitivity": sensitivity,
-        "repeatability": repeatability(blocks, confidence),
+        "repeatability": repeat,
         "illustration": illustration(blocks, rules),
-        "nees": nees_summary(blocks.get("robots_open_loop", []), confidence),
+        "nees": nees_numbers,
     }
+
+
+def population_report(out: Path, criteria: str | Path | None = None) -> dict:
+    """The population's verdicts, sensitivities, repeatability and NEES.
+
+    Args:
+        out: the population campaign's directory (its table and ``runs/``).
+        criteria: the criteria file (default: the shipped one).
+    """
+    rules = load_criteria() if criteria is None else load_criteria(criteria)
+    confidence = next(iter(rules.values())).confidence
+    blocks = collect(out, confidence)
+    repeat = repeatability(blocks, confidence)
+    nees_numbers = nees_summary(blocks.get("robots_open_loop", []), confidence)
+    return judge_population(blocks, rules, repeat, nees_numbers)
+
+
+def population_from_json(data: dict, criteria: str | Path | None = None) -> dict:
+    """:func:`population_report` from ``report.json``'s numbers: the criteria applied anew."""
+    rules = load_criteria() if criteria is None else load_criteria(criteria)
+    return judge_population(data["metrics"], rules, data["repeatability"], data["nees"])
 
 
 def nees_summary(runs: list[dict], confidence: float) -> dict:
@@ -390,36 +412,27 @@ def nees_summary(runs: list[dict], confidence: float) -> dict:
 
 
 def population_json(pop: dict) -> dict:
-    """The population report's numbers for ``report.json`` (no per-run time series)."""
+    """The population's numbers for ``report.json``.
+
+    Every run's metrics (not its NEES series), the repetitions, NEES; and, for a reader, the
+    verdicts they gave (:func:`population_from_json` applies the criteria anew).
+    """
     return {
+        "metrics": {
+            block: [{k: v for k, v in r.items() if k != "nees"} for r in runs]
+            for block, runs in pop["blocks"].items()
+        },
+        "repeatability": pop["repeatability"],
+        "nees": pop["nees"],
         "verdicts": [
             {
                 "id": v.rule.id,
                 "population": v.rule.population,
                 "n": v.n,
                 "k": v.k,
-                "share": v.share,
                 "interval": list(v.interval),
-                "median": v.median,
                 "verdict": v.verdict,
             }
             for v in pop["verdicts"]
         ],
-        "sensitivity": [
-            {
-                "id": r.id,
-                "population": b,
-                "n": v.n,
-                "k": v.k,
-                "interval": list(v.interval),
-                "verdict": v.verdict,
-            }
-            for r, b, v in pop["sensitivity"]
-        ],
-        "repeatability": pop["repeatability"],
-        "illustration": {
-            k: {"value": a, "percentile": p, "n": n} for k, (a, p, n) in pop["illustration"].items()
-        },
-        "nees": pop["nees"],
-        "runs": {b: len(runs) for b, runs in pop["blocks"].items()},
     }

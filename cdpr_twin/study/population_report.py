@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import math
 
-from cdpr_twin.study.criteria import CRITERIA_FILE
-
 TOLERANCE_BLOCKS = {"tolerances_half": "×0.5", "tolerances_double": "×2"}
 """The sensitivity populations: every tolerance of ``[truth]`` scaled."""
 ENTRY = "cdpr_twin/study/criteria.toml"
@@ -217,17 +215,22 @@ TOLERANCES = (
 """The robots' tolerances as the report states them (values read from the scenario file)."""
 
 
-def tolerance_section(scenario_file) -> list[str]:
-    """The tolerances the robots are drawn to, stated as the assumptions they are."""
+def tolerance_section(scenario: str) -> list[str]:
+    """The tolerances the robots are drawn to, stated as the assumptions they are.
+
+    Args:
+        scenario: the shipped scenario file's name the robots are drawn from.
+    """
+    from cdpr_twin import SCENARIOS_DIR
     from cdpr_twin.scenario.loading import load_scenario
 
-    truth = load_scenario(scenario_file).truth
+    truth = load_scenario(SCENARIOS_DIR / scenario).truth
     lines = [
         "",
         "## The tolerances are assumptions",
         "",
         "The paper gives no tolerance of its robot. The robots are drawn to these standard "
-        f"deviations (`[truth]` of `{getattr(scenario_file, 'name', scenario_file)}`), the "
+        f"deviations (`[truth]` of `scenarios/{scenario}`), the "
         "twin's assumptions, none from a source that states it for ACROBOT; how much each "
         "verdict leans on them is in *Sensitivity to the tolerances*.",
         "",
@@ -239,10 +242,26 @@ def tolerance_section(scenario_file) -> list[str]:
     return lines
 
 
+def population_markdown(data: dict, scenario_file=None) -> list[str]:
+    """Every population section of ``report.md``, from ``report.json``'s ``population``.
+
+    The verdicts are the criteria file's rules applied to the stored metrics.
+    """
+    from cdpr_twin.study.calibration_gauge import calibration_section
+    from cdpr_twin.study.population import population_from_json
+
+    pop = population_from_json(data)
+    lines = population_sections(pop, pop["illustration"], scenario_file)
+    if data.get("calibration"):
+        confidence = next(iter(pop["rules"].values())).confidence
+        lines += calibration_section(data["calibration"], confidence)
+    return [*lines, "", f"The criteria: `{ENTRY}`."]
+
+
 def population_sections(pop: dict, illustration: dict, scenario_file=None) -> list[str]:
-    """Every population section of ``report.md``."""
+    """Every population section of ``report.md`` but the calibration's."""
     lines = verdict_table(pop, illustration)
     if scenario_file is not None:
-        lines += tolerance_section(scenario_file)
+        lines += tolerance_section(str(scenario_file))
     lines += sensitivity_table(pop) + repeatability_table(pop) + nees_section(pop)
-    return [*lines, "", f"The criteria: `{ENTRY}` (shipped as `{CRITERIA_FILE.name}`)."]
+    return lines

@@ -66,7 +66,7 @@ def _intro(rep: dict, wall_time_s: float) -> list[str]:
         "",
     ]
     if "population" in rep:
-        runs = rep["population"]["runs"]
+        runs = {b: len(r) for b, r in rep["population"]["metrics"].items()}
         lines[2] += (
             f" The verdicts come from {sum(runs.values())} more runs of "
             "`campaigns/paper_population.toml` ("
@@ -266,21 +266,23 @@ def _excess(mv: dict) -> str:
     return "" if excess is None else f", its arc longer than the chord by ≤ {excess:.3g} m"
 
 
-def write_report(
-    out: Path, rep: dict, figures: list[Path], wall_time_s: float, population: list[str] = ()
-) -> Path:
+def write_report(out: Path, rep: dict, figures: list[Path], wall_time_s: float) -> Path:
     """``report.md``: the paper's numbers beside the twin's, and the findings with verdicts.
 
     Written whole (``report.md.partial``, then renamed), after everything else of the study.
-    With ``population`` (the population's sections, :mod:`.population_report`), the verdicts
-    are those; the single robot's findings follow as an illustration, without verdicts.
+    With the population's numbers (``rep["population"]``), the verdicts are the criteria's
+    over them (:mod:`.population_report`); the single robot's findings follow as an
+    illustration, without verdicts.
 
     Raises:
         OutputError: it cannot be written (it is left ``*.partial``).
     """
     lines = [*_intro(rep, wall_time_s)]
-    if population:
-        lines += [*population, "", *_illustration(rep)]
+    if "population" in rep:
+        from cdpr_twin.study.population_report import population_markdown
+
+        scenario = rep["population"].get("scenario")
+        lines += [*population_markdown(rep["population"], scenario), "", *_illustration(rep)]
     else:
         lines += _findings(rep)
     lines += [*_paper_table(rep), *_accuracy(rep)]
