@@ -31,6 +31,19 @@ def _population(block: str, blocks: dict) -> str:
     return f"`{block}` ({robots} robots)"
 
 
+def _convergence(blocks: dict) -> list[str]:
+    """How many PBVS runs converged (the others end at the time limit, still counted)."""
+    runs = [r for b, rs in blocks.items() if "pbvs" in b for r in rs if "converged" in r]
+    if not runs:
+        return []
+    k = sum(bool(r["converged"]) for r in runs)
+    return [
+        f"PBVS runs: {k} of {len(runs)} converged; a run that did not is judged on its pose "
+        "at the time limit.",
+        "",
+    ]
+
+
 def verdict_table(pop: dict, illustration: dict) -> list[str]:
     """The findings, each judged over its population by its criteria entry."""
     blocks = pop["blocks"]
@@ -46,6 +59,7 @@ def verdict_table(pop: dict, illustration: dict) -> list[str]:
         "**inconclusive** otherwise. *Robot 19* is the study's illustration robot (chosen, for "
         "its ≈ 1 cm miss): its value and its percentile in the population.",
         "",
+        *_convergence(blocks),
         "| finding | paper | population | holds on one robot | share [95 %] | median | verdict |"
         " robot 19 (percentile) | entry |",
         "|---|---|---|---|---|---|---|---|---|",
@@ -53,7 +67,7 @@ def verdict_table(pop: dict, illustration: dict) -> list[str]:
     for v in pop["verdicts"]:
         r = v.rule
         ill = illustration.get(r.id)
-        ill_text = "—" if ill is None else f"{_number(ill[0])} ({ill[1]:.0f}th)"
+        ill_text = "—" if ill is None else f"{_number(ill[0])} (percentile {ill[1]:.0f})"
         holds = r.reason if not r.judged else f"{r.holds} (`{r.bounds()}`)"
         lines.append(
             f"| {r.claim} | “{r.paper}” | {_population(r.population, blocks)} | {holds} | "
