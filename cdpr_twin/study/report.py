@@ -71,7 +71,10 @@ def _intro(rep: dict, wall_time_s: float) -> list[str]:
             f" The verdicts come from {sum(runs.values())} more runs of "
             "`campaigns/paper_population.toml` ("
             + ", ".join(f"{b} {n}" for b, n in runs.items())
-            + f"); realism profile `{rep.get('realism', {}).get('profile', 'ideal')}`."
+            + f"); realism profile `{rep.get('realism', {}).get('profile', 'ideal')}`. Made by "
+            "`cdpr-twin reproduce --population DIR`: the population's runs already in DIR are "
+            "kept, the missing ones run (on Ray: `cdpr-twin campaign "
+            "campaigns/paper_population.toml --out DIR --resume --ray` first)."
         )
     if rep["runs"]["failed"]:
         lines += ["Failed runs:", ""]
