@@ -191,6 +191,7 @@ def _population(rep: dict, out: Path, workers: int, progress) -> None:
     ``report.md``'s population sections are written from them (:mod:`.population_report`).
     """
     from cdpr_twin.campaign import load_campaign, run_campaign
+    from cdpr_twin.campaign.report import write_report as write_campaign_report
     from cdpr_twin.study.calibration_gauge import CALIBRATION_DIR, calibration_rows
     from cdpr_twin.study.population import (
         POPULATION_CAMPAIGN,
@@ -198,7 +199,9 @@ def _population(rep: dict, out: Path, workers: int, progress) -> None:
         population_report,
     )
 
-    run_campaign(load_campaign(POPULATION_CAMPAIGN), out, workers, resume=True, progress=progress)
+    campaign = load_campaign(POPULATION_CAMPAIGN)
+    run_campaign(campaign, out, workers, resume=True, progress=progress)
+    write_campaign_report(out, campaign)  # as `cdpr-twin campaign` leaves it
     rep["population"] = population_json(population_report(out))
     rep["population"]["scenario"] = POPULATION_SCENARIO.name  # of the shipped scenarios
     if (CALIBRATION_DIR / "results.json").is_file():
