@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ast
 import inspect
+import json
 import math
 import re
 import textwrap
@@ -249,3 +250,55 @@ def test_verdict_cell_names_population_share_interval_and_entry():
     assert f"`{rule.population}` (50 robots)" in row
     assert f"40/50 = 80 % [{low * 100:.0f}, {high * 100:.0f}] %" in row
     assert f"**{verdict.verdict}**" in row and rule.paper in row
+
+
+def test_open_loop_metrics_from_a_summary(tmp_path):
+    # the plan-following ratio leaves the image estimate out (the paper's claim is of the
+    # control and model estimates); fused's gain is the best other RMS over its own
+    def est(rms_t, rms_r):
+        return {"rms_translation_m": rms_t, "rms_rotation_deg": rms_r, "max_translation_m": 0.01}
+
+    summary = {
+        "estimators": {
+            "control": est(0.004, 0.3),
+            "image": est(0.006, 0.9),
+            "model_simple": est(0.0036, 0.35),
+            "fused": est(0.002, 0.4),
+        },
+        "segment_ends": [
+            {
+                "truth_vs_waypoint": {"translation_m": 0.01, "rotation_deg": 0.5},
+                "estimates_vs_plan": {
+                    "control": {"translation_m": 1e-8},
+                    "image": {"translation_m": 0.02},
+                    "model_simple": {"translation_m": 0.002},
+                    "fused": {"translation_m": 0.009},
+                },
+            }
+        ],
+    }
+    (tmp_path / "summary.json").write_text(json.dumps(summary))
+    m = population.open_loop_metrics(tmp_path, 0.95, whole_run=False)
+    assert m["open_loop_miss_m"] == 0.01 and m["open_loop_miss_deg"] == 0.5
+    assert m["follow_plan_ratio"] == pytest.approx(0.002 / 0.01)
+    assert m["model_over_control_rms"] == pytest.approx(0.0036 / 0.004)
+    assert m["fused_gain_t"] == pytest.approx(0.0036 / 0.002)
+    assert m["fused_gain_r"] == pytest.approx(0.3 / 0.4)
+
+
+def test_accuracy_ratios_pair_each_robot_with_its_own_open_loop_run():
+    blocks = {
+        "robots_open_loop": [
+            {"truth_seed": 1, "open_loop_miss_m": 0.01, "open_loop_miss_deg": 0.4},
+            {"truth_seed": 2, "open_loop_miss_m": 0.004, "open_loop_miss_deg": 2.0},
+        ],
+        "robots_pbvs": [
+            {"truth_seed": 2, "pbvs_error_m": 0.002, "pbvs_error_deg": 1.0},
+            {"truth_seed": 1, "pbvs_error_m": 0.001, "pbvs_error_deg": 0.1},
+        ],
+    }
+    population._pair_accuracy(blocks)
+    by_seed = {r["truth_seed"]: r for r in blocks["robots_pbvs"]}
+    assert by_seed[1]["accuracy_ratio_t"] == pytest.approx(10.0)
+    assert by_seed[1]["accuracy_ratio_r"] == pytest.approx(4.0)
+    assert by_seed[2]["accuracy_ratio_t"] == pytest.approx(2.0)
