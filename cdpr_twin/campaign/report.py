@@ -113,7 +113,9 @@ def attribution(X: np.ndarray, Y: np.ndarray, m: int) -> tuple[dict[str, float],
     shares, start = {}, 0
     for name, size in zip(GROUPS, sizes, strict=True):
         part = Xc[:, start : start + size] @ beta[start : start + size]
-        shares[name] = float(np.sum(part.var(axis=0)) / total) if total > 0 else math.nan
+        varied = np.any(np.ptp(X[:, start : start + size], axis=0) > 0.0)
+        # a group the runs share (e.g. one homing offset for all) has no share: NaN
+        shares[name] = float(np.sum(part.var(axis=0)) / total) if total > 0 and varied else math.nan
         start += size
     residual = Yc - Xc @ beta
     return shares, 1.0 - float(np.sum(residual.var(axis=0)) / total) if total > 0 else math.nan
@@ -256,9 +258,12 @@ def _attribution_section(campaign: Campaign, rows: list[dict]) -> list[str]:
         "| deviation group | share of variance |",
         "|---|---|",
     ]
+    varied = {g: s for g, s in shares.items() if not math.isnan(s)}
     lines += [
-        f"| {g} | {100 * s:.1f} % |" for g, s in sorted(shares.items(), key=lambda kv: -kv[1])
+        f"| {g} | {100 * s:.1f} % |" for g, s in sorted(varied.items(), key=lambda kv: -kv[1])
     ]
+    if same := [g for g in shares if g not in varied]:
+        lines += ["", f"The same in every run (no share): {', '.join(same)}."]
     return [*lines, ""]
 
 
