@@ -30,7 +30,16 @@ from cdpr_twin.campaign.spec import Campaign
 from cdpr_twin.campaign.table import load_table
 from cdpr_twin.files.transaction import save_figure, write_atomic
 
-GROUPS = ("exit points", "anchor points", "E·S", "sheave radii", "camera mount", "tag placement")
+GROUPS = (
+    "exit points",
+    "anchor points",
+    "E·S",
+    "sheave radii",
+    "camera mount",
+    "tag placement",
+    "drum radii",
+    "homing offset",
+)
 
 
 def _metric(columns: dict) -> tuple[str, str]:
@@ -51,20 +60,28 @@ def _quantiles(x: np.ndarray) -> str:
 
 
 def deviation_matrix(tasks: dict, rows: list[dict]) -> np.ndarray:
-    """Each run's drawn calibration errors, one row per run: (n, 8m + 12).
+    """Each run's drawn errors, one row per run: (n, 9m + 18).
 
     Columns: exit points (3m), anchor points (3m), E·S scale − 1 (m), sheave radii (m), camera
     mount (6), tag placement (6), as :class:`~cdpr_twin.robot.deviations.TruthDeviations` holds
-    them.
+    them; the drums' relative radius errors (m), drawn as the twin draws them (the robot's
+    winch generator, :func:`cdpr_twin.sim.winch.draw_drum_radii`); the run's homing offset
+    (position [m], rotation [deg]: 6), as its ``summary.json`` gives it.
     """
+    from cdpr_twin.robot.realism import robot_rng
     from cdpr_twin.scenario.loading import scenario_from_data
 
     out = []
     for row in rows:
         task = tasks[row["run_id"]]
-        spec = scenario_from_data(task.data, task.source).truth
-        m = len(json.loads(row["summary"])["final_tensions_n"])
+        scenario = scenario_from_data(task.data, task.source)
+        spec = scenario.truth
+        summary = json.loads(row["summary"])
+        m = len(summary["final_tensions_n"])
         d = spec.draw(m)
+        sigma = scenario.realism.winch.drum_radius_error_std
+        drums = robot_rng(spec.seed, "winch").normal(0.0, sigma, m)
+        homing = summary.get("homing_offset") or {}
         out.append(
             np.concatenate(
                 [
@@ -74,6 +91,9 @@ def deviation_matrix(tasks: dict, rows: list[dict]) -> np.ndarray:
                     d.pulley_radius_offsets,
                     d.camera_offset,
                     d.tag_offset,
+                    drums,
+                    homing.get("position_m", np.zeros(3)),
+                    homing.get("rotation_deg", np.zeros(3)),
                 ]
             )
         )
@@ -86,14 +106,16 @@ def attribution(X: np.ndarray, Y: np.ndarray, m: int) -> tuple[dict[str, float],
     Returns:
         ``({group: share}, R²)``; shares of the total variance of ``Y`` (summed over axes).
     """
-    sizes = (3 * m, 3 * m, m, m, 6, 6)
+    sizes = (3 * m, 3 * m, m, m, 6, 6, m, 6)
     Xc, Yc = X - X.mean(axis=0), Y - Y.mean(axis=0)
     beta, *_ = np.linalg.lstsq(Xc, Yc, rcond=None)
     total = float(np.sum(Yc.var(axis=0)))
     shares, start = {}, 0
     for name, size in zip(GROUPS, sizes, strict=True):
         part = Xc[:, start : start + size] @ beta[start : start + size]
-        shares[name] = float(np.sum(part.var(axis=0)) / total) if total > 0 else math.nan
+        varied = np.any(np.ptp(X[:, start : start + size], axis=0) > 0.0)
+        # a group the runs share (e.g. one homing offset for all) has no share: NaN
+        shares[name] = float(np.sum(part.var(axis=0)) / total) if total > 0 and varied else math.nan
         start += size
     residual = Yc - Xc @ beta
     return shares, 1.0 - float(np.sum(residual.var(axis=0)) / total) if total > 0 else math.nan
@@ -243,9 +265,12 @@ def _attribution_section(campaign: Campaign, rows: list[dict]) -> list[str]:
         "| deviation group | share of variance |",
         "|---|---|",
     ]
+    varied = {g: s for g, s in shares.items() if not math.isnan(s)}
     lines += [
-        f"| {g} | {100 * s:.1f} % |" for g, s in sorted(shares.items(), key=lambda kv: -kv[1])
+        f"| {g} | {100 * s:.1f} % |" for g, s in sorted(varied.items(), key=lambda kv: -kv[1])
     ]
+    if same := [g for g in shares if g not in varied]:
+        lines += ["", f"The same in every run (no share): {', '.join(same)}."]
     return [*lines, ""]
 
 

@@ -197,6 +197,12 @@ def _reproduce(args: argparse.Namespace) -> int:
         line.log(f"[{n:3d}/{total}] {record['name']}: {mark} ({record['status']})")
         line.update(n, total, f"{len(failed)} failed" if failed else "")
 
+    def population_progress(n: int, total: int, row: dict) -> None:
+        """One line per population run (the campaign's), the rate and time left below."""
+        mark = "ok" if row.get("ok") else "FAILED"
+        line.log(f"[population {n:3d}/{total}] {row.get('name')}: {mark}")
+        line.update(n, total, "population")
+
     try:
         with sigterm_raises():
             try:  # every option and every run's scenario, before anything runs or is touched
@@ -213,7 +219,9 @@ def _reproduce(args: argparse.Namespace) -> int:
                 return 2
             count[1] = len(specs)
             line.update(0, len(specs))
-            rep = study.reproduce_runs(args.out, specs, workers, progress)
+            rep = study.reproduce_runs(
+                args.out, specs, workers, progress, args.population, population_progress
+            )
     except (Exception, KeyboardInterrupt) as exc:
         line.done()
         return _study_failure(exc, args, (count[0], count[1]))
@@ -361,6 +369,15 @@ def _reproduce_parser(sub) -> None:
         help="also run PBVS (control in the loop) with this goal",
     )
     rep.add_argument("--robot", choices=model_cli.STUDY_ROBOTS, default="acrobot", help="robot")
+    rep.add_argument(
+        "--population",
+        type=out_path,
+        default=None,
+        metavar="DIR",
+        help="judge the findings over the robots of campaigns/paper_population.toml, run into "
+        "DIR (resumed: the runs already there are kept); the verdicts follow "
+        "cdpr_twin/study/criteria.toml",
+    )
     rep.add_argument("--traceback", action="store_true", help=TRACEBACK_HELP)
     rep.set_defaults(func=_reproduce)
 

@@ -24,6 +24,9 @@ from cdpr_twin.study.analysis import accuracy_at_p1, analyse
 from cdpr_twin.study.findings import FINDINGS, Finding, evaluate
 from cdpr_twin.study.output_dir import STUDY_FILES, STUDY_MARKER, clear_earlier_study
 from cdpr_twin.study.plan import (
+    OPEN_LOOP_SCENARIO as POPULATION_SCENARIO,
+)
+from cdpr_twin.study.plan import (
     Progress,
     RunSpec,
     Scenarios,
@@ -104,6 +107,7 @@ def reproduce(
     scenarios: Scenarios | tuple[str | Path, str | Path] | None = None,
     decompose: tuple[str, ...] = (),
     other_goal: str | None = None,
+    population: Path | None = None,
 ) -> dict:
     """Run the study and write ``runs/``, ``runs.json``, figures, ``report.json``, ``report.md``.
 
@@ -120,6 +124,8 @@ def reproduce(
         decompose: per-run sources of variation (:data:`cdpr_twin.robot.realism.RUN_SOURCES`) to
             switch off in turn, repeating the open-loop and control-in-the-loop PBVS runs.
         other_goal: a second PBVS goal (``"nominal"``/``"taught"``) for the control runs.
+        population: the population campaign's directory (:mod:`.population`): its missing
+            runs are run (those there are kept) and the findings judged over it.
 
     Returns:
         The report numbers (as in ``report.json``), plus ``"wall_time_s"``.
@@ -132,11 +138,16 @@ def reproduce(
     """
     workers = check_workers(workers)
     specs = study_runs(runs_scale, duration, scenarios, decompose, other_goal)
-    return reproduce_runs(out, specs, workers, progress)
+    return reproduce_runs(out, specs, workers, progress, population)
 
 
 def reproduce_runs(
-    out: Path, specs: list[RunSpec], workers: int, progress: Progress | None = None
+    out: Path,
+    specs: list[RunSpec],
+    workers: int,
+    progress: Progress | None = None,
+    population: Path | None = None,
+    population_progress=None,
 ) -> dict:
     """Claim ``out``, remove an earlier study's files, run ``specs``, write the report.
 
@@ -164,8 +175,34 @@ def reproduce_runs(
         records = run_study(specs, out, workers, progress)
         rep = analyse(out, records)
         figs = make_figures(out, rep, records)
+        if population is not None:
+            _population(rep, population, workers, population_progress)
+            write_json_atomic(out / "report.json", rep)
         wall = time.perf_counter() - start
         write_report(out, rep, figs, wall)
     finally:
         owner.release()
     return {**rep, "wall_time_s": wall}
+
+
+def _population(rep: dict, out: Path, workers: int, progress) -> None:
+    """Run the population's missing runs; ``rep["population"]``: its numbers.
+
+    ``report.md``'s population sections are written from them (:mod:`.population_report`).
+    """
+    from cdpr_twin.campaign import load_campaign, run_campaign
+    from cdpr_twin.campaign.report import write_report as write_campaign_report
+    from cdpr_twin.study.calibration_gauge import CALIBRATION_DIR, calibration_rows
+    from cdpr_twin.study.population import (
+        POPULATION_CAMPAIGN,
+        population_json,
+        population_report,
+    )
+
+    campaign = load_campaign(POPULATION_CAMPAIGN)
+    run_campaign(campaign, out, workers, resume=True, progress=progress)
+    write_campaign_report(out, campaign)  # as `cdpr-twin campaign` leaves it
+    rep["population"] = population_json(population_report(out))
+    rep["population"]["scenario"] = POPULATION_SCENARIO.name  # of the shipped scenarios
+    if (CALIBRATION_DIR / "results.json").is_file():
+        rep["population"]["calibration"] = calibration_rows(CALIBRATION_DIR, POPULATION_SCENARIO)

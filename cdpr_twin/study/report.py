@@ -66,6 +66,17 @@ def _intro(rep: dict, wall_time_s: float) -> list[str]:
         "`timeseries.csv` and `summary.json` files (also in `report.json`).",
         "",
     ]
+    if "population" in rep:
+        runs = {b: len(r) for b, r in rep["population"]["metrics"].items()}
+        lines[2] += (
+            f" The verdicts come from {sum(runs.values())} more runs of "
+            "`campaigns/paper_population.toml` ("
+            + ", ".join(f"{b} {n}" for b, n in runs.items())
+            + f"); realism profile `{rep.get('realism', {}).get('profile', 'ideal')}`. Made by "
+            "`cdpr-twin reproduce --population DIR`: the population's runs already in DIR are "
+            "kept, the missing ones run (on Ray: `cdpr-twin campaign "
+            "campaigns/paper_population.toml --out DIR --resume --ray` first)."
+        )
     if rep["runs"]["failed"]:
         lines += ["Failed runs:", ""]
         lines += [f"- `{f['name']}`: {f['status']}" for f in rep["runs"]["failed"]]
@@ -83,6 +94,24 @@ def _findings(rep: dict) -> list[str]:
     return lines + [
         f"| {f['finding']} | {f['paper']} | {f['twin']} | **{f['verdict']}** | {f['why']} |"
         for f in rep["findings"]
+    ]
+
+
+def _illustration(rep: dict) -> list[str]:
+    """The single robot's findings, as an illustration: its numbers and why, no verdict."""
+    lines = [
+        "## Illustration: one robot (truth seed 19, chosen)",
+        "",
+        "The figures and the tables below are of one robot, truth seed 19, chosen for its "
+        "≈ 1 cm open-loop miss at p1, the paper's; run seed 1 for the figures. Its percentile "
+        "in each metric of the populations is in the table above (*robot 19*). What one robot "
+        "shows is not a verdict: the verdicts are the populations'.",
+        "",
+        "| finding | paper | robot 19 | why |",
+        "|---|---|---|---|",
+    ]
+    return lines + [
+        f"| {f['finding']} | {f['paper']} | {f['twin']} | {f['why']} |" for f in rep["findings"]
     ]
 
 
@@ -245,11 +274,22 @@ def write_report(out: Path, rep: dict, figures: list[Path], wall_time_s: float) 
     """``report.md``: the paper's numbers beside the twin's, and the findings with verdicts.
 
     Written whole (``report.md.partial``, then renamed), after everything else of the study.
+    With the population's numbers (``rep["population"]``), the verdicts are the criteria's
+    over them (:mod:`.population_report`); the single robot's findings follow as an
+    illustration, without verdicts.
 
     Raises:
         OutputError: it cannot be written (it is left ``*.partial``).
     """
-    lines = [*_intro(rep, wall_time_s), *_findings(rep), *_paper_table(rep), *_accuracy(rep)]
+    lines = [*_intro(rep, wall_time_s)]
+    if "population" in rep:
+        from cdpr_twin.study.population_report import population_markdown
+
+        scenario = rep["population"].get("scenario")
+        lines += [*population_markdown(rep["population"], scenario), "", *_illustration(rep)]
+    else:
+        lines += _findings(rep)
+    lines += [*_paper_table(rep), *_accuracy(rep)]
     lines += _estimator_table(rep) + _spread(rep)
     lines += ["", "## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figures]
     return write_atomic(out / "report.md", "\n".join(lines) + "\n")
