@@ -319,7 +319,8 @@ class RopePhysics(Physics):
         """Let the swivels follow their cables' azimuths ψ (m,) [rad] by Coulomb's law.
 
         Between refreshes a swivel holds its yaw: the law is applied to ψ sampled every
-        ``align_every`` steps (a reversal within a chunk is missed, ψ̇·5 ms ≪ α*).
+        ``align_every`` steps: between refreshes a swivel lags by up to ψ̇·(align_every·h)
+        more (20 ms in the paper scenarios: 5e-4 rad at 1 cm/s, a tenth of α*).
         """
         if self._swivel_yaw is None:
             self._swivel_yaw = psi.copy()

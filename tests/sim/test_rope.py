@@ -405,3 +405,22 @@ def test_lagging_swivel_lengthens_its_cable_in_the_groove_not_as_mujocos_helix()
         assert p.data.ten_length[p._tendons][i] == pytest.approx(helix, abs=1e-12)
         if lag[i] != 0:
             assert helix < aligned[i]
+
+
+def test_lagging_swivels_stretch_enters_a_viscoelastic_ropes_force():
+    # the stepwise update (creep): τ = E₀ε − E_m·ε_d with ε = (L + ΔL)/l0 − 1, L MuJoCo's
+    # aligned tendon less its entry segment, ΔL the groove's stretch
+    cable = CableRealism(relaxed_ratio=0.6, creep_time=2.0, strain_damping=True)
+    p = _robot(cable, PulleyRealism(wrap_diameter=0.002, swivel_friction=0.05), seed=3)
+    p.reset(T_P0)
+    p.place(p.T_base_platform)
+    psi = _swivel_frame(p, p.T_base_platform)[0]
+    p._swivel_yaw = psi - np.linspace(-0.03, 0.03, 8)
+    p.refresh()
+    mujoco.mj_forward(p.model, p.data)
+    assert np.abs(p.groove_stretch).max() > 1e-7  # 0.1 N on these cables
+    length = p.data.ten_length[p._tendons] - 0.03 + p.groove_stretch
+    eps = length / p.rest_lengths - 1.0
+    expected = ES * eps - 0.4 * ES * p.eps_d[0]
+    # the force linearised about the present length is exact there (round-off: 1e-10 N)
+    np.testing.assert_allclose(p.tensions, expected, rtol=0, atol=1e-8)
