@@ -38,6 +38,7 @@ from cdpr_twin.calibrate import drive
 from cdpr_twin.calibrate.excitation import tag_in_view
 from cdpr_twin.calibrate.problem import Detector, Observations
 from cdpr_twin.campaign.executor import abandon, exit_with
+from cdpr_twin.math.geometry import CdprGeometry
 from cdpr_twin.math.se3 import so3_exp, so3_log, transform
 from cdpr_twin.run.episode import Episode, start
 from cdpr_twin.run.homing_and_teaching import homing
@@ -75,7 +76,7 @@ class Truth:
     """
 
     T_base_platform: np.ndarray
-    geometry: object
+    geometry: CdprGeometry
     T_base_tag: np.ndarray
     drum_scale: np.ndarray
     intrinsics_error: np.ndarray
