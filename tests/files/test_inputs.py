@@ -121,8 +121,8 @@ def test_a_100_mb_file_is_refused_unread_before_it_is_parsed(command, tmp_path, 
 
 
 def test_the_size_bound_holds_every_shipped_input_100_times_over():
-    # two orders of magnitude between the largest shipped input (a 500-run campaign, 5 kB) and
-    # the bound: no file a user writes by hand comes near it
+    # two orders of magnitude between the largest shipped input (the study's criteria, 10 kB)
+    # and the bound: no file a user writes by hand comes near it
     files = [*ROOT.glob("scenarios/*.toml"), *ROOT.glob("campaigns/*.toml")]
     files += [*ROOT.glob("models/*/robot.toml"), *ROOT.glob("cdpr_twin/study/criteria.toml")]
     assert max(p.stat().st_size for p in files) * 100 < MAX_TOML_BYTES
