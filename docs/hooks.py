@@ -153,15 +153,15 @@ def _scenario() -> str:
             doc = (inspect.getdoc(cls) or "").split("\n\n")[0].replace("\n", " ")
             out.extend([f'### `kind = "{cls.kind}"`', "", doc, "", *_table(cls), ""])
     out.extend(["## Realism (`[realism.<part>]`)", ""])
-    for part, cls in (
-        ("camera", realism.CameraRealism),
-        ("winch", realism.WinchRealism),
-        ("tension", realism.TensionRealism),
-        ("homing", realism.HomingRealism),
-    ):
+    profiles = " and ".join(f'`profile = "{p}"`' for p in realism.PROFILES if p != "ideal")
+    parts = typing.get_type_hints(realism.Realism)
+    for f in dataclasses.fields(realism.Realism):
+        cls = parts[f.name]
+        if not dataclasses.is_dataclass(cls):
+            continue
         doc = (inspect.getdoc(cls) or "").split("\n\n")[0].replace("\n", " ")
-        out.extend([f"### `[realism.{part}]`", "", doc, "", *_table(cls), ""])
-        out.append('Defaults are the `ideal` profile\'s; `profile = "acrobot"` sets its own.')
+        out.extend([f"### `[realism.{f.name}]`", "", doc, "", *_table(cls), ""])
+        out.append(f"Defaults are the `ideal` profile's; {profiles} set their own.")
         out.append("")
     shipped = (ROOT / "scenarios" / "paper_open_loop.toml").read_text(encoding="utf-8")
     out.extend(

@@ -347,6 +347,8 @@ def _build(s: Scenario):
             s.model.align_every,
             s.realism.winch,
             nominal_path=s.model.nominal,
+            cable=s.realism.cable,
+            pulley=s.realism.pulley,
         )
     except (ModelError, ValueError) as exc:
         raise ScenarioError(f"{s.source}: model: {exc}") from None

@@ -16,6 +16,7 @@ from cdpr_twin.cli.campaign import add_campaign_parser
 from cdpr_twin.cli.plots import missing_plots
 from cdpr_twin.cli.progress import Progress
 from cdpr_twin.files.transaction import out_path
+from cdpr_twin.robot.realism import PROFILES
 from cdpr_twin.run.interrupts import closed_stdout
 
 TRACEBACK_HELP = "on an unexpected error (e.g. a plugin's bug), also print its traceback"
@@ -308,7 +309,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     runp.add_argument(
         "--realism",
-        choices=("ideal", "acrobot"),
+        choices=PROFILES,
         default=None,
         help="realism profile instead of the scenario's (its [realism] overrides are dropped)",
     )

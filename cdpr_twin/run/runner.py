@@ -185,6 +185,8 @@ def prepare(scenario: Scenario) -> RunSetup:
             occluder,
             s.model.nominal,
             (s.model.payload, s.model.payload_com),
+            cable=s.realism.cable,
+            pulley=s.realism.pulley,
         )
         physics, nominal = built.physics, built.nominal
         sensors = Sensors(

@@ -355,6 +355,10 @@ class Physics:
         self.refresh()
         mujoco.mj_forward(m, d)
 
+    def _rest_lengths(self, T_base_platform: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """The winches' rest lengths l0 that hold the tensions τ (m,) [N] at a pose. (m,) [m]."""
+        return rest_lengths(cable_lengths(self.geometry, T_base_platform, "pulley"), tau, self._es)
+
     def reset(
         self,
         T_base_platform: np.ndarray,
@@ -381,12 +385,11 @@ class Physics:
         geom = self.geometry
         T = geom.check_pose_inside(T_base_platform, "reset pose")
         tau = tension_distribution(geom, T, *geom.tension_bounds(tau_min, tau_max))  # pulley
-        l0 = rest_lengths(cable_lengths(geom, T, "pulley"), tau, self._es)
         mujoco.mj_resetData(self.model, self.data)
         self._servos.reset()  # winches at rest
         self.cable_enabled[:] = True
         self._running = None
-        self.data.act[self._actuators] = l0
+        self.data.act[self._actuators] = self._rest_lengths(T, tau)
         self.place(T)
         self.was_reset = True
         hooks, self._hooks = self._hooks, []  # no event acts while settling
