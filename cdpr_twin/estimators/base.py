@@ -180,7 +180,8 @@ class Estimator(ABC):
         if cls.update is not Estimator.update and getattr(cls._step, "__isabstractmethod__", False):
             # Written against the older interface: its update() does the whole job, so it
             # needs no _step. Set here, before ABCMeta lists the abstract methods left.
-            cls._step = _no_step
+            # (assigning the abstract method away is the point here)
+            cls._step = _no_step  # type: ignore[method-assign]
 
     def __init__(self, geometry: CdprGeometry, options: Any = None) -> None:
         self.geometry = geometry
@@ -273,7 +274,10 @@ class Estimator(ABC):
         if not self._ready:
             self._check_reset()
         if not math.isfinite(measurement.time):
-            return self._bad_time(measurement)
+            held = self._bad_time(measurement)
+            # (None only for a finite time)
+            assert held is not None
+            return held
         watch_flags = self._seen(measurement, self._watch_encoders, self._watch_tensions)
         return self._step(measurement, inputs, watch_flags)
 

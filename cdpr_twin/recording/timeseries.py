@@ -153,9 +153,10 @@ class TimeseriesWriter:
             plan,
             None if m.tag is None else m.tag.T_cam_tag,
         ]
-        valid = [int(estimates[n].valid) for n in self.estimators]
+        flags = [int(estimates[n].valid) for n in self.estimators]
+        valid: list[int] | list[tuple[int, list[float]]] = flags
         if self.covariance:
-            valid = [(v, _cov21(estimates[n])) for v, n in zip(valid, self.estimators, strict=True)]
+            valid = [(v, _cov21(estimates[n])) for v, n in zip(flags, self.estimators, strict=True)]
         sensors = [*m.tensions.tolist(), *m.cable_lengths.tolist(), *m.cable_rates.tolist()]
         status = command.status if command is not None else Status.START
         event = "; ".join(marks).replace(",", ";").replace("\n", " ")

@@ -167,9 +167,9 @@ def shielded(escape: bool = False) -> Iterator[None]:
                 signal.signal(sig, handler)
         stopping = sys.exc_info()[1]  # raised in the body, or a stop under way around it
         absorbed = signal.SIGTERM if isinstance(stopping, Terminated) else signal.SIGINT
-        for sig in dict.fromkeys(held):  # each kind once, in the order they came
-            if not (isinstance(stopping, KeyboardInterrupt) and sig == absorbed):
-                signal.raise_signal(sig)  # now, to the handler it was meant for (a worker: exit)
+        for came in dict.fromkeys(held):  # each kind once, in the order they came
+            if not (isinstance(stopping, KeyboardInterrupt) and came == absorbed):
+                signal.raise_signal(came)  # now, to the handler it was meant for (a worker: exit)
 
 
 def closed_stdout(exc: BrokenPipeError) -> int:
