@@ -282,7 +282,8 @@ class ModelConfig:
     """Which model, and how to step it.
 
     Attributes:
-        file: MJCF scene.
+        file: MJCF scene: a shipped robot's (``robot = "<name>"``) or any (``file = "<path>"``,
+            relative to the scenario file).
         timestep: physics step [s].
         control_rate: control (and sensing) rate [Hz].
         align_every: physics steps between swivel/stiffness refreshes.
