@@ -44,10 +44,15 @@ import warnings
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Literal, Protocol, TypeVar, cast, overload
 
 from cdpr_twin.files.paths import path_kind
 from cdpr_twin.options import NoOptions, OptionError, OptionSpec, option, spec_of
+
+if TYPE_CHECKING:
+    # (for the types only: the bases import this module)
+    from cdpr_twin.controllers.base import Controller
+    from cdpr_twin.estimators.base import Estimator
 
 KINDS = ("estimator", "controller")
 RESERVED_NAMES = frozenset({"t", "true", "plan", "tag", "status", "tension", "length", "rate"})
@@ -73,7 +78,7 @@ BUILTINS: dict[str, tuple[tuple[str, str], ...]] = {
 }
 """The built-in plugins, by kind: name → ``"module:Class"``, in listing order. A class is
 imported when it is first looked up (its module, and what it needs, only then)."""
-_REGISTRY: dict[str, dict[str, type | str]] = {kind: dict(BUILTINS[kind]) for kind in KINDS}
+_REGISTRY: dict[str, dict[str, type[Plugin] | str]] = {kind: dict(BUILTINS[kind]) for kind in KINDS}
 """The registered plugins by kind and name: a class, or a built-in's ``"module:Class"`` until
 it is first looked up."""
 _ORIGIN: dict[str, dict[str, str]] = {kind: {} for kind in KINDS}
@@ -84,6 +89,23 @@ _ENTRY_POINTS_LOADED = False
 _ANNOUNCE = [True]
 
 C = TypeVar("C", bound=type)
+
+
+class Plugin(Protocol):
+    """A registered class as the registry knows it (an estimator or a controller).
+
+    Attributes:
+        name: its name in scenario files.
+        kind: ``"estimator"`` or ``"controller"``.
+        Options: its frozen options dataclass (the scenario file's schema of its table).
+    """
+
+    name: ClassVar[str]
+    kind: ClassVar[str]
+    Options: ClassVar[type[Any]]
+
+    def __init__(self, geometry: Any, options: Any = None) -> None: ...
+
 
 __all__ = [
     "BUILTINS",
@@ -124,13 +146,13 @@ def register(cls: C) -> C:
     kind, name = getattr(cls, "kind", ""), getattr(cls, "name", "")
     if kind not in KINDS or not name:
         raise TypeError(f"{cls.__name__}: set class attributes kind (one of {KINDS}) and name")
-    _check(cls, kind)
+    checked = _check(cls, kind)
     known = _REGISTRY[kind].get(name)
     here = f"{cls.__module__}:{cls.__qualname__}"
     if known is not None and here != (known if isinstance(known, str) else _ref(known)):
         where = known.split(":")[0] if isinstance(known, str) else known.__module__
         raise ValueError(f"{_a(kind)} named {name!r} is already registered ({where})")
-    _REGISTRY[kind][name] = cls
+    _REGISTRY[kind][name] = checked
     return cls
 
 
@@ -139,26 +161,33 @@ def _ref(cls: type) -> str:
     return f"{cls.__module__}:{cls.__qualname__}"
 
 
-def _check(cls: type, kind: str) -> None:
-    """Refuse a class that cannot be a plugin of ``kind`` (see :func:`register`)."""
+def _check(cls: type, kind: str) -> type[Plugin]:
+    """Refuse a class that cannot be a plugin of ``kind`` (see :func:`register`).
+
+    Returns:
+        ``cls``, checked to be a :class:`Plugin`.
+    """
     base = _base(kind)
     if not (isinstance(cls, type) and issubclass(cls, base)):
         raise TypeError(f"{cls!r}: {_a(kind)} must subclass {base.__module__}.{base.__name__}")
     if inspect.isabstract(cls):
-        missing = ", ".join(sorted(cls.__abstractmethods__))
+        missing = ", ".join(sorted(getattr(cls, "__abstractmethods__", ())))
         raise TypeError(f"{cls.__name__}: implement {missing} (abstract in {base.__name__})")
     options = getattr(cls, "Options", None)
-    if not (dataclasses.is_dataclass(options) and options.__dataclass_params__.frozen):
+    params = getattr(options, "__dataclass_params__", None)
+    if not (dataclasses.is_dataclass(options) and params is not None and params.frozen):
         raise TypeError(f"{cls.__name__}: Options must be a frozen dataclass")
-    name = cls.name
+    name = getattr(cls, "name", "")
     if name in RESERVED_NAMES or not name.isidentifier():
         raise ValueError(
             f"{cls.__name__}: {name!r} cannot name {_a(kind)} (a column prefix of run files, or "
             f"not an identifier); reserved: {', '.join(sorted(RESERVED_NAMES))}"
         )
+    # every attribute of the protocol was checked above
+    return cast("type[Plugin]", cls)
 
 
-def _resolve(kind: str, name: str) -> type:
+def _resolve(kind: str, name: str) -> type[Plugin]:
     """The class registered under ``name``, a built-in's imported now if it was not yet."""
     entry = _REGISTRY[kind][name]
     if isinstance(entry, str):
@@ -166,8 +195,7 @@ def _resolve(kind: str, name: str) -> type:
         cls = getattr(importlib.import_module(module), attr)
         if getattr(cls, "name", None) != name or getattr(cls, "kind", None) != kind:
             raise TypeError(f"{entry} is not the {kind} named {name!r}")
-        _check(cls, kind)
-        _REGISTRY[kind][name] = entry = cls
+        _REGISTRY[kind][name] = entry = _check(cls, kind)
     return entry
 
 
@@ -229,7 +257,7 @@ def installed(kind: str) -> str:
     return ", ".join(_ORIGIN[kind].get(n, n) for n in names(kind))
 
 
-def registry(kind: str) -> Mapping[str, type]:
+def registry(kind: str) -> Mapping[str, type[Plugin]]:
     """The registered classes of one kind, by name, every built-in imported (a copy)."""
     return MappingProxyType({name: _resolve(kind, name) for name in names(kind)})
 
@@ -240,7 +268,15 @@ def names(kind: str) -> tuple[str, ...]:
     return tuple(_REGISTRY[kind])
 
 
-def lookup(kind: str, name: str) -> type:
+@overload
+def lookup(kind: Literal["estimator"], name: str) -> type[Estimator]: ...
+@overload
+def lookup(kind: Literal["controller"], name: str) -> type[Controller]: ...
+@overload
+def lookup(kind: str, name: str) -> type[Plugin]: ...
+
+
+def lookup(kind: str, name: str) -> type[Plugin]:
     """The class registered under a name.
 
     Raises:

@@ -63,3 +63,17 @@ def test_the_site_builds_strict_with_every_page(tmp_path):
         assert f"cdpr-twin {command}" in cli, command
     scenario = (tmp_path / "site" / "reference" / "scenario" / "index.html").read_text()
     assert "max_linear_speed" in scenario and "exposure_s" in scenario
+    # the top-level tables, from the loader's own reads: every key a shipped scenario writes
+    # there, and the keys it reads only when a file gives them (no shipped file does)
+    import tomllib
+
+    for path in sorted((ROOT / "scenarios").glob("*.toml")):
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        for table in ("model", "truth", "sensors", "start", "monitor"):
+            for key in data.get(table, {}):
+                assert f"<code>{key}</code>" in scenario, (path.name, table, key)
+    assert "<code>nominal</code>" in scenario and "<code>file</code>" in scenario
+    # every part of the realism profiles, the cables' and pulleys' too, and their profile
+    for part in ("camera", "winch", "tension", "homing", "cable", "pulley"):
+        assert f"[realism.{part}]" in scenario, part
+    assert "acrobot_full" in cli and "acrobot_full" in scenario

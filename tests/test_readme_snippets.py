@@ -64,8 +64,12 @@ def test_a_readme_example_runs_as_written(index, tmp_path, monkeypatch):
         assert (tmp_path / "runs" / "quick" / "summary.json").is_file()
 
 
-def test_the_examples_type_check(tmp_path):
-    """mypy, with the project's settings, accepts every Python example a reader pastes."""
+def test_the_package_and_the_examples_type_check(tmp_path):
+    """mypy, with the project's settings, accepts the package and every example a reader pastes.
+
+    One run checks both (the examples import the package: checking them apart would analyse
+    it twice), from an empty cache as CI starts.
+    """
     import subprocess
     import sys
 
@@ -78,9 +82,9 @@ def test_the_examples_type_check(tmp_path):
             sys.executable,
             "-m",
             "mypy",
-            "--follow-imports=silent",
             "--cache-dir",
             str(tmp_path / "cache"),
+            "cdpr_twin",
             *map(str, files),
         ],
         cwd=ROOT,
@@ -89,3 +93,6 @@ def test_the_examples_type_check(tmp_path):
         timeout=600,
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    # every example and every module of the package was checked
+    n_modules = len(list((ROOT / "cdpr_twin").rglob("*.py")))
+    assert f"in {n_modules + len(files)} source files" in proc.stdout, proc.stdout

@@ -7,6 +7,11 @@ environment in a temporary directory. That environment reaches the test environm
 dependencies (mujoco, numpy…) through a ``.pth`` line, which adds their directory to
 ``sys.path`` without running its ``.pth`` files, so the editable install of ``cdpr_twin`` is
 not importable there: the test checks that ``cdpr_twin`` is imported from the new environment.
+
+The installed package starts with the checkout's compiled Numba kernels (warmed here first): Numba
+keys its on-disk cache by the source file's content, the function's bytecode and the CPU, all
+the same for the installed copy of the same sources, so the environment loads them instead of
+compiling them again (a minute and more of CPU; a kernel whose key differs is compiled as usual).
 """
 
 import json
@@ -40,6 +45,21 @@ def _call(*command, cwd: Path, env: dict | None = None) -> subprocess.CompletedP
     return proc
 
 
+def _reuse_compiled_kernels(purelib: Path) -> None:
+    """Copy the checkout's Numba cache beside the installed sources, the kernels compiled first.
+
+    Building the shipped scenario's estimators compiles (or loads) every kernel its runs use.
+    """
+    from cdpr_twin.run.runner import prepare
+    from cdpr_twin.scenario.loading import load_scenario
+
+    prepare(load_scenario("paper_open_loop").with_overrides(camera=False)).close()
+    for cached in (ROOT / "cdpr_twin").rglob("__pycache__/*.nb[ci]"):
+        target = purelib / cached.relative_to(ROOT)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(cached, target)
+
+
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory):
     """(venv, wheel, environment, empty working directory) with the wheel installed."""
@@ -62,6 +82,7 @@ def installed(tmp_path_factory):
     purelib = _call(python, "-c", "import sysconfig; print(sysconfig.get_path('purelib'))", cwd=tmp)
     deps = [p for p in site.getsitepackages() if Path(p).is_dir()]
     (Path(purelib.stdout.strip()) / "_test_env_deps.pth").write_text("\n".join(deps) + "\n")
+    _reuse_compiled_kernels(Path(purelib.stdout.strip()))
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
     env["MUJOCO_GL"] = env.get("MUJOCO_GL", "egl")
     work = tmp / "elsewhere"

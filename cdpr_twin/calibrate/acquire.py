@@ -158,7 +158,7 @@ class _Segment:
     readings: list[Reading]
     true_poses: list[np.ndarray]
     simulated_time: float
-    geometry: object
+    geometry: CdprGeometry
     T_base_tag: np.ndarray
     drum_scale: np.ndarray
     intrinsics_error: np.ndarray
@@ -215,6 +215,8 @@ def _read(
             tags.append(m.tag.T_cam_tag)
         episode.advance(period, rest)
     _exposures(episode.setup.sensors, False)
+    # (record() refuses frames < 1: at least one reading set ok)
+    assert ok is not None
     return Reading(np.mean(enc, axis=0), np.mean(ten, axis=0), ok, _mean_pose(tags))
 
 

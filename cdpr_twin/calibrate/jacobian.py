@@ -60,7 +60,9 @@ def _where(pattern: csc_matrix, cols: list[int], rows: slice) -> tuple[np.ndarra
 
     The rows are counted from ``rows.start``.
     """
-    at = np.concatenate([np.arange(pattern.indptr[c], pattern.indptr[c + 1]) for c in cols] or [[]])
+    at = np.concatenate(
+        [np.arange(pattern.indptr[c], pattern.indptr[c + 1]) for c in cols] or [np.zeros(0)]
+    )
     at = at.astype(np.intp)
     r = pattern.indices[at]
     inside = (r >= rows.start) & (r < rows.stop)

@@ -56,7 +56,7 @@ class Layout:
                 at += sizes[name]
         self.n_shared = at
         self.n = at + 6 * n_poses
-        self.sigma = np.concatenate([self._prior(n, priors) for n in self.blocks] or [[]])
+        self.sigma = np.concatenate([self._prior(n, priors) for n in self.blocks] or [np.zeros(0)])
 
     def _prior(self, name: str, p) -> np.ndarray:
         if name == "intrinsics":
@@ -87,8 +87,8 @@ class Layout:
     def get(self, x: np.ndarray, name: str) -> np.ndarray:
         """A block's values (zeros when not estimated), shaped (m, 3), (m,), (6,) or (8,)."""
         m = self.m
-        shape = {"intrinsics": (8,), "camera": (6,), "tag": (6,)}.get(name)
-        shape = shape or ((m, 3) if PER_CABLE[name] == 3 else (m,))
+        shared: dict[str, tuple[int, ...]] = {"intrinsics": (8,), "camera": (6,), "tag": (6,)}
+        shape = shared.get(name) or ((m, 3) if PER_CABLE[name] == 3 else (m,))
         if name not in self.blocks:
             return np.zeros(shape)
         return x[self.blocks[name]].reshape(shape)

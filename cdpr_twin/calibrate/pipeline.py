@@ -21,7 +21,7 @@ from cdpr_twin.calibrate.problem import Priors, Problem
 from cdpr_twin.calibrate.solver import Calibration, CalibrationError, solve_weighted
 from cdpr_twin.calibrate.variance import NoiseModel, Weighting
 from cdpr_twin.math.se3 import pose_distance, so3_log
-from cdpr_twin.scenario.loading import Scenario
+from cdpr_twin.scenario.loading import Scenario, ScenarioError
 
 NOISE = NoiseModel(tag_std_per_m=6e-3, tag_rotation_std=math.radians(1.0))
 """The noise the solver starts from, upper bounds for the twin's ``acrobot`` profile: the tag's
@@ -132,6 +132,11 @@ def calibrate(
 
     started = time.perf_counter()
     nominal = build_robot(s.model.file, nominal_path=s.model.nominal).nominal
+    if nominal.intrinsics is None or nominal.T_base_tag is None:
+        raise ScenarioError(
+            f"{s.source}: model.file: {s.model.file} has no camera or no tag; calibration "
+            "needs both (add [camera] and [tag] to the robot description)"
+        )
     try:
         poses = excitation_poses(
             nominal.geometry,

@@ -208,6 +208,8 @@ class Problem:
             from cdpr_twin.estimators.fused_models import tag_calibration_jacobian
 
             d = detector  # (no view: an empty (0, 6, 8) stack, which every step carries)
+            # the layout has an intrinsics block exactly when a detector was given
+            assert d is not None
             self.intrinsics_jacobian = np.array(
                 [
                     tag_calibration_jacobian(T, d.tag_size, d.focal_px, d.lens)
@@ -235,7 +237,7 @@ class Problem:
         out.noise = noise
         return out
 
-    def without_views(self, poses: np.ndarray) -> Problem:
+    def without_views(self, poses: np.ndarray | list[int]) -> Problem:
         """The same problem with the tag views at ``poses`` (indices) left out, as if unseen."""
         seen = np.array(self.obs.seen, dtype=bool)
         seen[poses] = False
@@ -312,7 +314,7 @@ class Problem:
             return np.zeros(0)
         L, p = self.layout, self.priors
         home = np.array([p.home_position] * 3 + [p.home_rotation] * 3)
-        homed = [x[L.pose(k)] / home for k in self.home_k]
+        homed = [x[L.pose(int(k))] / home for k in self.home_k]
         return np.concatenate([x[: L.n_shared] / L.sigma, *homed])
 
     def _cables(self, mod: Model) -> np.ndarray:
@@ -345,7 +347,8 @@ class Problem:
         L, rows, cols = self.layout, [], []
 
         def see(r: np.ndarray, c: np.ndarray) -> None:  # each row r sees the columns c
-            rows.append(np.repeat(r, len(c))), cols.append(np.tile(c, len(r)))
+            rows.append(np.repeat(r, len(c)))
+            cols.append(np.tile(c, len(r)))
 
         def pose(k: np.ndarray) -> np.ndarray:  # (len(k), 6) the poses' columns
             return L.n_shared + 6 * np.asarray(k)[:, None] + np.arange(6)
@@ -359,7 +362,8 @@ class Problem:
                     dtype=int,
                 ),
             )
-            rows.append(np.repeat(r, 6)), cols.append(pose(self.rows_k[r]).ravel())
+            rows.append(np.repeat(r, 6))
+            cols.append(pose(self.rows_k[r]).ravel())
         groups = (
             (self.n_cable_rows, self.seen, ("camera", "tag", "intrinsics")),
             (
@@ -371,11 +375,14 @@ class Problem:
         for at, ks, names in groups:  # a tag view's, a balance's six rows
             r = at + np.arange(6 * len(ks))
             see(r, np.array([c for n in names for c in L.columns(n)], dtype=int))
-            rows.append(np.repeat(r, 6)), cols.append(np.repeat(pose(ks), 6, axis=0).ravel())
+            rows.append(np.repeat(r, 6))
+            cols.append(np.repeat(pose(ks), 6, axis=0).ravel())
         n_shared = L.n_shared if self.n_prior else 0
-        rows.append(self.n_data + np.arange(n_shared)), cols.append(np.arange(n_shared))
+        rows.append(self.n_data + np.arange(n_shared))
+        cols.append(np.arange(n_shared))
         home = pose(self.home_k).ravel()
-        rows.append(self.n_data + n_shared + np.arange(len(home))), cols.append(home)
+        rows.append(self.n_data + n_shared + np.arange(len(home)))
+        cols.append(home)
         r, c = np.concatenate(rows), np.concatenate(cols)
         shape = (self.n_data + self.n_prior, L.n)
         return coo_matrix((np.ones(len(r), dtype=np.int8), (r, c)), shape=shape)

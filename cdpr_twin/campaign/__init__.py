@@ -172,6 +172,8 @@ def _execute(campaign, out, table, todo, workers, ray_address, progress, inputs)
                 progress(n, len(todo), row)
     except KeyboardInterrupt as exc:  # (a SIGTERM that Ray re-raised as a plain Ctrl-C too)
         stop = interruption(exc)
+        # a KeyboardInterrupt is a stop itself
+        assert stop is not None
         status = "terminated" if isinstance(stop, Terminated) else "interrupted"
         if stop is exc:
             raise

@@ -17,7 +17,7 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any
 
@@ -30,7 +30,7 @@ class ExecutorError(RuntimeError):
 
 def run_local(
     fn: Callable[..., Any], items: Iterable[Any], workers: int, *args: Any
-) -> Iterator[Any]:
+) -> Generator[Any, None, None]:
     """``fn(item, *args)`` for every item in ``workers`` spawned processes; results as they end.
 
     At most ``2 × workers`` items are in flight, so a stop (Ctrl-C, SIGTERM) abandons few.
@@ -100,7 +100,7 @@ def stop_workers(
     ``shutdown`` clears: give ``processes``, taken before it, after one).
     """
     given = processes is not None
-    if not given:
+    if processes is None:
         processes = list((getattr(pool, "_processes", None) or {}).values())
     terminate = getattr(pool, "terminate_workers", None)
     if terminate is not None and not given:
@@ -149,7 +149,7 @@ def run_ray(
     workers: int | None,
     address: str | None,
     *args: Any,
-) -> Iterator[Any]:
+) -> Generator[Any, None, None]:
     """``fn(item, *args)`` for every item on a Ray cluster's actors; results as they end.
 
     Raises:
@@ -194,7 +194,8 @@ def run_ray(
             def run(self, item):
                 return fn(item, *args)
 
-        pool = ActorPool([Worker.remote() for _ in range(n)])
+        # (Ray's stubs type the decorated class as the class, without its .remote())
+        pool = ActorPool([Worker.remote() for _ in range(n)])  # type: ignore[attr-defined]
         yield from pool.map_unordered(lambda actor, item: actor.run.remote(item), list(items))
     finally:
         if started:

@@ -297,7 +297,9 @@ def _tasks(source: Path, block: _Block, seed: int, where: str) -> list[Task]:
     from cdpr_twin.scenario.loading import ScenarioError, scenario_from_data
     from cdpr_twin.scenario.preflight import check_task
 
-    out, nominals, checked = [], {}, set()
+    out: list[Task] = []
+    nominals: dict = {}  # the nominal robots check_task builds, by model (built once each)
+    checked = set()
     points = itertools.product(*(a["values"] for a in block.grid))
     for p, point in enumerate(points):
         for sample in range(block.samples):

@@ -87,11 +87,11 @@ def flatten(task_fields: dict, summary: dict | None, error: str = "", wall: floa
         for k, c in zip(keys, short, strict=True):
             row[f"est.{name}.{c}"] = math.nan if e[k] is None else float(e[k])
         row[f"est.{name}.invalid"] = int(e["invalid_updates"])
-    for k, cp in enumerate(s.get("segment_ends", []), 1):
-        row[f"cp{k}.t_m"] = float(cp["truth_vs_waypoint"]["translation_m"])
-        row[f"cp{k}.r_deg"] = float(cp["truth_vs_waypoint"]["rotation_deg"])
+    for i, cp in enumerate(s.get("segment_ends", []), 1):
+        row[f"cp{i}.t_m"] = float(cp["truth_vs_waypoint"]["translation_m"])
+        row[f"cp{i}.r_deg"] = float(cp["truth_vs_waypoint"]["rotation_deg"])
         for axis, v in zip(("x", "y", "z", "rx", "ry", "rz"), cp["true_pose"], strict=True):
-            row[f"cp{k}.{axis}"] = float(v)
+            row[f"cp{i}.{axis}"] = float(v)
     row["summary"] = "" if summary is None else json.dumps(finite_or_null(summary), allow_nan=False)
     return row
 

@@ -207,9 +207,16 @@ class OpenLoopController(Controller):
         return seg.twist_base(tau)
 
     def command(
-        self, t: float, period: float, estimate: PoseEstimate, measurement: Measurement
+        self,
+        t: float,
+        period: float,
+        estimate: PoseEstimate | None,
+        measurement: Measurement | None,
     ) -> Command:
-        """l̇ = Â(planned pose) ᵇv_p at the midpoint of [t, t + period] (eq. 30)."""
+        """l̇ = Â(planned pose) ᵇv_p at the midpoint of [t, t + period] (eq. 30).
+
+        The plan reads no sensor: ``estimate`` and ``measurement`` may be ``None``.
+        """
         if not self.segments:
             raise RuntimeError("open_loop: call reset(T_base_platform0) before command()")
         mid = t + 0.5 * period

@@ -244,7 +244,7 @@ class PbvsController(Controller):
                 "rotation_deg": float(np.degrees(dr)),
                 "detected_at_s": end.last_tag_time,
             }
-        out = {
+        out: dict[str, Any] = {
             "converged": end.status == Status.CONVERGED,
             "final_tag_error": tag_err,
             "true_final_tag_error": end.true_tag_error,
@@ -292,8 +292,8 @@ class PbvsController(Controller):
         v_cam = -self.gain * np.linalg.pinv(interaction_matrix(T_co[:3, 3], e[3:])) @ e
         scale = max(
             1.0,
-            np.linalg.norm(v_cam[:3]) / self.max_linear_speed,
-            np.linalg.norm(v_cam[3:]) / self.max_angular_speed,
+            float(np.linalg.norm(v_cam[:3])) / self.max_linear_speed,
+            float(np.linalg.norm(v_cam[3:])) / self.max_angular_speed,
         )
         v_cam = v_cam / scale
         twist_platform = self._Ad @ v_cam  # eq. 3-4

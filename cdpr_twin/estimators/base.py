@@ -212,7 +212,8 @@ class Estimator(ABC):
         if cls.update is not Estimator.update and getattr(cls._step, "__isabstractmethod__", False):
             # Written against the older interface: its update() does the whole job, so it
             # needs no _step. Set here, before ABCMeta lists the abstract methods left.
-            cls._step = _no_step
+            # (assigning the abstract method away is the point here)
+            cls._step = _no_step  # type: ignore[method-assign]
 
     def __init__(self, geometry: CdprGeometry, options: Any = None) -> None:
         self.geometry = geometry
@@ -311,7 +312,10 @@ class Estimator(ABC):
         if not self._ready:
             self._check_reset()
         if not math.isfinite(measurement.time):
-            return self._bad_time(measurement)
+            held = self._bad_time(measurement)
+            # (None only for a finite time)
+            assert held is not None
+            return held
         encoders, tensions = self._watch_encoders, self._watch_tensions
         flags = _NO_FLAGS
         if encoders or tensions:

@@ -372,7 +372,7 @@ class FusedEstimator(Estimator):
             moving = twist is not None
             hanging = self._taut(m, self.options.hang_threshold)
             self.predict(
-                twist if moving else np.zeros(6),
+                twist if twist is not None else np.zeros(6),
                 dt,
                 m.cable_rates if moving else np.zeros(self._m),
                 hanging,

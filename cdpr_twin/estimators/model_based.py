@@ -159,10 +159,10 @@ class ModelEstimator(Estimator):
                 if outcome == newton.MAIN:
                     return PoseSolution(T, residual, it)
             return _newton([self._cables[i] for i in cables], self.pulley, goal, T0)
-        cables = np.asarray(cables)
+        index = np.asarray(cables)
         g = self.geometry
-        r = g.pulley_radius[cables] if self.pulley else None
-        return solve_scipy(g.a_base[cables], g.b_platform[cables], r, targets[cables], T0)
+        r = g.pulley_radius[index] if self.pulley else None
+        return solve_scipy(g.a_base[index], g.b_platform[index], r, targets[index], T0)
 
     def weights(self, lengths: np.ndarray, tensions: np.ndarray) -> np.ndarray:
         """Weights 1/σ_i² of every cable in the ``all_taut`` solve (m,) [1/m²]."""
@@ -205,8 +205,8 @@ class ModelEstimator(Estimator):
             ``(cables, condition)``: the cables, and their Jacobian's condition number at the
             last estimate.
         """
-        _, rows = _kernel(self._cables, self.pulley, _pose(self._T))
-        rows = np.asarray(rows)
+        rows = np.asarray(_kernel(self._cables, self.pulley, _pose(self._T))[1])
+        cables: list[int]
         if self.selection == "all_taut":
             cables = np.asarray(taut).nonzero()[0].tolist()
         else:

@@ -431,7 +431,7 @@ def _entries(directory: Path, patterns: tuple[str, ...]) -> list[Path]:
 def _identities(paths: tuple[Path | None, ...]) -> set[tuple[int, int]]:
     """The (device, inode) of each path, as named (a link) and as followed (its target)."""
     found = set()
-    for path in paths:
+    for path in filter(None, paths):
         for look in (os.lstat, os.stat):
             with contextlib.suppress(OSError, ValueError, TypeError):
                 info = look(path)
@@ -515,7 +515,7 @@ class OutputDir:
         inputs: tuple[Path | None, ...] = (),
     ) -> None:
         self.path = None if path is None else Path(path)
-        self.lock = None if path is None else self.path / LOCK_NAME
+        self.lock = None if path is None else Path(path) / LOCK_NAME
         self.outputs, self.foreign = outputs, foreign
         self.partials = outputs if partials is None else partials
         self.owned = outputs if owned is None else owned
@@ -549,9 +549,21 @@ class OutputDir:
             self.release()
             raise
 
+    @property
+    def _dir(self) -> Path:
+        """The directory of a claim that has one (only its steps after :meth:`claim` use it)."""
+        assert self.path is not None, "a claim without a directory has no steps"
+        return self.path
+
+    @property
+    def _lock(self) -> Path:
+        """The lock file of a claim that has a directory."""
+        assert self.lock is not None, "a claim without a directory has no lock"
+        return self.lock
+
     def _acquire(self) -> None:
         self._made = [
-            p for p in (self.path, *self.path.parents) if path_kind(p, OutputDirError) is None
+            p for p in (self._dir, *self._dir.parents) if path_kind(p, OutputDirError) is None
         ]
         for made in self._made:  # (os.stat found nothing there: a link to nothing, or nothing)
             if os.path.islink(made):
@@ -560,8 +572,8 @@ class OutputDir:
                     f"{os.readlink(made)}); remove it, or choose another --out"
                 )
         try:
-            self.path.mkdir(parents=True, exist_ok=True)
-            with _guard(self.path):
+            self._dir.mkdir(parents=True, exist_ok=True)
+            with _guard(self._dir):
                 self._create_lock()
         except OSError as exc:
             self._remove_made()  # (e.g. a name too long for the last one: not its parents)
@@ -572,32 +584,32 @@ class OutputDir:
     def _create_lock(self) -> None:
         flags = os.O_CREAT | os.O_EXCL | os.O_WRONLY | os.O_NOFOLLOW | os.O_CLOEXEC
         try:
-            fd = os.open(self.lock, flags, 0o644)
+            fd = os.open(self._lock, flags, 0o644)
         except FileExistsError:
-            owner = _owner(self.lock)
-            if not _stale(owner):
+            owner = _owner(self._lock)
+            if owner is not None and not _stale(owner):
                 pid, host = owner
                 raise OutputDirError(
                     f"output directory {self.path} is in use by another run (pid {pid} on "
-                    f"{host}); wait for it, or delete {self.lock} if no run uses it"
+                    f"{host}); wait for it, or delete {self._lock} if no run uses it"
                 ) from None
-            self.lock.unlink()
-            fd = os.open(self.lock, flags, 0o644)
+            self._lock.unlink()
+            fd = os.open(self._lock, flags, 0o644)
             self._took_over = True
         try:
             os.write(fd, f"{os.getpid()} {socket.gethostname()}\n".encode())
             os.fsync(fd)
         except BaseException:  # (a full disk): no lock left behind, nor a directory made for it
             with contextlib.suppress(OSError):
-                self.lock.unlink()
+                self._lock.unlink()
             raise
         finally:
             os.close(fd)
 
     def _stale_entries(self) -> list[Path]:
         """What a claim removes: the final names there and their owner's ``*.partial``."""
-        finals = [p for p in (self.path / n for n in self.outputs) if _present(p)]
-        return finals + _entries(self.path, tuple(f"{p}.partial" for p in self.partials))
+        finals = [p for p in (self._dir / n for n in self.outputs) if _present(p)]
+        return finals + _entries(self._dir, tuple(f"{p}.partial" for p in self.partials))
 
     def _check(self) -> None:
         """Refuse a directory whose files of an output's name are not ours to remove.
@@ -606,7 +618,7 @@ class OutputDir:
             OutputDirError: such a file is an input of the command, a directory, or was not
                 written by an earlier run of ours (no marker, no stale lock of ours).
         """
-        named = _entries(self.path, self.owned)
+        named = _entries(self._dir, self.owned)
         candidates = sorted({*self._stale_entries(), *named})
         if inputs := _identities(self.inputs):
             for path in candidates:
@@ -619,7 +631,7 @@ class OutputDir:
         for path in candidates:
             if stat.S_ISDIR(os.lstat(path).st_mode):
                 raise OutputDirError(f"{path} is a directory; remove it or choose another --out")
-        ours = self._took_over or (self.marker is not None and self.marker.written_by_us(self.path))
+        ours = self._took_over or (self.marker is not None and self.marker.written_by_us(self._dir))
         if named and not ours:
             shown = ", ".join(p.name for p in named[:4]) + (", …" if len(named) > 4 else "")
             proof = f" (no {self.marker.name} of ours beside them)" if self.marker else ""
@@ -661,7 +673,7 @@ class OutputDir:
         if self._held:
             self._held = False
             with contextlib.suppress(OSError):
-                self.lock.unlink()
+                self._lock.unlink()
 
 
 def _present(path: Path) -> bool:

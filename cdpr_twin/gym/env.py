@@ -163,7 +163,7 @@ class CdprEnv(gym.Env):
     @property
     def nominal_geometry(self):
         """The nominal geometry (what a policy may believe: exit/anchor points, camera mount)."""
-        return self._setup.nominal.geometry
+        return self._run.nominal.geometry
 
     def _observation_space(self, n: int) -> spaces.Dict:
         """Unbounded where physics is (an overload's tension, a lost estimate's position)."""
@@ -176,7 +176,9 @@ class CdprEnv(gym.Env):
             "pose_estimate": spaces.Box(-pose_high, pose_high, (6,), np.float64),
         }
         if self.image:
-            k = self._setup.nominal.intrinsics
+            k = self._run.nominal.intrinsics
+            # (image is on only for a robot with a camera)
+            assert k is not None
             space["image"] = spaces.Box(0, 255, (k.height, k.width, 3), np.uint8)
         return spaces.Dict(space)
 
@@ -215,14 +217,14 @@ class CdprEnv(gym.Env):
         Returns:
             ``(observation, reward, terminated, truncated, info)``.
         """
-        if self._setup is None or self._tick is None:
+        if self._setup is None or self._tick is None or self._episode is None:
             raise RuntimeError("call reset() before step()")
         if self._ended is not None:  # gymnasium leaves it undefined: here it is an error
             raise RuntimeError(f"the episode ended ({self._ended}); call reset() before step()")
         a = np.asarray(action, dtype=float)
         if a.shape != self.action_space.shape or not np.isfinite(a).all():
             raise ValueError(
-                f"an action is {self.action_space.shape[0]} finite numbers (Box(-1, 1), values "
+                f"an action is {len(self.action_scale)} finite numbers (Box(-1, 1), values "
                 f"outside are clipped), got shape {a.shape}: {np.round(a, 4).tolist()}"
             )
         command, scale = self._command(np.clip(a, -1.0, 1.0) * self.action_scale)
@@ -262,6 +264,8 @@ class CdprEnv(gym.Env):
         """
         truth = self._truth() if truth is None else truth
         if not np.isfinite(truth.T_base_platform).all():
+            # reset() recorded a finite truth before any step could fail
+            assert self._last is not None
             truth = self._last
         score = self.task.score(truth)
         left = max(self._horizon - self._steps, 0) + 1
@@ -291,7 +295,7 @@ class CdprEnv(gym.Env):
             The command, and the factor (≤ 1) by which a twist was scaled down to keep every
             cable rate within its winch's limit.
         """
-        geometry = self._setup.nominal.geometry
+        geometry = self._run.nominal.geometry
         T = self._estimate.T_base_platform
         R = T[:3, :3]
         if self.action_kind == "twist":
@@ -304,20 +308,32 @@ class CdprEnv(gym.Env):
         return Command(a, twist), 1.0
 
     @property
+    def _run(self) -> RunSetup:
+        """The robot's setup (from construction until :meth:`close`)."""
+        assert self._setup is not None, "the environment is closed"
+        return self._setup
+
+    @property
+    def _ticked(self) -> TickRecord:
+        """The last tick that went through (from :meth:`reset` on)."""
+        assert self._tick is not None, "call reset() first"
+        return self._tick
+
+    @property
     def _m(self) -> Measurement:
-        return self._tick.measurement
+        return self._ticked.measurement
 
     @property
     def _estimate(self) -> PoseEstimate:
-        return self._tick.estimates[self.estimator]
+        return self._ticked.estimates[self.estimator]
 
     def _sees_tag(self) -> bool:
-        p = self._setup.physics
+        p = self._run.physics
         return p.has_camera and p.has_tag
 
     def _truth(self) -> Truth:
         """Where the robot is now (after a failed step: no tick recorded it)."""
-        p = self._setup.physics
+        p = self._run.physics
         return Truth(p.T_base_platform.copy(), p.T_cam_tag.copy() if self._sees_tag() else None)
 
     @staticmethod
@@ -371,7 +387,7 @@ class CdprEnv(gym.Env):
         if not isinstance(goal, np.ndarray):
             return
         try:
-            self._setup.nominal.geometry.check_pose_inside(goal, "the task's goal")
+            self._run.nominal.geometry.check_pose_inside(goal, "the task's goal")
         except ValueError as exc:
             self.close()
             raise ValueError(f"{getattr(self.task, 'name', 'task')}: goal: {exc}") from None

@@ -187,12 +187,13 @@ def sample_workspace(
     feasible = np.zeros_like(inside)
     plane = inside.shape[1] * inside.shape[2]
     for idx in np.ndindex(inside.shape):
-        T = transform(R, [axes[k][idx[k]] for k in range(3)])
+        T = transform(R, np.array([axes[k][idx[k]] for k in range(3)]))
         inside[idx] = inside_frame(geom, T)
         feasible[idx] = inside[idx] and is_feasible(geom, T)
         if progress is not None and idx[1] == inside.shape[1] - 1 and idx[2] == inside.shape[2] - 1:
             progress((idx[0] + 1) * plane, inside.size)
-    return Workspace(*axes, inside, feasible, R, (geom.tension_min, geom.tension_max), spacing)
+    x, y, z = axes
+    return Workspace(x, y, z, inside, feasible, R, (geom.tension_min, geom.tension_max), spacing)
 
 
 def check_waypoints(geom: CdprGeometry, poses: list[np.ndarray]) -> None:

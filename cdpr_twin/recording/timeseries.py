@@ -147,17 +147,18 @@ class TimeseriesWriter:
             marks: what happened during the tick (events, faults), in words.
         """
         m = measurement
-        poses = [T_true]
-        valid = []
+        poses: list[np.ndarray | None] = [T_true]
+        flags: list[int] = []
         for n in self.estimators:
             poses.append(estimates[n].T_base_platform)
-            valid.append(int(estimates[n].valid))
+            flags.append(int(estimates[n].valid))
         poses.append(plan)
         poses.append(None if m.tag is None else m.tag.T_cam_tag)
+        valid: list[int] | list[tuple[int, list[float]]] = flags
         if self.covariance:
             valid = [
                 (v, _cov21(estimates[n]) if n in self.covariance else [])
-                for v, n in zip(valid, self.estimators, strict=True)
+                for v, n in zip(flags, self.estimators, strict=True)
             ]
         sensors = [*m.tensions.tolist(), *m.cable_lengths.tolist(), *m.cable_rates.tolist()]
         status = command.status if command is not None else Status.START

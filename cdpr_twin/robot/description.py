@@ -12,6 +12,7 @@ field. :mod:`cdpr_twin.sim.mjcf_from_robot` turns a :class:`Robot` into MJCF thr
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -391,9 +392,13 @@ def load_robot(path: str | Path) -> Robot:
     fields.update(_cables(tables[-4], tables[-3]))
     check_gravity(sim, fields["gravity"], fields["sag"])
     fields["drum_radius_scale"] = _drum_scale(tables[3], fields["exit_points"].shape[0])
-    for key, reader in (("camera", _camera), ("tag", _tag)):
+    readers: tuple[tuple[str, Callable[[_Table], object]], ...] = (
+        ("camera", _camera),
+        ("tag", _tag),
+    )
+    for key, read in readers:
         t = optional(key)
-        fields[key] = None if t is None else reader(t)
+        fields[key] = None if t is None else read(t)
         tables += [t] if t is not None else []
     mon = optional("monitor") or _Table(path, {}, "monitor")
     for field, key in (

@@ -640,7 +640,7 @@ def for_robot(realism: Realism, robot: RobotSensing) -> Realism:
     if math.isnan(w.drum_radius):
         w = replace(w, drum_radius=robot.drum_radius)
     lo, hi = robot.tension_range
-    filled = {
+    filled: dict[str, Any] = {
         "range_min": lo if math.isnan(t.range_min) else t.range_min,
         "range_max": hi if math.isnan(t.range_max) else t.range_max,
         "bias_std": robot.accuracy / math.sqrt(3.0) if math.isnan(t.bias_std) else t.bias_std,

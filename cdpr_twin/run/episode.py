@@ -87,6 +87,7 @@ class Episode:
         if command is None:
             if setup.controller is None:
                 raise ValueError("this episode has no controller: pass each tick's command")
+            assert last is not None, "call reset() before step()"
             in_loop = last.estimates[setup.scenario.estimators.in_loop]
             command = setup.controller.command(
                 self.ticks * self.period, self.period, in_loop, last.measurement

@@ -27,7 +27,7 @@ import signal
 import sys
 import threading
 from collections.abc import Iterator
-from typing import ClassVar
+from typing import Any, ClassVar
 
 from cdpr_twin.files.transaction import Terminated
 
@@ -53,7 +53,7 @@ class _Stops:
 class _Relay:
     """The handlers :func:`held_here` relays SIGINT and SIGTERM to, by signal."""
 
-    to: ClassVar[dict[int, object]] = {}
+    to: ClassVar[dict[int, Any]] = {}
 
 
 def _held(signum: int, frame) -> int | None:
@@ -70,8 +70,11 @@ def _held(signum: int, frame) -> int | None:
 
 def _relay(signum: int, frame) -> None:
     """Within :func:`held_here`: hold the signal in a shield, else hand it on as it was meant."""
-    if _Stops.escapes and (signum := _held(signum, frame)) is None:
-        return
+    if _Stops.escapes:
+        now = _held(signum, frame)
+        if now is None:
+            return
+        signum = now
     handler = _Relay.to.get(signum)
     if callable(handler):
         handler(signum, frame)
@@ -96,7 +99,8 @@ def held_here() -> Iterator[None]:
         yield
         return
     outer, ours = dict(_Relay.to), _Stops.ours
-    previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    handled = (signal.SIGINT, signal.SIGTERM)
+    previous: dict[int, Any] = {sig: signal.getsignal(sig) for sig in handled}
     if any(handler is None for handler in previous.values()):
         # a handler installed from C cannot be handed on: each shield swaps handlers
         yield
@@ -119,8 +123,11 @@ def _stop(signum: int, frame) -> None:
     Within a :class:`shielded` block the signal is held instead; a second one, where the
     innermost shield lets it escape, handles the first one held now.
     """
-    if _Stops.escapes and (signum := _held(signum, frame)) is None:
-        return
+    if _Stops.escapes:
+        now = _held(signum, frame)
+        if now is None:
+            return
+        signum = now
     if _Stops.first is not None:
         return  # a stop is under way: it decides the status and the exit code
     _Stops.first = signum
@@ -284,12 +291,12 @@ class Shield:
         # raised in the body, or a stop under way around it
         stopping = exc if exc is not None else sys.exc_info()[1]
         absorbed = signal.SIGTERM if isinstance(stopping, Terminated) else signal.SIGINT
-        for sig in dict.fromkeys(held):  # each kind once, in the order they came
-            if not (isinstance(stopping, KeyboardInterrupt) and sig == absorbed):
+        for came in dict.fromkeys(held):  # each kind once, in the order they came
+            if not (isinstance(stopping, KeyboardInterrupt) and came == absorbed):
                 if self._fast and _Stops.escapes:
-                    _Stops.held.append(sig)  # an outer shield holds it in turn
+                    _Stops.held.append(came)  # an outer shield holds it in turn
                 else:
-                    signal.raise_signal(sig)  # now, to the handler it was meant for
+                    signal.raise_signal(came)  # now, to the handler it was meant for
 
 
 def shielded(escape: bool = False) -> Shield:

@@ -366,6 +366,8 @@ def _claim(setup: RunSetup, out_dir, record_rrd, spawn, connect) -> tuple:
     owner = OutputDir(out_dir, foreign=others("run"), inputs=inputs)
     try:
         owner.claim()  # the lock, then an earlier run's files removed
+        # a run's setup always has a controller (only calibration's acquisition has none)
+        assert setup.controller is not None
         checkpoints = setup.controller.checkpoints(s.duration)
         metrics = RunMetrics(s.estimators.names, checkpoints, s.model.control_period)
         return owner, metrics, _recorders(setup, out_dir, record_rrd, spawn, connect)
@@ -391,6 +393,9 @@ def _loop(setup: RunSetup, sinks: tuple, progress) -> str:
                 progress((k + 1) / n_ticks, tick.time)
             if tick.stop:  # stopped at the tick the fault happened in
                 return tick.stop
+            # a run's ticks always carry its controller's command
+            assert tick.command is not None and setup.controller is not None
             if tick.command.done:
                 return tick.command.status
+    assert setup.controller is not None
     return setup.controller.timeout_status

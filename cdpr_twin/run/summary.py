@@ -14,7 +14,7 @@ import numpy as np
 from cdpr_twin.controllers.base import RunEnd
 from cdpr_twin.math.se3 import pose_error
 from cdpr_twin.run.metrics import RunMetrics, run_summary
-from cdpr_twin.types import TickRecord
+from cdpr_twin.types import TagDetection, TickRecord
 
 
 @dataclass
@@ -34,7 +34,7 @@ class Tally:
         events: how many events had fired by that tick (later ones: not reached).
     """
 
-    last_tag: object = None
+    last_tag: TagDetection | None = None
     last_tag_time: float | None = None
     clipped: np.ndarray | None = None
     faults: list = dataclasses.field(default_factory=list)

@@ -101,7 +101,7 @@ def read_events(top: OptionReader) -> tuple[Event, ...]:
     out = []
     for i, table in enumerate(raw):
         r = OptionReader(top.source, table, f"events[{i}]")
-        cls = EVENT_KINDS.get(r.string("kind", choices=tuple(EVENT_KINDS)))
+        cls = EVENT_KINDS[r.string("kind", choices=tuple(EVENT_KINDS))]
         out.append(parse_options(r, cls, skip=("kind",)))
     return tuple(out)  # in file order (errors name events[i] as the file numbers them)
 
@@ -188,7 +188,8 @@ def read_nominal(m: OptionReader, source: Path) -> Path | None:
     path = path if path.is_absolute() else (source.parent / path).resolve()
     kind = path_kind(path, lambda why: m.fail("nominal", why))
     if kind != "file":
-        what = {"dir": "is a directory", "other": "is not a regular file"}.get(kind, "not found")
+        found = {"dir": "is a directory", "other": "is not a regular file"}
+        what = found.get(kind or "", "not found")
         raise m.fail("nominal", f"{path} {what}; give a robot.toml (cdpr-twin calibrate)")
     return path
 
@@ -281,7 +282,8 @@ class ModelConfig:
     """Which model, and how to step it.
 
     Attributes:
-        file: MJCF scene.
+        file: MJCF scene: a shipped robot's (``robot = "<name>"``) or any (``file = "<path>"``,
+            relative to the scenario file).
         timestep: physics step [s].
         control_rate: control (and sensing) rate [Hz].
         align_every: physics steps between swivel/stiffness refreshes.
@@ -494,7 +496,7 @@ class Scenario:
         )
 
 
-def _plugin(r: OptionReader, key: str, kind: str, name: str) -> type:
+def _plugin(r: OptionReader, key: str, kind: str, name: str) -> type[plugins.Plugin]:
     """The registered class of a name the file gives; unknown: the installed ones listed."""
     try:
         return plugins.lookup(kind, name)

@@ -53,6 +53,8 @@ def check_plan(s: Scenario, rate_range, controller: Controller) -> None:
             ``controller.max_linear_speed``.
     """
     planned = getattr(controller, "planned_rates", None)
+    # a plan's segments: the one at fault is named by its index
+    durations = getattr(controller, "durations", ())
     capped = getattr(controller, "peak_cable_rate", None)
     if rate_range is None:
         return
@@ -75,7 +77,7 @@ def check_plan(s: Scenario, rate_range, controller: Controller) -> None:
         return
     k = int(over[0])
     t = (k + 0.5) * period
-    i = int(np.searchsorted(np.cumsum(controller.durations), t))
+    i = int(np.searchsorted(np.cumsum(durations), t))
     cable = int(np.argmax(np.maximum(rates[k] - hi, lo - rates[k])))
     raise ScenarioError(
         f"{s.source}: controller.durations[{i}]: at t = {t:.3g} s the plan drives cable "

@@ -133,7 +133,7 @@ def scene_key(scene: mujoco.MjvScene) -> bytes | None:
     for light in scene.lights[: scene.nlight]:
         parts += [light.pos, light.dir, light.diffuse, light.ambient, light.specular]
     for cam in scene.camera:
-        frustum = (cam.frustum_center, cam.frustum_width, cam.frustum_bottom)
+        frustum: tuple[float, ...] = (cam.frustum_center, cam.frustum_width, cam.frustum_bottom)
         frustum += (cam.frustum_top, cam.frustum_near, cam.frustum_far, cam.orthographic)
         parts += [cam.pos, cam.forward, cam.up, np.array(frustum, np.float32)]
     # a list, not a generator: one call, where a generator resumes once per part (≈ 900)
@@ -221,9 +221,12 @@ class CameraRenderer:
             finally:
                 self._model.cam_fovy[self.camera_id] = fovy
         key = scene_key(self._renderer.scene)
-        if key is None or key != self._last[0]:
-            self._last = (key, self._renderer.render())
-        return self._last[1].copy()
+        last_key, image = self._last
+        # (no image yet: no key either, so the first call always draws)
+        if image is None or key is None or key != last_key:
+            image = self._renderer.render()
+            self._last = (key, image)
+        return image.copy()
 
     def render_state(
         self, qpos: np.ndarray, mocap_pos: np.ndarray, mocap_quat: np.ndarray

@@ -50,7 +50,8 @@ class Encoders:
         )
         self._offset = np.zeros(physics.n_cables)
         self._l0_home = np.zeros(physics.n_cables)  # true paid-out lengths when homed [m]
-        self._glitch = None  # (m,) jumps of the readings since homing [m], or None
+        # (m,) jumps of the readings since homing [m], or None
+        self._glitch: np.ndarray | None = None
 
     def glitch(self, i: int, jump: float) -> None:
         """Encoder i (from 0) jumps by ``jump`` [m]: every later reading is off by it."""

@@ -122,7 +122,8 @@ def expose(
     e *= fw
     z = np.empty(e.shape, np.float32)
     cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))  # OpenCV's normal draws: 3× numpy's speed
-    cv2.randn(z, 0.0, 1.0)
+    # (OpenCV's stubs omit the scalar form of mean and stddev, which it documents)
+    cv2.randn(z, 0.0, 1.0)  # type: ignore[call-overload]
     out = np.add(e, np.float32(read_noise_e**2))  # e + σ_r², then in place: e + √(e + σ_r²)·z
     np.sqrt(out, out=out)
     out *= z

@@ -16,9 +16,10 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+import numpy.typing as npt
 
 from cdpr_twin.math.se3 import pose_from_vector
-from cdpr_twin.robot.description import Robot, load_robot
+from cdpr_twin.robot.description import Robot, Tag, load_robot
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim.mjcf_writer import to_xml
 from cdpr_twin.sim.model import (
@@ -47,7 +48,7 @@ _COLOURS = {
 
 
 def _numerics(spec: mujoco.MjSpec, r: Robot) -> None:
-    values = {
+    values: dict[str, npt.ArrayLike] = {
         "cable_es": r.es,
         "cable_damping_time": [r.damping_time],
         "cable_entry_height": [r.entry_height],
@@ -68,9 +69,10 @@ def _numerics(spec: mujoco.MjSpec, r: Robot) -> None:
         values["tension_sensor_at_pulley"] = [1.0]
     if r.sag:  # heavy cables: the twin builds SaggingPhysics (cdpr_twin/sim/sag.py)
         values["cable_sag"] = [1.0]
-    for name, data in values.items():
+    for name, given in values.items():
+        data = np.asarray(given, dtype=float)
         if np.all(np.isfinite(data)):
-            spec.add_numeric(name=name, data=list(map(float, data)), size=len(data))
+            spec.add_numeric(name=name, data=data.tolist(), size=data.size)
 
 
 def _frame(world: mujoco.MjsBody, r: Robot) -> None:
@@ -256,12 +258,11 @@ def scene_spec(r: Robot, out_dir: str | Path | None = None) -> mujoco.MjSpec:
         material="floor_grid",
     )
     if r.tag is not None:
-        _tag(spec, r, Path(r.source).parent if out_dir is None else Path(out_dir))
+        _tag(spec, r, r.tag, Path(r.source).parent if out_dir is None else Path(out_dir))
     return spec
 
 
-def _tag(spec: mujoco.MjSpec, r: Robot, out_dir: Path) -> None:
-    t = r.tag
+def _tag(spec: mujoco.MjSpec, r: Robot, t: Tag, out_dir: Path) -> None:
     texture = (Path(r.source).parent / t.texture).resolve()
     name = texture.stem
     spec.compiler.texturedir = os.path.relpath(texture.parent, out_dir.resolve())

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -343,7 +344,7 @@ def read_geometry(model: mujoco.MjModel) -> CdprGeometry:
     if platform < 0 or np.any(model.site_bodyid[sites] != platform):
         raise ModelError("the model's anchor sites must sit on a body named 'platform'")
     es = numeric(model, "cable_es")
-    limits = {}
+    limits: dict[str, Any] = {}
     if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "cable_tension_range") >= 0:
         lo, hi = numeric(model, "cable_tension_range")
         limits = {"tension_min": float(lo), "tension_max": float(hi)}

@@ -115,6 +115,12 @@ def _numeric_or(model: mujoco.MjModel, name: str, default: float) -> float:
     return float(numeric(model, name)[0]) if present else default
 
 
+def _point(v: np.ndarray) -> tuple[float, float, float]:
+    """A (3,) array as a point of floats."""
+    x, y, z = map(float, v)
+    return x, y, z
+
+
 def robot_limits(physics, sensor_max: float, slack_time: float) -> MonitorLimits:
     """The limits a model declares in ``<numeric>`` elements.
 
@@ -131,8 +137,8 @@ def robot_limits(physics, sensor_max: float, slack_time: float) -> MonitorLimits
     return MonitorLimits(
         breaking_load=_numeric_or(model, "cable_breaking_load", math.inf),
         sensor_max=float(sensor_max),
-        frame_min=tuple(map(float, geom.frame_min)),
-        frame_max=tuple(map(float, geom.frame_max)),
+        frame_min=_point(geom.frame_min),
+        frame_max=_point(geom.frame_max),
         floor_z=_numeric_or(model, "floor_height", -math.inf),
         max_speed=_numeric_or(model, "platform_max_speed", math.inf),
         max_angular_speed=_numeric_or(model, "platform_max_angular_speed", math.inf),

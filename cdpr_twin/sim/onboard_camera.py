@@ -223,7 +223,10 @@ class OnboardCamera:
 
         self.physics, self.realism, self.run_rng = physics, realism, run_rng
         # render()'s own noise: a look at the camera must not shift the run's frames
-        self._view_rng = np.random.default_rng(run_rng.bit_generator.seed_seq.spawn(1)[0])
+        seed_seq = run_rng.bit_generator.seed_seq
+        # a run's generator comes from a seed: its bit generator holds a SeedSequence
+        assert isinstance(seed_seq, np.random.SeedSequence)
+        self._view_rng = np.random.default_rng(seed_seq.spawn(1)[0])
         self.calibrated, self.calibrated_distortion = calibrate(intrinsics, r, robot_rng)
         self._renderer: cam_mod.CameraRenderer | None = cam_mod.CameraRenderer(
             physics.model, scale=r.supersample, lens=r.distortion
@@ -255,6 +258,8 @@ class OnboardCamera:
             raise
         if r.exposure_s > 0:
             offsets = imaging.subframe_offsets(r.exposure_s, r.blur_subframes)
+            # check_exposure refused an exposure without a period
+            assert period is not None
             self.exposure = ExposureRecorder(physics, period, offsets)
             physics.add_hook(self.exposure)
 
@@ -296,6 +301,8 @@ class OnboardCamera:
 
     def _renders(self) -> list[np.ndarray]:
         """The GL part of a frame: the render(s) of the exposure ending now (this thread's)."""
+        # only close() drops the renderer, after which no frame is taken
+        assert self._renderer is not None, "the camera is closed"
         if self.exposure is not None:
             states = self.exposure.states(self.physics.time)
             if _still(states):

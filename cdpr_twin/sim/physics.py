@@ -157,7 +157,8 @@ class Physics:
     @property
     def taut(self) -> np.ndarray:
         """(m,) each cable taut: MuJoCo's straight cable pulls (a heavy one may hang: sag.py)."""
-        return Physics.tensions.fget(self) > 0.0
+        # (mypy types a property read on its class as the getter function, not the property)
+        return Physics.tensions.fget(self) > 0.0  # type: ignore[attr-defined]
 
     @property
     def tensions(self) -> np.ndarray:

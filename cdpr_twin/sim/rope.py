@@ -58,11 +58,24 @@ import mujoco
 import numpy as np
 
 from cdpr_twin.math.se3 import quat_wxyz_from_matrix, so3_exp
-from cdpr_twin.robot.realism import CableRealism, PulleyRealism, robot_rng
+from cdpr_twin.robot.realism import CableRealism, PulleyRealism, WinchRealism, robot_rng
 from cdpr_twin.sim import rope_kernel as kernel
 from cdpr_twin.sim.events import fire_due
 from cdpr_twin.sim.model import ModelError, as_slice, sheave_geom, side_site
 from cdpr_twin.sim.physics import Physics
+
+_KernelArgs = tuple[
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+]
+"""The nine arrays :func:`~cdpr_twin.sim.rope_kernel.update_ropes` takes before ``relax``."""
 
 
 def sls_tension(
@@ -152,18 +165,20 @@ class RopePhysics(Physics):
     def __init__(
         self,
         model: mujoco.MjModel,
-        *args,
+        align_every: int = 10,
+        source: str = "model",
+        winch: WinchRealism | None = None,
+        robot_seed: int = 0,
+        *,
         cable: CableRealism,
         pulley: PulleyRealism,
-        robot_seed: int = 0,
-        **kwargs,
     ) -> None:
         from cdpr_twin.sim.model import cable_count
 
         n = cable_count(model)
         self.pulley_draws = draw_pulley_geometry(pulley, robot_seed, n)
         apply_pulley_geometry(model, pulley, self.pulley_draws, n)
-        super().__init__(model, *args, robot_seed=robot_seed, **kwargs)
+        super().__init__(model, align_every, source, winch, robot_seed)
         if pulley.sheave_efficiency < 1.0 and cable.drum_segment <= 0.0:
             raise ModelError(
                 "realism.pulley.sheave_efficiency: a sheave with friction needs "
@@ -324,7 +339,7 @@ class RopePhysics(Physics):
         """
         if self._swivel_yaw is None:
             self._swivel_yaw = psi.copy()
-        taut = (Physics.tensions.fget(self) > 0.0) & self.cable_enabled
+        taut = (super().tensions > 0.0) & self.cable_enabled
         kernel.turn_swivels(
             psi,
             np.hypot(local[:, 0], local[:, 1]),
@@ -387,7 +402,7 @@ class RopePhysics(Physics):
             n -= chunk
         self._check_state()
 
-    def _kernel_args(self) -> tuple:
+    def _kernel_args(self) -> _KernelArgs:
         """The arrays :func:`~cdpr_twin.sim.rope_kernel.update_ropes` reads and writes."""
         d = self.data
         return (

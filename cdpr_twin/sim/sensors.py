@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Protocol, cast
 
 import numpy as np
 
@@ -22,6 +23,15 @@ from cdpr_twin.sim.onboard_camera import OnboardCamera
 from cdpr_twin.sim.physics import Physics
 from cdpr_twin.sim.tension_sensors import TensionSensors
 from cdpr_twin.types import CameraIntrinsics, Command, Measurement
+
+
+class _SensedTensions(Protocol):
+    """A physics whose tension sensors read other than its straight cables' pull."""
+
+    @property
+    def sensed_tensions(self) -> np.ndarray:
+        """(m,) the tensions where the sensors sit [N]."""
+        ...
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,7 +138,9 @@ class Sensors:
     def _sensed(self) -> np.ndarray:
         """True tensions where the sensors sit (heavy cables: that end of the catenary)."""
         p = self.physics
-        return p.sensed_tensions if hasattr(type(p), "sensed_tensions") else p.tensions
+        if hasattr(type(p), "sensed_tensions"):
+            return cast(_SensedTensions, p).sensed_tensions
+        return p.tensions
 
     def render(self) -> np.ndarray:
         """The onboard camera's current frame, (H, W, 3) RGB uint8."""

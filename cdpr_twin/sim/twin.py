@@ -17,6 +17,7 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+import numpy.typing as npt
 
 from cdpr_twin import resources
 from cdpr_twin.math.se3 import matrix_from_quat_wxyz, transform
@@ -136,7 +137,7 @@ def _set_timestep(model: mujoco.MjModel, timestep: float | None) -> None:
 def nominal_robot(
     model_path: str | Path | None = None,
     nominal_path: str | Path | None = None,
-    payload: tuple[float, np.ndarray] = (0.0, np.zeros(3)),
+    payload: tuple[float, npt.ArrayLike] = (0.0, np.zeros(3)),
 ) -> NominalRobot:
     """What the robot's software believes (as :func:`build_robot` gives it), without a twin.
 
@@ -184,7 +185,7 @@ def build_robot(
     winch: WinchRealism | None = None,
     occluder: bool = False,
     nominal_path: str | Path | None = None,
-    payload: tuple[float, np.ndarray] = (0.0, np.zeros(3)),
+    payload: tuple[float, npt.ArrayLike] = (0.0, np.zeros(3)),
     cable: CableRealism | None = None,
     pulley: PulleyRealism | None = None,
 ) -> BuiltRobot:
@@ -230,6 +231,7 @@ def build_robot(
             f"{path}: realism.cable/realism.pulley: ropes are not modelled on sagging cables; "
             "turn the robot's sag off or use the acrobot profile"
         )
+    physics: Physics
     if ropes:
         from cdpr_twin.sim.rope import RopePhysics  # the cables and pulleys as they are
 

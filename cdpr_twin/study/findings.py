@@ -279,7 +279,7 @@ def control_best_with_pbvs(rep: dict) -> Finding | None:
     if not pbvs:
         return None
     maxes = {n: v["max_translation_m"] for n, v in pbvs.items()}
-    best = min(maxes, key=maxes.get)
+    best = min(maxes, key=maxes.__getitem__)
     why = (
         "in closed loop the servo corrects the robot's pose, and the control estimate "
         "drifts only with the mismatch between commanded and achieved twists (as "
@@ -294,7 +294,7 @@ def control_best_with_pbvs(rep: dict) -> Finding | None:
             f"within {_goal_distance(rep)} of the tag, where 4 sub-pixel corners give precise "
             "poses; the real camera's noise, which made Est. 2 the noisiest in the paper,"
             " is not modelled. Among the others, "
-            f"{min(others, key=maxes.get)} is best."
+            f"{min(others, key=maxes.__getitem__)} is best."
         )
     elif best == "image" and others:
         why += (
@@ -306,7 +306,7 @@ def control_best_with_pbvs(rep: dict) -> Finding | None:
             "paper (no lens blur, no pixel-area integration), so its corners stay sub-pixel "
             "accurate, while the control estimate accumulates the commanded-vs-achieved mismatch "
             f"over the whole servo. Among the others, "
-            f"{min(others, key=maxes.get)} is best."
+            f"{min(others, key=maxes.__getitem__)} is best."
         )
     return Finding(
         finding="control-based estimate is the best with PBVS",
@@ -482,7 +482,7 @@ def _comparisons(experiment: str, t: dict, name: str, label: bool = True) -> lis
     out = []
     for key, unit, scale in (("rms_translation_m", "mm", 1e3), ("rms_rotation_deg", "°", 1)):
         others = {n: v[key] for n, v in t.items() if n != name}
-        best = min(others, key=others.get)
+        best = min(others, key=others.__getitem__)
         ratio = others[best] / t[name][key]
         text = f"{experiment}: " if label else ""
         text += f"{t[name][key] * scale:.3g} {unit} vs {best} {others[best] * scale:.3g} {unit}"
@@ -493,7 +493,7 @@ def _comparisons(experiment: str, t: dict, name: str, label: bool = True) -> lis
 
 def _loss(experiment: str, best: str, value: float, unit: str, refs: dict) -> str:
     """Why a single estimator beats the filter on one quantity, from the others' numbers."""
-    cable = min((n for n in refs if n.startswith("model_")), key=refs.get, default=None)
+    cable = min((n for n in refs if n.startswith("model_")), key=refs.__getitem__, default=None)
     seen = [f"{n} {refs[n]:.3g} {unit}" for n in (cable, "image") if n in refs]
     text = f" Where it loses ({experiment}, {best} {value:.3g} {unit}), the single estimators "
     text += f"on its other sensors do worse ({', '.join(seen)})" if seen else "are missing"

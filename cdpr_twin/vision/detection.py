@@ -14,6 +14,7 @@ fits lines to them, and solves the pose on the undistorted corners.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import cv2
 import numpy as np
@@ -55,7 +56,8 @@ class _Detector(Detector):
         self.tag_detector_ptr = None
         self.libc.apriltag_detector_destroy.restype = None
         self.libc.apriltag_detector_destroy(ptr)
-        families, self.tag_families = self.tag_families, {}
+        families = self.tag_families
+        self.tag_families: dict[str, Any] = {}
         for family, tf in families.items():
             destroy = getattr(self.libc, f"{family}_destroy")
             destroy.restype = None
@@ -274,6 +276,8 @@ class TagDetector:
         return det, np.asarray(det.corners, dtype=float) - off + [x0, y0]
 
     def _undistort(self, pixels: np.ndarray) -> np.ndarray:
+        # detect() calls it only for a lens with distortion
+        assert self.distortion is not None
         return undistort_pixels(self.intrinsics, self.distortion, pixels)
 
     def detect(self, image: np.ndarray) -> TagDetection | None:
