@@ -138,6 +138,12 @@ def repeatability_table(pop: dict) -> list[str]:
         q = r["quantity"]
         shares = []
         for source, (s, (low, high), _n) in r["shares"].items():
+            # report.json stores NaN as null
+            low, high = (math.nan if v is None else v for v in (low, high))
+            if not (math.isfinite(low) and math.isfinite(high)):
+                # no interval: without the source every run ends in the same pose
+                shares.append(f"{source} {s * 100:.0f} % (no spread left without it)")
+                continue
             zero = ", *includes 0*" if low <= 0.0 <= high else ""
             shares.append(f"{source} {s * 100:.0f} % [{low * 100:.0f}, {high * 100:.0f}]{zero}")
         lo, hi = r["std_ci"]
