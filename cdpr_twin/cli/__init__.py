@@ -228,9 +228,9 @@ def _reproduce(args: argparse.Namespace) -> int:
         for v in rep["population"]["verdicts"]:
             robots = f"{v['k']}/{v['n']} robots ({v['population']})"
             print(f"  [{v['verdict']:>12s}] {v['id']}: {robots}")
-    else:
+    else:  # one robot: measurements; the criteria judge populations only
         for f in rep["findings"]:
-            print(f"  [{f['verdict']:>9s}] {f['finding']}: {f['twin']}")
+            print(f"  {f['finding']}: {f['twin']} [{f['verdict']}]")
     for r in failed:
         print(f"failed: {r['name']}: {r['status']}", file=sys.stderr)
     return 0 if not failed else 1

@@ -159,20 +159,6 @@ def repeatability_table(pop: dict) -> list[str]:
 AXES = ("x", "y", "z", "rx", "ry", "rz")
 
 
-def _nees_verdict_words(n: dict) -> str:
-    """Which axes are off by more than ×2 in variance, in words (from the numbers only)."""
-    over = [a for a, v in zip(AXES, n["axes"], strict=True) if v > 2.0]
-    under = [a for a, v in zip(AXES, n["axes"], strict=True) if v < 0.5]
-    if not over and not under:
-        return "No axis is off by more than ×2 in variance."
-    words = []
-    if over:
-        words.append(f"overconfident by more than ×2 in variance on {', '.join(over)}")
-    if under:
-        words.append(f"cautious by more than ×2 on {', '.join(under)}")
-    return "It is " + " and ".join(words) + "."
-
-
 def nees_section(pop: dict) -> list[str]:
     """The fused filter's consistency over the open-loop population (camera on, deviated robots)."""
     n = pop.get("nees")
@@ -192,7 +178,7 @@ def nees_section(pop: dict) -> list[str]:
         f"{n['below'] * 100:.0f} % (smaller); the mean ε is {n['mean']:.2f} against 6 for a "
         f"consistent filter. Each axis's mean δ²/σ² (1 when consistent; F_p, m and rad): "
         f"{axes}: above 1 the filter is overconfident on that axis (its errors exceed its "
-        "σ), below 1 cautious. " + _nees_verdict_words(n),
+        "σ), below 1 cautious.",
     ]
 
 
