@@ -121,6 +121,39 @@ def attribution(X: np.ndarray, Y: np.ndarray, m: int) -> tuple[dict[str, float],
     return shares, 1.0 - float(np.sum(residual.var(axis=0)) / total) if total > 0 else math.nan
 
 
+ATTRIBUTION_RESAMPLES = 400
+"""Bootstrap resamples of the robots behind each variance share's interval."""
+
+
+def attribution_intervals(
+    X: np.ndarray, Y: np.ndarray, m: int, confidence: float = 0.95, seed: int = 0
+) -> dict[str, tuple[float, float]]:
+    """Each group's share of :func:`attribution` with its percentile bootstrap interval.
+
+    The robots (rows) are resampled with replacement and the fit redone on each resample; the
+    generator is seeded, so the same table gives the same intervals.
+
+    Args:
+        X: (n, 9m + 18) the drawn deviations (:func:`deviation_matrix`).
+        Y: (n, 3) the error at p1 [m].
+        m: cables.
+        confidence: the intervals' level.
+        seed: the resampling generator's seed.
+
+    Returns:
+        ``{group: (low, high)}`` (NaN for a group the runs share).
+    """
+    rng = np.random.default_rng(seed)
+    n = len(X)
+    draws = [attribution(X[i], Y[i], m)[0] for i in rng.integers(0, n, (ATTRIBUTION_RESAMPLES, n))]
+    q = ((1.0 - confidence) / 2.0, (1.0 + confidence) / 2.0)
+    out = {}
+    for g in GROUPS:
+        v = np.array([d[g] for d in draws])
+        out[g] = (math.nan, math.nan) if np.isnan(v).all() else tuple(map(float, np.quantile(v, q)))
+    return out
+
+
 def _miss_vectors(rows: list[dict]) -> np.ndarray:
     out = []
     for row in rows:
@@ -255,19 +288,22 @@ def _attribution_section(campaign: Campaign, rows: list[dict]) -> list[str]:
     X, Y = deviation_matrix(tasks, rows), _miss_vectors(rows)
     m = len(json.loads(rows[0]["summary"])["final_tensions_n"])
     shares, r2 = attribution(X, Y, m)
+    ci = attribution_intervals(X, Y, m)
     lines = [
         "## Which calibration error drives the error at p1",
         "",
         f"Linear least squares of the 3-D error at the first checkpoint on the {X.shape[1]} "
         f"drawn deviations of each of the {len(rows)} robots (R² = {r2:.3f}); each group's "
-        "share of the error's variance:",
+        "share of the error's variance, with its 95 % bootstrap interval (the robots resampled "
+        f"{ATTRIBUTION_RESAMPLES} times):",
         "",
-        "| deviation group | share of variance |",
-        "|---|---|",
+        "| deviation group | share of variance | 95 % interval |",
+        "|---|---|---|",
     ]
     varied = {g: s for g, s in shares.items() if not math.isnan(s)}
     lines += [
-        f"| {g} | {100 * s:.1f} % |" for g, s in sorted(varied.items(), key=lambda kv: -kv[1])
+        f"| {g} | {100 * s:.1f} % | [{100 * ci[g][0]:.1f}, {100 * ci[g][1]:.1f}] % |"
+        for g, s in sorted(varied.items(), key=lambda kv: -kv[1])
     ]
     if same := [g for g in shares if g not in varied]:
         lines += ["", f"The same in every run (no share): {', '.join(same)}."]

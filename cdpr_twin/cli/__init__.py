@@ -230,8 +230,13 @@ def _reproduce(args: argparse.Namespace) -> int:
         f"{rep['runs']['ok']}/{rep['runs']['total']} runs in {rep['wall_time_s'] / 60:.1f} min;"
         f" report: {args.out}/report.md"
     )
-    for f in rep["findings"]:
-        print(f"  [{f['verdict']:>9s}] {f['finding']}: {f['twin']}")
+    if "population" in rep:  # the verdicts are the population's (report.md: the criteria)
+        for v in rep["population"]["verdicts"]:
+            robots = f"{v['k']}/{v['n']} robots ({v['population']})"
+            print(f"  [{v['verdict']:>12s}] {v['id']}: {robots}")
+    else:  # one robot: measurements; the criteria judge populations only
+        for f in rep["findings"]:
+            print(f"  {f['finding']}: {f['twin']} [{f['verdict']}]")
     for r in failed:
         print(f"failed: {r['name']}: {r['status']}", file=sys.stderr)
     return 0 if not failed else 1

@@ -8,9 +8,10 @@ runs of Fig. 5 and 7. Runs are independent processes, in parallel; a failed run 
 the others are kept.
 
 Modules: :mod:`.plan` (which runs, and running them), :mod:`.analysis` (every number, from the
-run files), :mod:`.findings` (the paper's claims and their verdicts), :mod:`.report` (figures
-and ``report.md``), :mod:`.output_dir` (the directory's promises: one study at a time, an earlier
-study's files removed first, every file written whole).
+run files), :mod:`.findings` (the paper's claims on one robot), :mod:`.criteria` (the verdicts,
+over populations only), :mod:`.report` (figures and ``report.md``), :mod:`.output_dir` (the
+directory's promises: one study at a time, an earlier study's files removed first, every file
+written whole).
 """
 
 from __future__ import annotations

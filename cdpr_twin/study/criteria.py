@@ -26,6 +26,8 @@ CRITERIA_FILE = Path(str(resources.files("cdpr_twin.study") / "criteria.toml"))
 """The shipped criteria (package data)."""
 AGREES, DISAGREES, INCONCLUSIVE, NOT_JUDGED = "agrees", "disagrees", "inconclusive", "not judged"
 """The verdicts."""
+NEEDS_POPULATION = "not judged: needs the population (reproduce --population DIR)"
+"""The verdict of a finding on one robot: the criteria judge populations only."""
 _FIELDS = {
     "id",
     "claim",

@@ -125,3 +125,11 @@ def repetition_rms(records: list[dict]) -> dict[str, dict[str, dict]]:
 def _quadratic_mean(values) -> float:
     v = np.fromiter(values, dtype=float)
     return float(np.sqrt(np.mean(v**2)))
+
+
+def several_runs(rms: dict[str, dict[str, dict]], name: str) -> dict[str, dict[str, dict]]:
+    """The experiments of :func:`repetition_rms` with ``name`` and another, over several runs.
+
+    One run's RMS over the repetitions is that run's own: such an experiment is left out.
+    """
+    return {exp: t for exp, t in rms.items() if name in t and len(t) > 1 and t[name]["n"] > 1}

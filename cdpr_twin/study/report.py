@@ -88,11 +88,16 @@ def _findings(rep: dict) -> list[str]:
     lines = [
         "## Findings",
         "",
-        "| finding | paper | twin | verdict | why |",
-        "|---|---|---|---|---|",
+        "One robot: its numbers, each finding's criteria (the criteria file's entries, which "
+        "judge a population's share of robots) and whether their per-robot condition holds on "
+        "this robot. The verdicts are the population's: `cdpr-twin reproduce --population DIR`.",
+        "",
+        "| finding | paper | twin | criterion | verdict | why |",
+        "|---|---|---|---|---|---|",
     ]
     return lines + [
-        f"| {f['finding']} | {f['paper']} | {f['twin']} | **{f['verdict']}** | {f['why']} |"
+        f"| {f['finding']} | {f['paper']} | {f['twin']} | {f['criterion']} | **{f['verdict']}** "
+        f"| {f['why']} |"
         for f in rep["findings"]
     ]
 

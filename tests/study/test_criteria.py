@@ -17,12 +17,13 @@ import textwrap
 import numpy as np
 import pytest
 
-from cdpr_twin.study import criteria, population, population_report
+from cdpr_twin.study import criteria, findings, population, population_report, report
 from cdpr_twin.study.criteria import (
     AGREES,
     CRITERIA_FILE,
     DISAGREES,
     INCONCLUSIVE,
+    NEEDS_POPULATION,
     NOT_JUDGED,
     CriteriaError,
     judge,
@@ -142,33 +143,84 @@ def test_bad_entry_is_one_line_naming_the_field(tmp_path):
     assert "\n" not in str(exc.value)
 
 
-VERDICT_CODE = (
-    criteria.holds,
-    criteria.judge,
-    criteria.share_interval,
-    population.population_report,
-    population_report.verdict_table,
-    population_report.sensitivity_table,
-)
-"""The functions that turn metrics into verdicts and put them in the report."""
-VERDICT_MODULES = (criteria, population, population_report)
+VERDICT_MODULES = (criteria, findings, population, population_report, report)
+"""Every module that turns metrics into verdicts, or writes a verdict into a report."""
+ALLOWED = {
+    # the criteria file's own shares and confidence are probabilities: checked to lie in [0, 1]
+    "0.0 <= v <= 1.0",
+    "0.0 < shares['confidence'] < 1.0",
+    # whether a variance share's interval includes 0 (said beside the share, no verdict)
+    "low <= 0.0 <= high",
+    # the chosen illustration robot is found by its truth seed (an id, not a metric)
+    "run['truth_seed'] == ILLUSTRATION_ROBOT",
+}
+"""Comparisons with a number that are no threshold of a finding (exact source text)."""
 
 
-def test_verdict_code_holds_no_threshold_of_its_own():
-    for fn in VERDICT_CODE:
-        tree = ast.parse(textwrap.dedent(inspect.getsource(fn)))
-        for node in ast.walk(tree):
-            if isinstance(node, ast.Compare):
-                for operand in [node.left, *node.comparators]:
-                    assert not (
-                        isinstance(operand, ast.Constant)
-                        and isinstance(operand.value, int | float)
-                        and not isinstance(operand.value, bool)
-                    ), f"{fn.__name__}: a number in a comparison: {ast.unparse(node)}"
+def _is_count(node: ast.AST) -> bool:
+    """``len(...)``: a comparison of a count of samples, not of a metric."""
+    return isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "len"
+
+
+def _numbers_in(node: ast.AST, names: set[str]) -> bool:
+    """Whether a number (literal, or module-level numeric name) is in ``node``, indices aside."""
+    if isinstance(node, ast.Subscript):
+        return _numbers_in(node.value, names)
+    if isinstance(node, ast.Constant):
+        return isinstance(node.value, int | float) and not isinstance(node.value, bool)
+    if isinstance(node, ast.Name):
+        return node.id in names
+    return any(_numbers_in(child, names) for child in ast.iter_child_nodes(node))
+
+
+def _thresholds(source: str, names: set[str]) -> list[str]:
+    """The comparisons of ``source`` that hold a number of their own (but :data:`ALLOWED`)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, ast.Compare):
+            continue
+        operands = [node.left, *node.comparators]
+        if any(_is_count(o) for o in operands) or ast.unparse(node) in ALLOWED:
+            continue
+        if any(_numbers_in(o, names) for o in operands):
+            found.append(ast.unparse(node))
+    return found
+
+
+def _module_numbers(module) -> set[str]:
+    return {
+        k for k, v in vars(module).items() if isinstance(v, int | float) and not isinstance(v, bool)
+    }
+
+
+def test_the_threshold_scan_finds_hard_coded_thresholds():
+    source = textwrap.dedent(
+        """
+        LIMIT = 3.0
+        def verdict(ratio, worst, miss, d, x):
+            a = ratio > 1.0
+            b = worst < 0.25 * miss["translation_m"]
+            c = x >= LIMIT
+            e = 0.005 <= d <= 0.02
+            return len(x) < 3, x[-1] == d, a, b, c, e
+        """
+    )
+    assert _thresholds(source, {"LIMIT"}) == [
+        "ratio > 1.0",
+        "worst < 0.25 * miss['translation_m']",
+        "x >= LIMIT",
+        "0.005 <= d <= 0.02",
+    ]
+
+
+@pytest.mark.parametrize("module", VERDICT_MODULES, ids=lambda m: m.__name__)
+def test_verdict_code_holds_no_threshold_of_its_own(module):
+    found = _thresholds(inspect.getsource(module), _module_numbers(module))
+    assert not found, f"{module.__name__}: a number in a comparison: {found}"
 
 
 def test_no_verdict_is_written_as_a_literal():
-    words = {AGREES, DISAGREES, INCONCLUSIVE, NOT_JUDGED}
+    words = {AGREES, DISAGREES, INCONCLUSIVE, NOT_JUDGED, NEEDS_POPULATION}
     for module in VERDICT_MODULES:
         tree = ast.parse(inspect.getsource(module))
         for fn in (n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)):
@@ -176,6 +228,32 @@ def test_no_verdict_is_written_as_a_literal():
                 assert not (isinstance(node, ast.Constant) and node.value in words), (
                     f"{module.__name__}.{fn.name}: the verdict {node.value!r} as a literal"
                 )
+
+
+def _robot_numbers() -> dict:
+    """A robot's report numbers: it misses p1 by 10.9 mm, PBVS is 3.4× / 0.19× as accurate."""
+    return {
+        "open_loop": {"miss_at_p1": {"translation_m": 0.0109, "rotation_deg": 0.2, "time_s": 10}},
+        "ratios": {"translation_m": 3.4, "rotation_deg": 0.19},
+    }
+
+
+def test_one_robot_gets_no_verdict_and_its_conditions_come_from_the_file(tmp_path):
+    found = {f["finding"]: f for f in findings.evaluate(_robot_numbers())}
+    assert {f["verdict"] for f in found.values()} == {NEEDS_POPULATION}
+    miss = found["open-loop error at p1 ≈ 1 cm"]
+    rot = found["PBVS more accurate than open loop at p1 (rotation)"]
+    assert (
+        "`open_loop_miss`: 0.005 ≤ open_loop_miss_m ≤ 0.02; holds on this robot"
+        in miss["criterion"]
+    )
+    assert "does not hold on this robot" in rot["criterion"]
+    # the file's bound moved below the robot's 10.9 mm: the robot's condition follows it
+    text = CRITERIA_FILE.read_text(encoding="utf-8")
+    mutant = tmp_path / "criteria.toml"
+    mutant.write_text(text.replace("low = 0.005\nhigh = 0.02", "low = 0.005\nhigh = 0.01"))
+    moved = findings.evaluate(_robot_numbers(), criteria=load_criteria(mutant))
+    assert "0.005 ≤ open_loop_miss_m ≤ 0.01; does not hold on this robot" in moved[0]["criterion"]
 
 
 def test_vector_roughness_sees_what_the_norm_misses():
