@@ -14,6 +14,7 @@ from cdpr_twin.cli import demo as cli_demo
 from cdpr_twin.cli import model as model_cli
 from cdpr_twin.cli.campaign import add_campaign_parser
 from cdpr_twin.files.transaction import out_path
+from cdpr_twin.robot.realism import PROFILES
 from cdpr_twin.run.interrupts import closed_stdout
 
 TRACEBACK_HELP = "on an unexpected error (e.g. a plugin's bug), also print its traceback"
@@ -299,7 +300,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     runp.add_argument(
         "--realism",
-        choices=("ideal", "acrobot"),
+        choices=PROFILES,
         default=None,
         help="realism profile instead of the scenario's (its [realism] overrides are dropped)",
     )

@@ -104,7 +104,7 @@ def _tail(k: float) -> float:
     return 0.5 * math.erfc(k / math.sqrt(2.0))
 
 
-PROFILES = ("ideal", "acrobot")
+PROFILES = ("ideal", "acrobot", "acrobot_full")
 
 
 @dataclass(frozen=True)
@@ -290,6 +290,65 @@ class HomingRealism:
         )
 
 
+def _check_correlation(name: str, rho: float) -> None:
+    """Refuse a correlation outside (−1, 1) (±1 would make the covariance singular)."""
+    if not -1.0 < rho < 1.0:
+        raise OptionError(name, f"must lie strictly between -1 and 1 (a correlation), got {rho}")
+
+
+@dataclass(frozen=True)
+class OpticsRealism:
+    """How the camera's calibration errors go together (all 0: independent draws, as before).
+
+    A calibration (Zhang's method, OpenCV, Kalibr) fits fx, fy, cx, cy and the distortion
+    coefficients together, and what it cannot tell apart it leaves correlated: the focal
+    lengths move together (the aspect ratio fy/fx is pinned far tighter than either), k1 and
+    k2 trade off against each other over the field, and a tangential coefficient trades off
+    against the principal point on the same axis. The errors are drawn from one multivariate
+    normal with the stds of :class:`CameraRealism` and these correlations
+    (:func:`cdpr_twin.sim.onboard_camera.calibrate`).
+
+    Attributes:
+        focal_correlation: ρ between the relative errors of fx and fy; the aspect ratio's
+            relative error then has std ``focal_error_std``·√(2(1 − ρ)).
+        radial_correlation: ρ between the errors of k1 and k2.
+        center_tangential_correlation: (ρ(cx, p2), ρ(cy, p1)): p2 moves points along x as cx
+            does, p1 along y as cy does.
+    """
+
+    focal_correlation: float = option(0.0)
+    radial_correlation: float = option(0.0)
+    center_tangential_correlation: tuple[float, ...] = option((0.0, 0.0))
+
+    def __post_init__(self) -> None:
+        _check_correlation("focal_correlation", self.focal_correlation)
+        _check_correlation("radial_correlation", self.radial_correlation)
+        if len(self.center_tangential_correlation) != 2:
+            raise OptionError(
+                "center_tangential_correlation", "must list 2 values, ρ(cx, p2) and ρ(cy, p1)"
+            )
+        for rho in self.center_tangential_correlation:
+            _check_correlation("center_tangential_correlation", rho)
+
+    @property
+    def correlated(self) -> bool:
+        """Whether any calibration errors are drawn together."""
+        return self != OpticsRealism()
+
+    def calibration_correlation(self) -> np.ndarray:
+        """The correlation matrix of the errors of (fx, fy, cx, cy, k1, k2, p1, p2). Returns (8, 8).
+
+        Each correlation pairs two errors no other one touches: the matrix is block-diagonal in
+        2 × 2 blocks, positive definite for every |ρ| < 1.
+        """
+        c = np.eye(8)
+        c[0, 1] = c[1, 0] = self.focal_correlation
+        c[4, 5] = c[5, 4] = self.radial_correlation
+        c[2, 7] = c[7, 2] = self.center_tangential_correlation[0]
+        c[3, 6] = c[6, 3] = self.center_tangential_correlation[1]
+        return c
+
+
 @dataclass(frozen=True)
 class Realism:
     """The whole profile.
@@ -300,6 +359,7 @@ class Realism:
         winch: winch and encoder imperfections.
         tension: tension-sensor imperfections.
         homing: start-pose repeatability.
+        optics: how the camera's calibration errors are correlated.
     """
 
     profile: str = "ideal"
@@ -307,6 +367,7 @@ class Realism:
     winch: WinchRealism = field(default_factory=WinchRealism)
     tension: TensionRealism = field(default_factory=TensionRealism)
     homing: HomingRealism = field(default_factory=HomingRealism)
+    optics: OpticsRealism = field(default_factory=OpticsRealism)
 
     @property
     def is_ideal(self) -> bool:
@@ -319,6 +380,7 @@ PARTS: dict[str, type] = {
     "winch": WinchRealism,
     "tension": TensionRealism,
     "homing": HomingRealism,
+    "optics": OpticsRealism,
 }
 """The profile's parts, by their table name in ``[realism.<part>]``."""
 
@@ -355,6 +417,16 @@ ACROBOT: dict[str, dict[str, Any]] = {
 }
 """The ``acrobot`` profile: each magnitude and its source in ``models/acrobot/README.md``."""
 
+ACROBOT_FULL_OPTICS: dict[str, Any] = {
+    "focal_correlation": 0.98,
+    "radial_correlation": -0.90,
+    "center_tangential_correlation": (0.71, 0.45),
+}
+"""The ``acrobot_full`` profile's calibration correlations (``models/acrobot/README.md``)."""
+
+ACROBOT_FULL: dict[str, dict[str, Any]] = {**ACROBOT, "optics": ACROBOT_FULL_OPTICS}
+"""The ``acrobot_full`` profile: ``acrobot`` and the drives' and optics' effects."""
+
 
 def profile(name: str, **parts: dict[str, Any]) -> Realism:
     """A named profile with some fields overridden (SI units).
@@ -368,7 +440,7 @@ def profile(name: str, **parts: dict[str, Any]) -> Realism:
     """
     if name not in PROFILES:
         raise ValueError(f"unknown realism profile {name!r}; choose one of {', '.join(PROFILES)}")
-    base = ACROBOT if name == "acrobot" else {}
+    base = {"acrobot": ACROBOT, "acrobot_full": ACROBOT_FULL}.get(name, {})
     out = Realism(profile=name)
     for part, cls in PARTS.items():
         values = {**base.get(part, {}), **parts.get(part, {})}

@@ -45,7 +45,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import cv2
 import numpy as np
 
-from cdpr_twin.robot.realism import CameraRealism
+from cdpr_twin.robot.realism import CameraRealism, OpticsRealism
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim import imaging
 from cdpr_twin.sim.model import SimulationError
@@ -142,7 +142,10 @@ class ExposureRecorder:
 
 
 def calibrate(
-    nominal: CameraIntrinsics, realism: CameraRealism, rng: np.random.Generator
+    nominal: CameraIntrinsics,
+    realism: CameraRealism,
+    rng: np.random.Generator,
+    optics: OpticsRealism | None = None,
 ) -> tuple[CameraIntrinsics, tuple[float, ...] | None]:
     """The robot's calibrated intrinsics and distortion: the true ones plus calibration errors.
 
@@ -150,12 +153,16 @@ def calibrate(
     ``N(0, center_error_std_px)``, each distortion coefficient shifted by
     ``N(0, distortion_error_std)`` (drawn in that order from the per-robot generator; a
     4-sequence of stds, one per coefficient, is accepted too: a calibration pins k1, k2 and
-    p1, p2 to very different precisions).
+    p1, p2 to very different precisions). With correlations (``optics``), the eight errors are
+    instead drawn together, as a calibration leaves them: eight standard normals z (one draw),
+    then L·z with L the Cholesky factor of the covariance diag(σ)·R·diag(σ)
+    (:meth:`OpticsRealism.calibration_correlation`), the focal errors relative as above.
 
     Args:
         nominal: the nominal intrinsics (the true ones in this model).
         realism: the camera's imperfections.
         rng: the per-robot generator.
+        optics: the correlations of the errors (``None``: independent).
 
     Returns:
         The calibrated intrinsics and (k1, k2, p1, p2), or ``None`` for a pinhole (no draw is
@@ -166,9 +173,19 @@ def calibrate(
     if not (r.focal_error_std or r.center_error_std_px or dist_std.any()):
         dist = tuple(r.distortion) if any(r.distortion) else None
         return nominal, dist
-    df = rng.normal(0.0, r.focal_error_std, 2)
-    dc = rng.normal(0.0, r.center_error_std_px, 2)
-    dd = rng.normal(0.0, dist_std)
+    if optics is not None and optics.correlated:
+        std = np.concatenate([[r.focal_error_std] * 2, [r.center_error_std_px] * 2, dist_std])
+        cov = std[:, None] * optics.calibration_correlation() * std[None, :]
+        # (a zero std makes its row zero: the factor of the nonzero block, zeros elsewhere)
+        on = std > 0
+        L = np.zeros((8, 8))
+        L[np.ix_(on, on)] = np.linalg.cholesky(cov[np.ix_(on, on)])
+        e = L @ rng.standard_normal(8)
+        df, dc, dd = e[:2], e[2:4], e[4:]
+    else:
+        df = rng.normal(0.0, r.focal_error_std, 2)
+        dc = rng.normal(0.0, r.center_error_std_px, 2)
+        dd = rng.normal(0.0, dist_std)
     K = nominal
     calibrated = CameraIntrinsics(
         K.width, K.height, K.fx * (1 + df[0]), K.fy * (1 + df[1]), K.cx + dc[0], K.cy + dc[1]
@@ -195,6 +212,7 @@ class OnboardCamera:
             off by default: it moves corners by ~1e-5 px, which closed loops carry on).
         pipeline: with ``latency_ticks`` ≥ 1, form and detect each frame in a worker thread
             while the caller goes on (the same frames and detections, sooner).
+        optics: the optics' realism (correlated calibration errors; ``None``: none).
 
     Raises:
         SimulationError: without a camera in the model.
@@ -212,6 +230,7 @@ class OnboardCamera:
         period: float | None = None,
         tag_window: bool = False,
         pipeline: bool = True,
+        optics: OpticsRealism | None = None,
     ) -> None:
         if not physics.has_camera:
             raise SimulationError(
@@ -224,7 +243,7 @@ class OnboardCamera:
         self.physics, self.realism, self.run_rng = physics, realism, run_rng
         # render()'s own noise: a look at the camera must not shift the run's frames
         self._view_rng = np.random.default_rng(run_rng.bit_generator.seed_seq.spawn(1)[0])
-        self.calibrated, self.calibrated_distortion = calibrate(intrinsics, r, robot_rng)
+        self.calibrated, self.calibrated_distortion = calibrate(intrinsics, r, robot_rng, optics)
         self._renderer: cam_mod.CameraRenderer | None = cam_mod.CameraRenderer(
             physics.model, scale=r.supersample, lens=r.distortion
         )
