@@ -328,6 +328,7 @@ def _build(s: Scenario):
             s.model.align_every,
             s.realism.winch,
             nominal_path=s.model.nominal,
+            drive=s.realism.drive,
         )
     except (ModelError, ValueError) as exc:
         raise ScenarioError(f"{s.source}: model: {exc}") from None

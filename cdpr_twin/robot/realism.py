@@ -349,6 +349,66 @@ class OpticsRealism:
         return c
 
 
+MAX_DRIVE_LENGTH = 0.05
+"""The largest drive length a scenario may set [m] (a groove pitch, a backlash, a homing
+error's std, a departure offset): a winch's are millimetres; 5 cm is another machine."""
+
+
+@dataclass(frozen=True)
+class DriveRealism:
+    """The winches' drums, gearboxes and motors, and how each drum is zeroed (all off: ideal).
+
+    :mod:`cdpr_twin.sim.drive` generates each effect as the physics steps.
+
+    Attributes:
+        helix_pitch: the drum's helical groove pitch [m] (0: a plain drum): the cable lies on a
+            helix (√(r² + (p/2π)²) per radian) and its departure point walks p per turn along
+            the drum.
+        guide_distance: from the drum's axis to the first fixed guide the cable runs to [m],
+            square to the drum axis.
+        departure_offset: where along the drum the cable departs at the zero of its drum angle,
+            from the foot of the guide's perpendicular [m].
+        winding_compliance: relative shrink of the effective winding radius per newton of
+            cable force [1/N] (the rope flattens on the drum): r(τ) = r'·(1 − κ·τ).
+        backlash: the gearbox's play, as cable length at the drum [m].
+        drum_holding_force: the cable force [N] that turns the drum against its bearing
+            friction: below it the drum stays where it is inside the play; above it the cable
+            pulls the drum against the flank that holds it.
+        friction_rate: the motor's Coulomb friction over the velocity loop's gain, as a cable
+            rate [m/s]: a winch at rest does not start below it, a moving one lags its command
+            by it (needs a finite ``[realism.winch] bandwidth_hz``).
+        zero_error_std: per-run std of each drum's zero [m of cable]: each winch is homed
+            against its own reference with its own error, and the start pose is where the
+            eight cables then settle.
+    """
+
+    helix_pitch: float = option(0.0, minimum=0.0, unit="m")
+    guide_distance: float = option(0.2, minimum=0.0, exclusive=True, unit="m")
+    departure_offset: float = option(0.0, unit="m")
+    winding_compliance: float = option(0.0, minimum=0.0, unit="1/N")
+    backlash: float = option(0.0, minimum=0.0, unit="m")
+    drum_holding_force: float = option(0.0, minimum=0.0, unit="N")
+    friction_rate: float = option(0.0, minimum=0.0, unit="m/s")
+    zero_error_std: float = option(0.0, minimum=0.0, unit="m")
+
+    def __post_init__(self) -> None:
+        why = " (a winch's groove, play and homing are millimetres)"
+        for name in ("helix_pitch", "backlash", "zero_error_std"):
+            check_at_most(name, getattr(self, name), MAX_DRIVE_LENGTH, " m" + why)
+        check_at_most("departure_offset", abs(self.departure_offset), MAX_DRIVE_LENGTH, " m" + why)
+        check_at_most(
+            "winding_compliance",
+            self.winding_compliance,
+            1e-3,
+            " /N (at 1e-3 a 1 kN cable would wind on no radius)",
+        )
+
+    @property
+    def drums(self) -> bool:
+        """Whether the drums or gearboxes do anything (the physics then winds them)."""
+        return bool(self.helix_pitch or self.winding_compliance or self.backlash)
+
+
 @dataclass(frozen=True)
 class Realism:
     """The whole profile.
@@ -360,6 +420,7 @@ class Realism:
         tension: tension-sensor imperfections.
         homing: start-pose repeatability.
         optics: how the camera's calibration errors are correlated.
+        drive: drums, gearboxes, motors and how each drum is zeroed.
     """
 
     profile: str = "ideal"
@@ -368,6 +429,7 @@ class Realism:
     tension: TensionRealism = field(default_factory=TensionRealism)
     homing: HomingRealism = field(default_factory=HomingRealism)
     optics: OpticsRealism = field(default_factory=OpticsRealism)
+    drive: DriveRealism = field(default_factory=DriveRealism)
 
     @property
     def is_ideal(self) -> bool:
@@ -381,6 +443,7 @@ PARTS: dict[str, type] = {
     "tension": TensionRealism,
     "homing": HomingRealism,
     "optics": OpticsRealism,
+    "drive": DriveRealism,
 }
 """The profile's parts, by their table name in ``[realism.<part>]``."""
 
@@ -424,7 +487,22 @@ ACROBOT_FULL_OPTICS: dict[str, Any] = {
 }
 """The ``acrobot_full`` profile's calibration correlations (``models/acrobot/README.md``)."""
 
-ACROBOT_FULL: dict[str, dict[str, Any]] = {**ACROBOT, "optics": ACROBOT_FULL_OPTICS}
+ACROBOT_FULL_DRIVE: dict[str, Any] = {
+    "helix_pitch": 0.0022,
+    "guide_distance": 0.2,
+    "departure_offset": 0.0,
+    "winding_compliance": 4e-5,
+    "backlash": 3.5e-4,
+    "drum_holding_force": 0.5,
+    "friction_rate": 5e-4,
+}
+"""The ``acrobot_full`` profile's drives (``models/acrobot/README.md``)."""
+
+ACROBOT_FULL: dict[str, dict[str, Any]] = {
+    **ACROBOT,
+    "optics": ACROBOT_FULL_OPTICS,
+    "drive": ACROBOT_FULL_DRIVE,
+}
 """The ``acrobot_full`` profile: ``acrobot`` and the drives' and optics' effects."""
 
 

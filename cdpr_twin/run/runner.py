@@ -179,6 +179,7 @@ def prepare(scenario: Scenario) -> RunSetup:
             occluder,
             s.model.nominal,
             (s.model.payload, s.model.payload_com),
+            s.realism.drive,
         )
         physics, nominal = built.physics, built.nominal
         sensors = Sensors(
