@@ -488,6 +488,7 @@ ACROBOT_FULL_OPTICS: dict[str, Any] = {
 """The ``acrobot_full`` profile's calibration correlations (``models/acrobot/README.md``)."""
 
 ACROBOT_FULL_DRIVE: dict[str, Any] = {
+    "zero_error_std": 0.0006,
     "helix_pitch": 0.0022,
     "guide_distance": 0.2,
     "departure_offset": 0.0,
@@ -500,6 +501,8 @@ ACROBOT_FULL_DRIVE: dict[str, Any] = {
 
 ACROBOT_FULL: dict[str, dict[str, Any]] = {
     **ACROBOT,
+    # each drum is zeroed on its own (drive.zero_error_std): no rigid offset of the pose
+    "homing": {"position_std": 0.0, "rotation_std": 0.0},
     "optics": ACROBOT_FULL_OPTICS,
     "drive": ACROBOT_FULL_DRIVE,
 }
@@ -530,7 +533,7 @@ def profile(name: str, **parts: dict[str, Any]) -> Realism:
     return out
 
 
-_STREAMS = {"camera": 1, "winch": 2, "tension": 3, "homing": 4}
+_STREAMS = {"camera": 1, "winch": 2, "tension": 3, "homing": 4, "drive": 5}
 
 
 def robot_rng(robot_seed: int, part: str) -> np.random.Generator:

@@ -92,6 +92,17 @@ class Encoders:
             l0_nominal = rest_lengths(cable_lengths(g, T_base_platform, "pulley"), tensions, g.es)
             self._offset = l0_nominal - self.physics.rest_lengths
 
+    def home_lengths(self, readings: np.ndarray) -> None:
+        """Zero the encoders so that they read ``readings`` (m,) [m] now.
+
+        The drums were homed each on its own reference, then wound to these lengths.
+        """
+        self.home_enabled = True
+        self._l0_home = self.physics.rest_lengths
+        self._motor_home = self.physics.motor_positions
+        self._glitch = None
+        self._offset = np.asarray(readings, dtype=float) - self._l0_home
+
     def read(self) -> np.ndarray:
         """The lengths the encoders report (m,) [m]."""
         if self.ideal:  # (exact encoders on drums as set: the length itself, bit for bit)

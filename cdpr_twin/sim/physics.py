@@ -411,18 +411,48 @@ class Physics:
         T = geom.check_pose_inside(T_base_platform, "reset pose")
         tau = tension_distribution(geom, T, *geom.tension_bounds(tau_min, tau_max))  # pulley
         l0 = rest_lengths(cable_lengths(geom, T, "pulley"), tau, self._es)
+        self._start(T, l0, tau, settle_time)
+
+    def settle_at_lengths(
+        self, rest_lengths: np.ndarray, T_guess: np.ndarray, settle_time: float = 2.0
+    ) -> None:
+        """Wind the cables to these rest lengths and let the platform settle where they hold it.
+
+        What a robot whose drums were each zeroed on its own does: the platform is released
+        near ``T_guess`` and comes to rest where the cables' elastic forces balance its weight,
+        some cables perhaps slack. Time restarts at 0; every cable is enabled again.
+
+        Args:
+            rest_lengths: (m,) unstretched lengths l0 [m].
+            T_guess: (4, 4) where the platform is released.
+            settle_time: how long to settle [s] (the slowest mode of ACROBOT's platform decays
+                by e in ≈ 0.25 s: 2 s leaves 3e-4 of the first offset).
+
+        Raises:
+            ValueError: if the pose leaves the frame or a length is not positive.
+        """
+        T = self.geometry.check_pose_inside(T_guess, "start pose")
+        l0 = np.array(rest_lengths, dtype=float)
+        if l0.shape != (self.n_cables,) or not np.all(l0 > 0):
+            raise ValueError(f"rest lengths: {self.n_cables} positive lengths [m], got {l0}")
+        self._start(T, l0, None, settle_time)
+
+    def _start(self, T: np.ndarray, l0: np.ndarray, tau: np.ndarray | None, settle: float) -> None:
+        """Rest lengths l0 at pose T, winches at rest, then settle (tau: the tensions, if known)."""
         mujoco.mj_resetData(self.model, self.data)
         self._servos.reset()  # winches at rest
         self.cable_enabled[:] = True
         self._running = None
         self.data.act[self._actuators] = l0
-        if self._drums is not None:
+        if self._drums is not None and tau is not None:
             self._drums.reset(tau)
         self.place(T)
+        if self._drums is not None and tau is None:
+            self._drums.reset(self.tensions)
         self.was_reset = True
         hooks, self._hooks = self._hooks, []  # no event acts while settling
         try:
-            self.step(round(settle_time / self.timestep))
+            self.step(round(settle / self.timestep))
         finally:
             self._hooks = hooks
         self.settle_error = se3.pose_distance(T, self.T_base_platform)
