@@ -488,7 +488,7 @@ ACROBOT_FULL_OPTICS: dict[str, Any] = {
 """The ``acrobot_full`` profile's calibration correlations (``models/acrobot/README.md``)."""
 
 ACROBOT_FULL_DRIVE: dict[str, Any] = {
-    "zero_error_std": 0.0006,
+    "zero_error_std": 1e-5,
     "helix_pitch": 0.0022,
     "guide_distance": 0.2,
     "departure_offset": 0.0,

@@ -306,7 +306,9 @@ class Physics:
     def _wind(self, h: float) -> np.ndarray:
         """The rates that pay out, over ``h`` seconds, what the drums wind (m,) [m/s]."""
         motor_rate = self._servos.command if self._servos.ideal else self._servos.run(h)
-        return self._drums.advance(self._stalled(motor_rate) * h, self.tensions) / h
+        l0 = self.data.act[self._actuators]
+        stiffness = self._es / l0
+        return self._drums.advance(self._stalled(motor_rate) * h, self.tensions, stiffness) / h
 
     @property
     def motor_positions(self) -> np.ndarray | None:
@@ -411,7 +413,7 @@ class Physics:
         T = geom.check_pose_inside(T_base_platform, "reset pose")
         tau = tension_distribution(geom, T, *geom.tension_bounds(tau_min, tau_max))  # pulley
         l0 = rest_lengths(cable_lengths(geom, T, "pulley"), tau, self._es)
-        self._start(T, l0, tau, settle_time)
+        self._start(T, l0, settle_time)
 
     def settle_at_lengths(
         self, rest_lengths: np.ndarray, T_guess: np.ndarray, settle_time: float = 2.0
@@ -435,20 +437,18 @@ class Physics:
         l0 = np.array(rest_lengths, dtype=float)
         if l0.shape != (self.n_cables,) or not np.all(l0 > 0):
             raise ValueError(f"rest lengths: {self.n_cables} positive lengths [m], got {l0}")
-        self._start(T, l0, None, settle_time)
+        self._start(T, l0, settle_time)
 
-    def _start(self, T: np.ndarray, l0: np.ndarray, tau: np.ndarray | None, settle: float) -> None:
-        """Rest lengths l0 at pose T, winches at rest, then settle (tau: the tensions, if known)."""
+    def _start(self, T: np.ndarray, l0: np.ndarray, settle: float) -> None:
+        """Rest lengths l0 at pose T, winches at rest, then settle ``settle`` seconds."""
         mujoco.mj_resetData(self.model, self.data)
         self._servos.reset()  # winches at rest
         self.cable_enabled[:] = True
         self._running = None
         self.data.act[self._actuators] = l0
-        if self._drums is not None and tau is not None:
-            self._drums.reset(tau)
+        if self._drums is not None:
+            self._drums.reset()
         self.place(T)
-        if self._drums is not None and tau is None:
-            self._drums.reset(self.tensions)
         self.was_reset = True
         hooks, self._hooks = self._hooks, []  # no event acts while settling
         try:

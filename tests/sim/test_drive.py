@@ -66,8 +66,8 @@ def test_the_winding_radius_shrinks_with_the_cables_force():
     kappa = 4e-5
     drums = Drums(DriveRealism(winding_compliance=kappa), np.full(2, R), np.full(2, R))
     tensions = np.array([0.0, 75.0])
-    drums.reset(tensions)
-    paid = drums.advance(np.full(2, 0.1), tensions)
+    drums.reset()
+    paid = drums.advance(np.full(2, 0.1), tensions, np.full(2, 3e5))
     # no load: the drum's own radius; at 75 N the rope's centre line sits 0.3 % lower
     assert paid[0] == pytest.approx(0.1, abs=1e-15)
     assert paid[1] / paid[0] == pytest.approx(1.0 - 0.003, abs=1e-12)
@@ -89,8 +89,8 @@ def test_backlash_is_a_dead_band_of_its_width_on_a_reversal_of_a_slack_cable():
         l0.append(p.rest_lengths)
         motor.append(p.motor_positions)
     l0, motor = np.array(l0)[:, 0], np.array(motor)[:, 0]
-    # out: the taut cable left its drum on the paying-out flank (b/2 ahead of the motor): the
-    # motor crosses the whole play before its other flank pushes the drum on
+    # out: the drum was left on the paying-out flank (b/2 ahead of the motor): the motor
+    # crosses the whole play before its other flank pushes the drum on
     assert l0[10] - l0[0] == pytest.approx(motor[10] - b, abs=1e-12)
     # reversal: the drum stands still until the motor has crossed the whole play b
     still = np.abs(l0 - l0[10]) < 1e-15
