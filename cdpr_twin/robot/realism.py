@@ -308,17 +308,35 @@ class OpticsRealism:
     normal with the stds of :class:`CameraRealism` and these correlations
     (:func:`cdpr_twin.sim.onboard_camera.calibrate`).
 
+    The lens and the light (:mod:`cdpr_twin.sim.optics`) act on each formed frame.
+
     Attributes:
         focal_correlation: ρ between the relative errors of fx and fy; the aspect ratio's
             relative error then has std ``focal_error_std``·√(2(1 − ρ)).
         radial_correlation: ρ between the errors of k1 and k2.
         center_tangential_correlation: (ρ(cx, p2), ρ(cy, p1)): p2 moves points along x as cx
             does, p1 along y as cy does.
+        defocus: blur each frame by the thin lens's circle of confusion at the tag's depth.
+        focus_distance: where the lens is focused [m].
+        focal_length: the lens's focal length [m] (its field is the camera model's).
+        f_number: the lens's f-number N (aperture diameter f/N).
+        vignetting_power: the exponent of the illumination's fall-off cos^n θ off the axis
+            (4: a thin lens's natural vignetting; 0: none).
+        flicker_depth: the lighting's relative modulation m, 1 + m·sin(2π f t + φ), φ drawn
+            per run (0: steady light).
+        flicker_hz: its frequency f [Hz] (lamps on 50 Hz mains: 100 Hz).
     """
 
     focal_correlation: float = option(0.0)
     radial_correlation: float = option(0.0)
     center_tangential_correlation: tuple[float, ...] = option((0.0, 0.0))
+    defocus: bool = option(False)
+    focus_distance: float = option(0.15, minimum=0.0, exclusive=True, unit="m")
+    focal_length: float = option(3.04e-3, minimum=0.0, exclusive=True, unit="m")
+    f_number: float = option(2.0, minimum=0.0, exclusive=True)
+    vignetting_power: float = option(0.0, minimum=0.0)
+    flicker_depth: float = option(0.0, minimum=0.0)
+    flicker_hz: float = option(100.0, minimum=0.0, exclusive=True, unit="Hz")
 
     def __post_init__(self) -> None:
         _check_correlation("focal_correlation", self.focal_correlation)
@@ -329,11 +347,27 @@ class OpticsRealism:
             )
         for rho in self.center_tangential_correlation:
             _check_correlation("center_tangential_correlation", rho)
+        if not self.focus_distance > self.focal_length:
+            raise OptionError(
+                "focus_distance",
+                f"must exceed the focal length {self.focal_length} m (a real image), "
+                f"got {self.focus_distance} m",
+            )
+        if self.flicker_depth > 1.0:
+            raise OptionError(
+                "flicker_depth", f"must be ≤ 1 (light is ≥ 0), got {self.flicker_depth}"
+            )
 
     @property
     def correlated(self) -> bool:
         """Whether any calibration errors are drawn together."""
-        return self != OpticsRealism()
+        c = self.center_tangential_correlation
+        return bool(self.focal_correlation or self.radial_correlation or any(c))
+
+    @property
+    def forms(self) -> bool:
+        """Whether the lens or the light change the frame."""
+        return bool(self.defocus or self.vignetting_power or self.flicker_depth)
 
     def calibration_correlation(self) -> np.ndarray:
         """The correlation matrix of the errors of (fx, fy, cx, cy, k1, k2, p1, p2). Returns (8, 8).
@@ -484,6 +518,13 @@ ACROBOT_FULL_OPTICS: dict[str, Any] = {
     "focal_correlation": 0.98,
     "radial_correlation": -0.90,
     "center_tangential_correlation": (0.71, 0.45),
+    "defocus": True,
+    "focus_distance": 0.15,
+    "focal_length": 3.04e-3,
+    "f_number": 2.0,
+    "vignetting_power": 4.0,
+    "flicker_depth": 0.05,
+    "flicker_hz": 100.0,
 }
 """The ``acrobot_full`` profile's calibration correlations (``models/acrobot/README.md``)."""
 

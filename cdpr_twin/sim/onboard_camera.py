@@ -48,6 +48,7 @@ import numpy as np
 from cdpr_twin.robot.realism import CameraRealism, OpticsRealism
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim import imaging
+from cdpr_twin.sim import optics as lens
 from cdpr_twin.sim.model import SimulationError
 from cdpr_twin.sim.physics import Physics
 from cdpr_twin.types import CameraIntrinsics, TagDetection
@@ -250,7 +251,20 @@ class OnboardCamera:
         self.margins = self._renderer.margins  # what the lens sees beyond the pinhole's field
         self.true_intrinsics = self._renderer.intrinsics
         self._maps = None
-        self._formed = r.noise or r.exposure_s > 0 or any(r.distortion) or r.supersample > 1
+        self.optics = OpticsRealism() if optics is None else optics
+        o = self.optics
+        self._formed = (
+            r.noise or r.exposure_s > 0 or any(r.distortion) or r.supersample > 1 or o.forms
+        )
+        self._vignette = (
+            lens.vignetting_map(self.true_intrinsics, o.vignetting_power)
+            if o.vignetting_power
+            else None
+        )
+        self._flicker_phase = 0.0
+        if o.flicker_depth:  # per run, from a stream of its own (the noise's stays as it was)
+            spawned = np.random.default_rng(run_rng.bit_generator.seed_seq.spawn(1)[0])
+            self._flicker_phase = float(spawned.uniform(0.0, 2.0 * math.pi))
         self._fifo: deque[Future] = deque()
         self._pool: ThreadPoolExecutor | None = None
         self._last_job: Future | None = None  # the worker's newest frame (it works in order)
@@ -311,7 +325,13 @@ class OnboardCamera:
         are without it.
         """
         self._drain()  # the frames in hand are formed before this one, as they were taken
-        return self._form(self._renders(), self._view_rng)
+        return self._form(self._renders(), self._view_rng, self._scene())
+
+    def _scene(self) -> tuple[float, float]:
+        """What the lens and the light need of this instant: (the tag's depth [m], time [s])."""
+        p = self.physics
+        depth = float(p.T_cam_tag[2, 3]) if self.optics.defocus and p.has_tag else math.nan
+        return depth, p.time
 
     def _renders(self) -> list[np.ndarray]:
         """The GL part of a frame: the render(s) of the exposure ending now (this thread's)."""
@@ -323,9 +343,15 @@ class OnboardCamera:
         return [self._renderer.render(self.physics.data)]
 
     def _form(
-        self, renders: list[np.ndarray], rng: np.random.Generator | None = None
+        self,
+        renders: list[np.ndarray],
+        rng: np.random.Generator | None = None,
+        scene: tuple[float, float] = (math.nan, 0.0),
     ) -> np.ndarray:
-        """The frame the sensor forms from the renders of its exposure (``rng``: the run's)."""
+        """The frame the sensor forms from the renders of its exposure (``rng``: the run's).
+
+        ``scene``: the tag's depth [m] (``nan``: no defocus) and the exposure's end [s].
+        """
         if not self._formed:
             return renders[0]
         r = self.realism
@@ -334,6 +360,7 @@ class OnboardCamera:
             linear = imaging.distort(linear, self._maps)
         if r.supersample > 1:
             linear = imaging.integrate_pixels(linear, r.supersample)
+        linear = self._lens_and_light(linear, *scene)
         if (r.black_level, r.white_level) != (0.0, 1.0):  # the scene's exposure levels
             linear *= np.float32(r.white_level - r.black_level)  # in place: b + (w − b)·L
             linear += np.float32(r.black_level)
@@ -344,13 +371,28 @@ class OnboardCamera:
             gray = imaging.encode(linear, r.gamma)
         return cv2.cvtColor(gray, cv2.COLOR_GRAY2RGB)
 
+    def _lens_and_light(self, linear: np.ndarray, depth: float, time: float) -> np.ndarray:
+        """The flicker of the light, the lens's defocus and vignetting, on the linear image."""
+        o = self.optics
+        if o.flicker_depth:
+            e = self.realism.exposure_s
+            gain = lens.flicker_gain(time, e, o.flicker_hz, o.flicker_depth, self._flicker_phase)
+            linear = linear * np.float32(gain)
+        if o.defocus and math.isfinite(depth):
+            K = self.true_intrinsics
+            c = lens.blur_circle_px(depth, o.focus_distance, o.focal_length, o.f_number, K.fy)
+            linear = lens.defocus(linear, c)
+        if self._vignette is not None:
+            linear = linear * self._vignette
+        return linear
+
     def _develop(
-        self, renders: list[np.ndarray], forget: bool
+        self, renders: list[np.ndarray], forget: bool, scene: tuple[float, float]
     ) -> tuple[np.ndarray, TagDetection | None]:
         """Form the frame and detect the tag in it (a new run first forgets the last place)."""
         if forget:
             self._detector.forget()
-        image = self._form(renders)
+        image = self._form(renders, None, scene)
         return image, self._detector.detect(image)
 
     def _drain(self) -> None:
@@ -370,16 +412,16 @@ class OnboardCamera:
         """
         reset = self.physics.time < self._last_read
         forget = self.physics.time <= self._last_read  # a new run (or a re-read): search anew
-        renders = self._renders()
+        renders, scene = self._renders(), self._scene()
         d = self.realism.latency_ticks
         if self.pipeline and d > 0:
             if self._pool is None:
                 self._pool = ThreadPoolExecutor(1, thread_name_prefix="camera")
-            job = self._last_job = self._pool.submit(self._develop, renders, forget)
+            job = self._last_job = self._pool.submit(self._develop, renders, forget, scene)
         else:
             self._drain()  # switched off mid-run: the worker's frames come first
             job = Future()
-            job.set_result(self._develop(renders, forget))
+            job.set_result(self._develop(renders, forget, scene))
         first, self._last_read = not self._fifo, self.physics.time
         if d == 0:
             return job.result()
