@@ -325,6 +325,10 @@ class OpticsRealism:
         flicker_depth: the lighting's relative modulation m, 1 + m·sin(2π f t + φ), φ drawn
             per run (0: steady light).
         flicker_hz: its frequency f [Hz] (lamps on 50 Hz mains: 100 Hz).
+        line_time: a rolling shutter's row-to-row delay [s]: row r's exposure ends
+            (H − 1 − r)·t_line before the last row's (0: a global shutter). The frame is then
+            formed from ``blur_subframes`` + 1 renders spread over the whole readout and
+            exposure, each row weighing them by its own window.
     """
 
     focal_correlation: float = option(0.0)
@@ -337,6 +341,7 @@ class OpticsRealism:
     vignetting_power: float = option(0.0, minimum=0.0)
     flicker_depth: float = option(0.0, minimum=0.0)
     flicker_hz: float = option(100.0, minimum=0.0, exclusive=True, unit="Hz")
+    line_time: float = option(0.0, minimum=0.0, unit="s")
 
     def __post_init__(self) -> None:
         _check_correlation("focal_correlation", self.focal_correlation)
@@ -367,7 +372,7 @@ class OpticsRealism:
     @property
     def forms(self) -> bool:
         """Whether the lens or the light change the frame."""
-        return bool(self.defocus or self.vignetting_power or self.flicker_depth)
+        return bool(self.defocus or self.vignetting_power or self.flicker_depth or self.line_time)
 
     def calibration_correlation(self) -> np.ndarray:
         """The correlation matrix of the errors of (fx, fy, cx, cy, k1, k2, p1, p2). Returns (8, 8).
@@ -525,6 +530,7 @@ ACROBOT_FULL_OPTICS: dict[str, Any] = {
     "vignetting_power": 4.0,
     "flicker_depth": 0.05,
     "flicker_hz": 100.0,
+    "line_time": 3448 / 182.4e6,
 }
 """The ``acrobot_full`` profile's calibration correlations (``models/acrobot/README.md``)."""
 

@@ -45,6 +45,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import cv2
 import numpy as np
 
+from cdpr_twin.options import OptionError
 from cdpr_twin.robot.realism import CameraRealism, OpticsRealism
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim import imaging
@@ -261,6 +262,7 @@ class OnboardCamera:
             if o.vignetting_power
             else None
         )
+        self._row_w: np.ndarray | None = None  # a rolling shutter's (canvas rows, K) weights
         self._flicker_phase = 0.0
         if o.flicker_depth:  # per run, from a stream of its own (the noise's stays as it was)
             spawned = np.random.default_rng(run_rng.bit_generator.seed_seq.spawn(1)[0])
@@ -286,10 +288,42 @@ class OnboardCamera:
         except BaseException:
             self.close()
             raise
-        if r.exposure_s > 0:
+        if o.line_time > 0:
+            offsets = self._rolling_offsets(period)
+            self.exposure = ExposureRecorder(physics, period, offsets)
+            physics.add_hook(self.exposure)
+        elif r.exposure_s > 0:
             offsets = imaging.subframe_offsets(r.exposure_s, r.blur_subframes)
             self.exposure = ExposureRecorder(physics, period, offsets)
             physics.add_hook(self.exposure)
+
+    def _rolling_offsets(self, period: float | None) -> np.ndarray:
+        """A rolling shutter's sub-frame offsets before the read [s], and its rows' weights.
+
+        ``blur_subframes`` + 1 renders span the readout and exposure, from the first row's
+        exposure start to the last row's end; each row of the render canvas weighs them by its
+        sensor row's window (:func:`cdpr_twin.sim.optics.row_weights`).
+
+        Raises:
+            OptionError: naming ``realism.optics.line_time`` when readout and exposure do not
+                fit in the read period.
+        """
+        r, o, K = self.realism, self.optics, self.true_intrinsics
+        span = r.exposure_s + (K.height - 1) * o.line_time
+        if period is None or not span < period:
+            raise OptionError(
+                "realism.optics.line_time",
+                f"a readout of {(K.height - 1) * o.line_time:g} s and exposure of "
+                f"{r.exposure_s:g} s must fit in the camera's read period ({period} s)",
+            )
+        offsets = np.linspace(span, 0.0, r.blur_subframes + 1)
+        scale, margin = r.supersample, self.margins[1]
+        canvas_rows = np.arange(self._renderer.canvas.height)
+        sensor_rows = (canvas_rows - margin + 0.5) / scale - 0.5
+        self._row_w = lens.row_weights(
+            -offsets, sensor_rows, K.height, 0.0, r.exposure_s, o.line_time
+        )
+        return offsets
 
     def close(self) -> None:
         """Free the GL context and stop recording exposures.
@@ -355,7 +389,13 @@ class OnboardCamera:
         if not self._formed:
             return renders[0]
         r = self.realism
-        linear = imaging.average([imaging.linear_luminance(f, r.gamma) for f in renders])
+        frames = [imaging.linear_luminance(f, r.gamma) for f in renders]
+        if self._row_w is not None and len(frames) > 1:  # a rolling shutter's rows
+            linear = frames[0] * self._row_w[:, :1]
+            for k in range(1, len(frames)):
+                linear += frames[k] * self._row_w[:, k : k + 1]
+        else:
+            linear = imaging.average(frames)
         if self._maps is not None:
             linear = imaging.distort(linear, self._maps)
         if r.supersample > 1:
@@ -375,9 +415,13 @@ class OnboardCamera:
         """The flicker of the light, the lens's defocus and vignetting, on the linear image."""
         o = self.optics
         if o.flicker_depth:
-            e = self.realism.exposure_s
-            gain = lens.flicker_gain(time, e, o.flicker_hz, o.flicker_depth, self._flicker_phase)
-            linear = linear * np.float32(gain)
+            # each row's exposure ends (H − 1 − r)·t_line before the frame's (a rolling shutter
+            # bands the flicker; a global one dims or brightens the whole frame)
+            rows = np.arange(linear.shape[0], dtype=float)
+            ends = time - (linear.shape[0] - 1 - rows) * o.line_time
+            e, phase = self.realism.exposure_s, self._flicker_phase
+            gain = lens.flicker_gain(ends, e, o.flicker_hz, o.flicker_depth, phase)
+            linear = linear * gain.astype(np.float32)[:, None]
         if o.defocus and math.isfinite(depth):
             K = self.true_intrinsics
             c = lens.blur_circle_px(depth, o.focus_distance, o.focal_length, o.f_number, K.fy)

@@ -11,10 +11,10 @@ coordinates as OpenCV's) or says how rows are exposed:
   (θ the angle of the pixel's ray).
 - :func:`flicker_gain`: the mean over each exposure window of lighting modulated at the mains'
   second harmonic, 1 + m·sin(2π f t + φ).
-- :func:`row_weights`: a rolling shutter exposes row r over [t_end − E + (r − R)·t_line,
-  t_end + (r − R)·t_line] (R the last row, read out at t_end): the weights of sub-frames
-  rendered at given times that reproduce each row's exposure (linear interpolation in time
-  between sub-frames, integrated over the row's window).
+- :func:`row_weights`: a rolling shutter exposes row r over [e_r − E, e_r], e_r = t_end −
+  (H − 1 − r)·t_line (the last row read out at t_end): the weights of sub-frames rendered at
+  given times that reproduce each row's exposure (linear interpolation in time between
+  sub-frames, integrated over the row's window).
 """
 
 from __future__ import annotations
@@ -148,46 +148,60 @@ def flicker_gain(
 
 
 def row_weights(
-    times: np.ndarray, height: int, t_end: float, exposure: float, t_line: float
+    times: np.ndarray,
+    rows: np.ndarray,
+    height: int,
+    t_end: float,
+    exposure: float,
+    t_line: float,
 ) -> np.ndarray:
     """Weights of sub-frames rendered at ``times`` that form each row of a rolling shutter.
 
-    Row r is exposed over [e_r − E, e_r], e_r = t_end − (H − 1 − r)·t_line. Between two
-    sub-frames the scene is taken to move linearly in time (each pixel's light interpolated),
-    so a row's weight on sub-frame k is the mean over its window of the hat function of
-    ``times`` at k (with E = 0, its value at e_r). Times outside the rendered span take the
-    nearest sub-frame.
+    Sensor row r (0 at the top, read first) is exposed over [e_r − E, e_r], e_r = t_end −
+    (H − 1 − r)·t_line. Between two sub-frames the scene is taken to change linearly in time
+    (each pixel's light interpolated), so a row's weight on sub-frame k is the mean over its
+    window of the hat function of ``times`` at k (with E = 0, its value at e_r). Times outside
+    the rendered span take the nearest sub-frame.
 
     Args:
         times: (K,) increasing sub-frame times [s].
-        height: H rows.
+        rows: (n,) the sensor rows (fractional: a finer or wider render's rows) to weigh;
+            rows beyond the sensor's take its first or last row's time.
+        height: H, the sensor's rows.
         t_end: when the last row's exposure ends [s].
         exposure: E [s].
         t_line: the row-to-row delay [s].
 
     Returns:
-        (H, K) float32 weights, each row summing to 1.
+        (n, K) float32 weights, each row summing to 1.
     """
     times = np.asarray(times, dtype=float)
-    ends = t_end - (height - 1 - np.arange(height)) * t_line
+    r = np.clip(np.asarray(rows, dtype=float), 0.0, height - 1.0)
+    ends = t_end - (height - 1.0 - r) * t_line
     eye = np.eye(times.size)
     if exposure == 0.0:
         w = np.stack([np.interp(ends, times, eye[k]) for k in range(times.size)], axis=1)
         return w.astype(np.float32)
     # the mean of each piecewise-linear hat over [e − E, e]: the difference of its integral
-    grid = np.union1d(times, [times[0] - 1.0, times[-1] + 1.0])
-
-    def integral(k: int, t: np.ndarray) -> np.ndarray:
+    # (beyond the rendered span the hat is constant: its integral goes on linearly)
+    lo, hi = min(times[0], (ends - exposure).min()) - 1.0, max(times[-1], ends.max()) + 1.0
+    grid = np.concatenate([[lo], times, [hi]])
+    w = []
+    for k in range(times.size):
         hat = np.interp(grid, times, eye[k])
         cum = np.concatenate([[0.0], np.cumsum(0.5 * (hat[1:] + hat[:-1]) * np.diff(grid))])
-        # beyond the grid the hat is constant: extend its integral linearly
-        inside = np.interp(t, grid, cum)
-        left = np.where(t < grid[0], cum[0] + hat[0] * (t - grid[0]), 0.0)
-        right = np.where(t > grid[-1], cum[-1] + hat[-1] * (t - grid[-1]), 0.0)
-        return np.where(t < grid[0], left, np.where(t > grid[-1], right, inside))
+        # the integral is piecewise quadratic: interpolate it exactly by sub-sampling each
+        # segment's hat linearly (np.interp of cum alone would be off inside a segment)
+        w.append(
+            (_hat_integral(grid, hat, cum, ends) - _hat_integral(grid, hat, cum, ends - exposure))
+            / exposure
+        )
+    return np.stack(w, axis=1).astype(np.float32)
 
-    w = np.stack(
-        [(integral(k, ends) - integral(k, ends - exposure)) / exposure for k in range(times.size)],
-        axis=1,
-    )
-    return w.astype(np.float32)
+
+def _hat_integral(grid: np.ndarray, hat: np.ndarray, cum: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """∫ from grid[0] to t of the piecewise-linear ``hat`` (its values at ``grid``)."""
+    i = np.clip(np.searchsorted(grid, t, side="right") - 1, 0, grid.size - 2)
+    dt = t - grid[i]
+    slope = (hat[i + 1] - hat[i]) / (grid[i + 1] - grid[i])
+    return cum[i] + hat[i] * dt + 0.5 * slope * dt * dt

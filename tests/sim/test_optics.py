@@ -17,6 +17,7 @@ from conftest import paper_pose
 from scipy.integrate import quad
 from scipy.optimize import brentq
 
+from cdpr_twin.options import OptionError
 from cdpr_twin.robot.realism import CameraRealism, OpticsRealism, profile
 from cdpr_twin.sim import optics
 from cdpr_twin.sim.onboard_camera import OnboardCamera
@@ -127,3 +128,38 @@ def test_the_camera_defocuses_by_the_tags_true_depth(twin):
 def test_the_full_profile_has_the_lens_and_light_and_acrobot_not():
     assert profile("acrobot_full").optics.forms
     assert not profile("acrobot").optics.forms
+
+
+def test_a_rolling_shutter_skews_a_moving_vertical_edge_by_v_t_line_per_row():
+    height, t_line, exposure, v = 480, 3448 / 182.4e6, 0.008, 500.0  # v [px/s]
+    span = exposure + (height - 1) * t_line
+    times = np.linspace(-span, 0.0, 3)  # blur_subframes + 1 renders over the readout
+    x = np.arange(200, dtype=float)
+
+    def edge(t):  # a vertical edge, a 40 px linear ramp centred at 100 + v·t
+        return np.clip((x - (100.0 + v * t)) / 40.0 + 0.5, 0.0, 1.0)
+
+    w = optics.row_weights(times, np.arange(height), height, 0.0, exposure, t_line)
+    assert np.allclose(w.sum(axis=1), 1.0, atol=1e-6)
+    frame = w @ np.stack([edge(t) for t in times])
+    # each row's edge where its light crosses one half (the ramp is linear there)
+    crossing = np.array([np.interp(0.5, row, x) for row in frame])
+    slope = np.polyfit(np.arange(height), crossing, 1)[0]
+    assert slope == pytest.approx(v * t_line, rel=1e-4)
+    # and the first row sits where the edge was at the middle of its own window
+    first_mid = -(height - 1) * t_line - exposure / 2
+    assert crossing[0] == pytest.approx(100.0 + v * first_mid, abs=1e-3)
+
+
+def test_readout_and_exposure_must_fit_in_the_read_period(twin):
+    with pytest.raises(OptionError, match=r"realism\.optics\.line_time"):
+        OnboardCamera(
+            twin.physics,
+            twin.nominal.intrinsics,
+            twin.nominal.tag_size,
+            CameraRealism(exposure_s=0.008, blur_subframes=2),
+            np.random.default_rng(0),
+            np.random.default_rng(0),
+            period=0.01,
+            optics=OpticsRealism(line_time=2e-5),
+        )
