@@ -9,9 +9,14 @@ Profiles: ``profile = "ideal"`` is the twin before realism, bit for bit. Magnitu
 kinds, as physics dictates:
 
 - per robot (drawn from the truth seed, fixed across repetitions, like one physical robot):
-  intrinsics calibration error, drum radius error, tension-sensor bias and gain;
+  intrinsics calibration error (its parts drawn together with the correlations of
+  ``[realism.optics]``), drum radius error, tension-sensor bias and gain;
 - per run (drawn from the run seed): pixel noise, tension repeatability noise, the homing offset
-  of the start pose.
+  of the start pose, or each drum's zero error (``[realism.drive]``), the light's flicker
+  phase.
+
+The drums, gearboxes and motors (``[realism.drive]``) and the lens and light
+(``[realism.optics]``) are fixed by the profile's numbers: ``acrobot_full`` turns them on.
 
 A scenario overrides any field: ``[realism.camera] exposure_s = 0.004``. Every magnitude has an
 upper bound here (``MAX_*``, each with the reason it is the limit), which the scenario's other
@@ -337,10 +342,10 @@ class OpticsRealism:
     defocus: bool = option(False)
     focus_distance: float = option(0.15, minimum=0.0, exclusive=True, unit="m")
     focal_length: float = option(3.04e-3, minimum=0.0, exclusive=True, unit="m")
-    f_number: float = option(2.0, minimum=0.0, exclusive=True)
+    f_number: float = option(2.0, minimum=0.5)
     vignetting_power: float = option(0.0, minimum=0.0)
     flicker_depth: float = option(0.0, minimum=0.0)
-    flicker_hz: float = option(100.0, minimum=0.0, exclusive=True, unit="Hz")
+    flicker_hz: float = option(100.0, minimum=1.0, unit="Hz")
     line_time: float = option(0.0, minimum=0.0, unit="s")
 
     def __post_init__(self) -> None:
@@ -358,6 +363,7 @@ class OpticsRealism:
                 f"must exceed the focal length {self.focal_length} m (a real image), "
                 f"got {self.focus_distance} m",
             )
+        check_at_most("vignetting_power", self.vignetting_power, 10.0, " (cos⁴ is a thin lens's)")
         if self.flicker_depth > 1.0:
             raise OptionError(
                 "flicker_depth", f"must be ≤ 1 (light is ≥ 0), got {self.flicker_depth}"
@@ -391,6 +397,11 @@ class OpticsRealism:
 MAX_DRIVE_LENGTH = 0.05
 """The largest drive length a scenario may set [m] (a groove pitch, a backlash, a homing
 error's std, a departure offset): a winch's are millimetres; 5 cm is another machine."""
+
+
+MAX_ZERO_ERROR_STD = 0.005
+"""The largest std of a drum's zero error [m]: 5 mm on ACROBOT's cables is 1.5 kN, a robot
+homed that badly hangs on a few cables or tears them."""
 
 
 @dataclass(frozen=True)
@@ -432,9 +443,19 @@ class DriveRealism:
 
     def __post_init__(self) -> None:
         why = " (a winch's groove, play and homing are millimetres)"
-        for name in ("helix_pitch", "backlash", "zero_error_std"):
+        for name in ("helix_pitch", "backlash"):
             check_at_most(name, getattr(self, name), MAX_DRIVE_LENGTH, " m" + why)
-        check_at_most("departure_offset", abs(self.departure_offset), MAX_DRIVE_LENGTH, " m" + why)
+        if abs(self.departure_offset) > MAX_DRIVE_LENGTH:
+            raise OptionError(
+                "departure_offset",
+                f"must lie within ±{MAX_DRIVE_LENGTH:g} m{why}, got {self.departure_offset:g}",
+            )
+        check_at_most(
+            "zero_error_std",
+            self.zero_error_std,
+            MAX_ZERO_ERROR_STD,
+            " m (on a cable of E·S/l ≈ 3e5 N/m each millimetre is 300 N)",
+        )
         check_at_most(
             "winding_compliance",
             self.winding_compliance,

@@ -32,6 +32,10 @@ KERNEL_SAMPLES = 16
 disk's edge within a pixel is then right to ≈ 1/16² of a pixel."""
 
 
+MAX_BLUR_PX = 100.0
+"""The widest circle of confusion applied [px]: a frame blurred by more shows no tag."""
+
+
 def blur_circle_px(
     depth: float, focus: float, focal_length: float, f_number: float, focal_px: float
 ) -> float:
@@ -101,7 +105,8 @@ def defocus(linear: np.ndarray, diameter_px: float) -> np.ndarray:
     Returns:
         (H, W) float32 (the image itself below a tenth of a pixel).
     """
-    kernel = disk_kernel(round(float(diameter_px), 2))
+    # (a circle wider than MAX_BLUR_PX leaves no image to speak of: it is held there)
+    kernel = disk_kernel(round(min(float(diameter_px), MAX_BLUR_PX), 2))
     if kernel.shape == (1, 1):
         return linear
     # (the frame's edge repeats its border pixels: the lens saw beyond it, much like them)
