@@ -329,6 +329,8 @@ def _build(s: Scenario):
             s.realism.winch,
             nominal_path=s.model.nominal,
             drive=s.realism.drive,
+            cable=s.realism.cable,
+            pulley=s.realism.pulley,
         )
     except (ModelError, ValueError) as exc:
         raise ScenarioError(f"{s.source}: model: {exc}") from None

@@ -5,12 +5,15 @@ magnitude from ``models/acrobot/README.md`` (its source named there), and each c
 off. What is robot data — the drum radius, the tension sensors' range, accuracy and
 repeatability — is not here: ``nan`` fields (and ``repeatability_noise``) take it from the
 robot description (``robot.toml`` → the model's ``<numeric>``; :func:`for_robot`).
-Profiles: ``profile = "ideal"`` is the twin before realism, bit for bit. Magnitudes come in two
-kinds, as physics dictates:
+Profiles: ``profile = "ideal"`` is the twin before realism, bit for bit; ``acrobot_full`` is
+``acrobot`` with the cables and pulleys as they are (:class:`CableRealism`,
+:class:`PulleyRealism`) and the drives and optics as they are (:class:`DriveRealism`,
+:class:`OpticsRealism`). Magnitudes come in two kinds, as physics dictates:
 
 - per robot (drawn from the truth seed, fixed across repetitions, like one physical robot):
   intrinsics calibration error (its parts drawn together with the correlations of
-  ``[realism.optics]``), drum radius error, tension-sensor bias and gain;
+  ``[realism.optics]``), drum radius error, tension-sensor bias and gain, each rope's stiffness,
+  the pulleys' swivel tilts and sheave offsets;
 - per run (drawn from the run seed): pixel noise, tension repeatability noise, the homing offset
   of the start pose, or each drum's zero error (``[realism.drive]``), the light's flicker
   phase.
@@ -469,6 +472,146 @@ class DriveRealism:
         return bool(self.helix_pitch or self.winding_compliance or self.backlash)
 
 
+MAX_WRAP_DIAMETER = 0.05
+"""The largest cable diameter [m] added to the sheaves' wrap radius: cable robots run cables
+of 1–12 mm; a 5 cm one is a hawser on another machine."""
+
+
+MAX_BEARING_FRICTION = 0.05
+"""The largest bearing friction coefficient μ: a rolling bearing has 0.001–0.002, a plain one
+0.01–0.02 (Koyo catalogue, "Friction coefficient of bearings", Table 4-1)."""
+
+
+@dataclass(frozen=True)
+class CableRealism:
+    """The cables as ropes (all off: Hooke's law with the robot's E·S, the paper's cable).
+
+    The truth's cable i runs from its drum over the sheave to B_i as two segments: the drum
+    segment (``drum_segment`` long, fixed) and the platform segment (A_i over the sheave to
+    B_i), which exchange cable over the sheave (:class:`PulleyRealism`). Each segment is a
+    standard linear solid of instantaneous stiffness k₀ = ρ_i·E·S/l and relaxed stiffness
+    ``relaxed_ratio``·k₀ (:mod:`cdpr_twin.sim.rope`); the estimators keep the robot's E·S.
+    Magnitudes and sources: ``models/acrobot/README.md``.
+
+    Attributes:
+        rope_stiffness_ratio: the braided rope's instantaneous axial stiffness over the
+            robot's E·S (which the paper takes from the fibre's modulus); 1: the fibre's.
+        rope_stiffness_std: per-robot relative std of each cable's ratio (truth seed).
+        drum_segment: length of cable between the drum and the pulley [m], stretching with the
+            cable's tension (0: the paper's cable, which starts at the pulley).
+        relaxed_ratio: the rope's relaxed (long-term) stiffness over its instantaneous one
+            (1: elastic, no creep).
+        creep_time: the retardation time of the rope's creep under a constant tension [s].
+        strain_damping: the cable's damping (``damping_time_s`` × its stiffness) acts on its
+            strain rate; off, on L̇, the paper's cable's, which pulls k·η·l̇0 more on a cable
+            paid out at l̇0 (a steady pay-out strains nothing). Viscoelastic ropes and sheave
+            friction need it.
+    """
+
+    rope_stiffness_ratio: float = option(1.0, minimum=0.0, exclusive=True)
+    rope_stiffness_std: float = option(0.0, minimum=0.0)
+    drum_segment: float = option(0.0, minimum=0.0, unit="m")
+    relaxed_ratio: float = option(1.0, minimum=0.0, exclusive=True)
+    creep_time: float = option(math.inf, minimum=0.0, exclusive=True, infinite=True, unit="s")
+    strain_damping: bool = option(False)
+
+    def __post_init__(self) -> None:
+        check_relative_std("rope_stiffness_std", self.rope_stiffness_std, "rope's stiffness")
+        check_at_most(
+            "rope_stiffness_ratio",
+            self.rope_stiffness_ratio,
+            1.0,
+            " (a braid is no stiffer than its fibres laid straight)",
+        )
+        check_at_most(
+            "relaxed_ratio",
+            self.relaxed_ratio,
+            1.0,
+            " (a rope relaxes: its long-term stiffness is at most its instantaneous one)",
+        )
+        check_at_most(
+            "drum_segment",
+            self.drum_segment,
+            MAX_POSITION_ERROR_STD * 100,
+            " m (cable robots route their cables over tens of metres at most)",
+        )
+        if self.viscoelastic and not self.strain_damping:
+            raise OptionError(
+                "strain_damping",
+                "viscoelastic ropes (relaxed_ratio < 1) need strain_damping = true",
+            )
+
+    @property
+    def viscoelastic(self) -> bool:
+        """Whether the ropes creep (a relaxed stiffness below the instantaneous one)."""
+        return self.relaxed_ratio < 1.0 and math.isfinite(self.creep_time)
+
+
+@dataclass(frozen=True)
+class PulleyRealism:
+    """The pulleys as built (all off: the paper's pulley, a frictionless sheave).
+
+    Attributes:
+        sheave_efficiency: the tension ratio across a sheave while the cable slides over it,
+            low side over high side (1: frictionless); below it the cable sticks.
+        wrap_diameter: the cable's diameter [m]: its centreline wraps the sheave at
+            r_p + d/2 (0: the paper's r_p).
+        swivel_tilt_std: per-robot std of each swivel axis' tilt about the base x and y axes
+            [rad] (file: ``swivel_tilt_std_deg``).
+        sheave_offset_std: per-robot std of each sheave centre's offset from its place, along
+            the sheave's radius through the swivel axis and along the axis [m].
+        swivel_friction: the swivel bearing's friction coefficient μ (Coulomb: the friction
+            moment μ·(d/2)·P under the cable's load P on the swivel); the swivel turns toward
+            B_i only where the cable's moment about its axis exceeds it (0: it always points
+            at B_i, the paper's eq. 20).
+        swivel_bore: the swivel bearing's bore d [m].
+    """
+
+    sheave_efficiency: float = option(1.0, minimum=0.0, exclusive=True)
+    wrap_diameter: float = option(0.0, minimum=0.0, unit="m")
+    swivel_tilt_std: float = option(0.0, minimum=0.0, unit="deg")
+    sheave_offset_std: float = option(0.0, minimum=0.0, unit="m")
+    swivel_friction: float = option(0.0, minimum=0.0)
+    swivel_bore: float = option(0.008, minimum=0.0, exclusive=True, unit="m")
+
+    def __post_init__(self) -> None:
+        check_at_most(
+            "sheave_efficiency", self.sheave_efficiency, 1.0, " (a sheave adds no tension)"
+        )
+        check_at_most(
+            "wrap_diameter",
+            self.wrap_diameter,
+            MAX_WRAP_DIAMETER,
+            " m (cable robots run cables of 1–12 mm)",
+        )
+        check_at_most(
+            "swivel_tilt_std_deg",
+            math.degrees(self.swivel_tilt_std),
+            math.degrees(MAX_ROTATION_ERROR_STD),
+            "° (swivels are mounted within a degree of plumb)",
+        )
+        check_at_most(
+            "sheave_offset_std",
+            self.sheave_offset_std,
+            MAX_PULLEY_RADIUS_STD,
+            " m (sheaves are placed within tenths of a millimetre; set the exit points)",
+        )
+        check_at_most(
+            "swivel_friction",
+            self.swivel_friction,
+            MAX_BEARING_FRICTION,
+            " (rolling bearings 0.001–0.002, plain bearings 0.01–0.02)",
+        )
+        check_at_most(
+            "swivel_bore", self.swivel_bore, 0.05, " m (a small pulley's swivel turns on mm bores)"
+        )
+
+    @property
+    def geometric(self) -> bool:
+        """Whether the pulleys' geometry differs from the paper's model."""
+        return self.wrap_diameter > 0 or self.swivel_tilt_std > 0 or self.sheave_offset_std > 0
+
+
 @dataclass(frozen=True)
 class Realism:
     """The whole profile.
@@ -481,6 +624,8 @@ class Realism:
         homing: start-pose repeatability.
         optics: how the camera's calibration errors are correlated.
         drive: drums, gearboxes, motors and how each drum is zeroed.
+        cable: the cables as ropes.
+        pulley: the pulleys as mechanisms and as built.
     """
 
     profile: str = "ideal"
@@ -490,6 +635,8 @@ class Realism:
     homing: HomingRealism = field(default_factory=HomingRealism)
     optics: OpticsRealism = field(default_factory=OpticsRealism)
     drive: DriveRealism = field(default_factory=DriveRealism)
+    cable: CableRealism = field(default_factory=CableRealism)
+    pulley: PulleyRealism = field(default_factory=PulleyRealism)
 
     @property
     def is_ideal(self) -> bool:
@@ -504,6 +651,8 @@ PARTS: dict[str, type] = {
     "homing": HomingRealism,
     "optics": OpticsRealism,
     "drive": DriveRealism,
+    "cable": CableRealism,
+    "pulley": PulleyRealism,
 }
 """The profile's parts, by their table name in ``[realism.<part>]``."""
 
@@ -573,8 +722,25 @@ ACROBOT_FULL: dict[str, dict[str, Any]] = {
     "homing": {"position_std": 0.0, "rotation_std": 0.0},
     "optics": ACROBOT_FULL_OPTICS,
     "drive": ACROBOT_FULL_DRIVE,
+    "cable": {
+        "rope_stiffness_ratio": 0.6,
+        "rope_stiffness_std": 0.05,
+        "drum_segment": 1.2,
+        "relaxed_ratio": 0.6,
+        "creep_time": 1800.0,
+        "strain_damping": True,
+    },
+    "pulley": {
+        "sheave_efficiency": 0.95,
+        "wrap_diameter": 0.002,
+        "swivel_tilt_std": math.radians(0.5),
+        "sheave_offset_std": 0.0002,
+        "swivel_friction": 0.0015,
+        "swivel_bore": 0.008,
+    },
 }
-"""The ``acrobot_full`` profile: ``acrobot`` and the drives' and optics' effects."""
+"""The ``acrobot_full`` profile: ``acrobot`` with the drives, the optics, the cables and the
+pulleys as they are (each magnitude and its source in ``models/acrobot/README.md``)."""
 
 
 def profile(name: str, **parts: dict[str, Any]) -> Realism:
@@ -601,7 +767,15 @@ def profile(name: str, **parts: dict[str, Any]) -> Realism:
     return out
 
 
-_STREAMS = {"camera": 1, "winch": 2, "tension": 3, "homing": 4, "drive": 5}
+_STREAMS = {
+    "camera": 1,
+    "winch": 2,
+    "tension": 3,
+    "homing": 4,
+    "cable": 5,
+    "pulley": 6,
+    "drive": 7,
+}
 
 
 def robot_rng(robot_seed: int, part: str) -> np.random.Generator:

@@ -96,7 +96,7 @@ def home_by_drums(s: Scenario, physics, sensors, nominal, errors: np.ndarray) ->
         errors: (m,) each drum's zero error δ_i [m].
     """
     T = s.start_pose
-    physics.settle_at_lengths(start_rest_lengths(physics.geometry, T) + errors, T)
+    physics.settle_at_lengths(physics.rest_lengths_at(T) + errors, T)
     sensors.encoders.home_lengths(start_rest_lengths(nominal.geometry, T))
 
 

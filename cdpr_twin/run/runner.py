@@ -182,7 +182,9 @@ def prepare(scenario: Scenario) -> RunSetup:
             occluder,
             s.model.nominal,
             (s.model.payload, s.model.payload_com),
-            s.realism.drive,
+            drive=s.realism.drive,
+            cable=s.realism.cable,
+            pulley=s.realism.pulley,
         )
         physics, nominal = built.physics, built.nominal
         sensors = Sensors(

@@ -294,21 +294,41 @@ class Physics:
             chunk = min(n, self.align_every)
             chunk = fire_due(self._hooks, self.data.time, dt, chunk) if self._hooks else chunk
             self.refresh()
-            if self._drums is not None:  # the motors turn, the drums follow, the cable winds
-                self.data.ctrl[self._actuators] = self._wind(chunk * dt)
-            elif not self._servos.ideal:  # the chunk's exact mean rate: l0 exact at its end
-                rate = self._servos.run(chunk * dt)  # the drum's, in command units
-                self.data.ctrl[self._actuators] = self._stalled(rate * self._drum_ratio)
+            self._drive_winches(chunk * dt)
             mujoco.mj_step(self.model, self.data, nstep=chunk)
             n -= chunk
         self._check_state()
 
+    def _drive_winches(self, h: float) -> None:
+        """Set the winches' rates for the next ``h`` seconds (servo loops, drums)."""
+        if self._drums is not None:  # the motors turn, the drums follow, the cable winds
+            self.data.ctrl[self._actuators] = self._wind(h)
+        elif not self._servos.ideal:  # the chunk's exact mean rate: l0 exact at its end
+            rate = self._servos.run(h)  # the drum's, in command units
+            self.data.ctrl[self._actuators] = self._stalled(rate * self._drum_ratio)
+
+    def _drum_loads(self) -> tuple[np.ndarray, np.ndarray]:
+        """The cables' forces at the drums (m,) [N] and their stiffnesses from there (m,) [N/m]."""
+        return self.tensions, self._es / self.data.act[self._actuators]
+
     def _wind(self, h: float) -> np.ndarray:
         """The rates that pay out, over ``h`` seconds, what the drums wind (m,) [m/s]."""
         motor_rate = self._servos.command if self._servos.ideal else self._servos.run(h)
-        l0 = self.data.act[self._actuators]
-        stiffness = self._es / l0
-        return self._drums.advance(self._stalled(motor_rate) * h, self.tensions, stiffness) / h
+        tensions, stiffness = self._drum_loads()
+        return self._drums.advance(self._stalled(motor_rate) * h, tensions, stiffness) / h
+
+    def rest_lengths_at(self, T_base_platform: np.ndarray) -> np.ndarray:
+        """The rest lengths that hold the true robot at a pose (m,) [m].
+
+        Under the true geometry's minimum-norm tension distribution within the model's
+        ``cable_tension_range`` (what :meth:`reset` winds to by default).
+
+        Raises:
+            InfeasibleTensionError: if no tension distribution holds the platform there.
+        """
+        g = self.geometry
+        tau = tension_distribution(g, T_base_platform, *g.tension_bounds(None, None))
+        return self._rest_lengths(T_base_platform, tau)
 
     @property
     def motor_positions(self) -> np.ndarray | None:
@@ -386,6 +406,10 @@ class Physics:
         self.refresh()
         mujoco.mj_forward(m, d)
 
+    def _rest_lengths(self, T_base_platform: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """The winches' rest lengths l0 that hold the tensions τ (m,) [N] at a pose. (m,) [m]."""
+        return rest_lengths(cable_lengths(self.geometry, T_base_platform, "pulley"), tau, self._es)
+
     def reset(
         self,
         T_base_platform: np.ndarray,
@@ -412,8 +436,7 @@ class Physics:
         geom = self.geometry
         T = geom.check_pose_inside(T_base_platform, "reset pose")
         tau = tension_distribution(geom, T, *geom.tension_bounds(tau_min, tau_max))  # pulley
-        l0 = rest_lengths(cable_lengths(geom, T, "pulley"), tau, self._es)
-        self._start(T, l0, settle_time)
+        self._start(T, settle_time, tau=tau)
 
     def settle_at_lengths(
         self, rest_lengths: np.ndarray, T_guess: np.ndarray, settle_time: float = 2.0
@@ -437,15 +460,37 @@ class Physics:
         l0 = np.array(rest_lengths, dtype=float)
         if l0.shape != (self.n_cables,) or not np.all(l0 > 0):
             raise ValueError(f"rest lengths: {self.n_cables} positive lengths [m], got {l0}")
-        self._start(T, l0, settle_time)
+        self._start(T, settle_time, l0=l0)
 
-    def _start(self, T: np.ndarray, l0: np.ndarray, settle: float) -> None:
-        """Rest lengths l0 at pose T, winches at rest, then settle ``settle`` seconds."""
+    def _start(
+        self,
+        T: np.ndarray,
+        settle: float,
+        *,
+        tau: np.ndarray | None = None,
+        l0: np.ndarray | None = None,
+    ) -> None:
+        """Rest lengths at pose T, winches at rest, then settle ``settle`` seconds.
+
+        The cables are first wound to hold the tensions τ at T (subclasses set their internal
+        state there, as a robot long at rest at T); ``l0``, if given, then replaces the rest
+        lengths, and the platform settles where they hold it.
+
+        Args:
+            T: (4, 4) the pose the platform is released at.
+            settle: how long to settle [s].
+            tau: (m,) the tensions [N] at T (default: :meth:`rest_lengths_at`'s).
+            l0: (m,) the rest lengths [m] to wind instead of those holding τ.
+        """
         mujoco.mj_resetData(self.model, self.data)
         self._servos.reset()  # winches at rest
         self.cable_enabled[:] = True
         self._running = None
-        self.data.act[self._actuators] = l0
+        if tau is None:
+            held = self.rest_lengths_at(T)
+        else:
+            held = self._rest_lengths(T, tau)
+        self.data.act[self._actuators] = held if l0 is None else l0
         if self._drums is not None:
             self._drums.reset()
         self.place(T)

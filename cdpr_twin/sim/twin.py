@@ -21,7 +21,7 @@ import numpy as np
 from cdpr_twin import resources
 from cdpr_twin.math.se3 import matrix_from_quat_wxyz, transform
 from cdpr_twin.robot.deviations import DeviationSpec, TruthDeviations
-from cdpr_twin.robot.realism import DriveRealism, WinchRealism
+from cdpr_twin.robot.realism import CableRealism, DriveRealism, PulleyRealism, WinchRealism
 from cdpr_twin.robot.schema import MAX_TIMESTEP, MIN_TIMESTEP
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim.model import (
@@ -186,6 +186,8 @@ def build_robot(
     nominal_path: str | Path | None = None,
     payload: tuple[float, np.ndarray] = (0.0, np.zeros(3)),
     drive: DriveRealism | None = None,
+    cable: CableRealism | None = None,
+    pulley: PulleyRealism | None = None,
 ) -> BuiltRobot:
     """The simulated robot (with its calibration errors) and what its software believes.
 
@@ -203,6 +205,9 @@ def build_robot(
         payload: (mass [kg], (3,) centre of mass in F_p [m]) fixed to the platform, on the
             robot and in what its software believes (the operator knows the load).
         drive: the drums', gearboxes' and motors' imperfections (default: none).
+        cable: the cables as ropes (default: the paper's elastic cables); per-robot draws use
+            the deviations' seed.
+        pulley: the pulleys as mechanisms and as built (default: the paper's pulleys).
 
     Raises:
         ModelError: when the model file is missing, malformed or not a cable robot.
@@ -219,7 +224,20 @@ def build_robot(
     _set_timestep(model, timestep)
     args = (model, align_every, str(path))
     kwargs = {"winch": winch, "robot_seed": robot_seed, "drive": drive}
-    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "cable_sag") >= 0:
+    cable = CableRealism() if cable is None else cable
+    pulley = PulleyRealism() if pulley is None else pulley
+    sag = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "cable_sag") >= 0
+    ropes = cable != CableRealism() or pulley != PulleyRealism()
+    if ropes and sag:
+        raise ModelError(
+            f"{path}: realism.cable/realism.pulley: ropes are not modelled on sagging cables; "
+            "turn the robot's sag off or use the acrobot profile"
+        )
+    if ropes:
+        from cdpr_twin.sim.rope import RopePhysics  # the cables and pulleys as they are
+
+        physics = RopePhysics(*args, **kwargs, cable=cable, pulley=pulley)
+    elif sag:
         from cdpr_twin.sim.sag import SaggingPhysics  # heavy cables (robot.toml: sag = true)
 
         rho = float(numeric(model, "cable_linear_density")[0])
