@@ -337,6 +337,8 @@ class OpticsRealism:
             (H − 1 − r)·t_line before the last row's (0: a global shutter). The frame is then
             formed from ``blur_subframes`` + 1 renders spread over the whole readout and
             exposure, each row weighing them by its own window.
+        jpeg_quality: the camera delivers each frame JPEG-compressed at this IJG quality
+            (1–100; 0: uncompressed), as an MJPEG stream does.
     """
 
     focal_correlation: float = option(0.0)
@@ -350,6 +352,7 @@ class OpticsRealism:
     flicker_depth: float = option(0.0, minimum=0.0)
     flicker_hz: float = option(100.0, minimum=1.0, unit="Hz")
     line_time: float = option(0.0, minimum=0.0, unit="s")
+    jpeg_quality: int = option(0, minimum=0)
 
     def __post_init__(self) -> None:
         _check_correlation("focal_correlation", self.focal_correlation)
@@ -367,6 +370,7 @@ class OpticsRealism:
                 f"got {self.focus_distance} m",
             )
         check_at_most("vignetting_power", self.vignetting_power, 10.0, " (cos⁴ is a thin lens's)")
+        check_at_most("jpeg_quality", self.jpeg_quality, 100, " (the IJG scale runs 1–100)")
         if self.flicker_depth > 1.0:
             raise OptionError(
                 "flicker_depth", f"must be ≤ 1 (light is ≥ 0), got {self.flicker_depth}"
@@ -380,8 +384,14 @@ class OpticsRealism:
 
     @property
     def forms(self) -> bool:
-        """Whether the lens or the light change the frame."""
-        return bool(self.defocus or self.vignetting_power or self.flicker_depth or self.line_time)
+        """Whether the lens, the light or the compression change the frame."""
+        return bool(
+            self.defocus
+            or self.vignetting_power
+            or self.flicker_depth
+            or self.line_time
+            or self.jpeg_quality
+        )
 
     def calibration_correlation(self) -> np.ndarray:
         """The correlation matrix of the errors of (fx, fy, cx, cy, k1, k2, p1, p2). Returns (8, 8).

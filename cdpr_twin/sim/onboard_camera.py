@@ -409,6 +409,8 @@ class OnboardCamera:
             gray = imaging.expose(linear, r.full_well_e, r.read_noise_e, r.gamma, rng)
         else:
             gray = imaging.encode(linear, r.gamma)
+        if self.optics.jpeg_quality:  # the frame as the camera's encoder delivers it
+            gray = imaging.jpeg(gray, self.optics.jpeg_quality)
         return cv2.cvtColor(gray, cv2.COLOR_GRAY2RGB)
 
     def _lens_and_light(self, linear: np.ndarray, depth: float, time: float) -> np.ndarray:
