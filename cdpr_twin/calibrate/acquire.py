@@ -349,6 +349,7 @@ def _build(s: Scenario):
             s.model.align_every,
             s.realism.winch,
             nominal_path=s.model.nominal,
+            drive=s.realism.drive,
             cable=s.realism.cable,
             pulley=s.realism.pulley,
         )

@@ -78,7 +78,8 @@ class CdprEnv(gym.Env):
         image: add the camera frame to the observation.
         random_robot: draw the robot's calibration errors at each seeded reset.
         truth_scale: factor on the scenario's calibration-error magnitudes (0: nominal robot).
-        realism: a realism profile (``"ideal"``, ``"acrobot"``) instead of the scenario's.
+        realism: a realism profile (``"ideal"``, ``"acrobot"``, ``"acrobot_full"``) instead of
+            the scenario's.
         max_speed: |v| per axis at action ±1 [m/s] (twist).
         max_angular_speed: |ω| per axis at action ±1 [rad/s] (twist).
         max_cable_rate: |l̇| at action ±1 [m/s] (cable rates).

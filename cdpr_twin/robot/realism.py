@@ -7,12 +7,19 @@ repeatability — is not here: ``nan`` fields (and ``repeatability_noise``) take
 robot description (``robot.toml`` → the model's ``<numeric>``; :func:`for_robot`).
 Profiles: ``profile = "ideal"`` is the twin before realism, bit for bit; ``acrobot_full`` is
 ``acrobot`` with the cables and pulleys as they are (:class:`CableRealism`,
-:class:`PulleyRealism`). Magnitudes come in two kinds, as physics dictates:
+:class:`PulleyRealism`) and the drives and optics as they are (:class:`DriveRealism`,
+:class:`OpticsRealism`). Magnitudes come in two kinds, as physics dictates:
 
 - per robot (drawn from the truth seed, fixed across repetitions, like one physical robot):
-  intrinsics calibration error, drum radius error, tension-sensor bias and gain;
+  intrinsics calibration error (its parts drawn together with the correlations of
+  ``[realism.optics]``), drum radius error, tension-sensor bias and gain, each rope's stiffness,
+  the pulleys' swivel tilts and sheave offsets;
 - per run (drawn from the run seed): pixel noise, tension repeatability noise, the homing offset
-  of the start pose.
+  of the start pose, or each drum's zero error (``[realism.drive]``), the light's flicker
+  phase.
+
+The drums, gearboxes and motors (``[realism.drive]``) and the lens and light
+(``[realism.optics]``) are fixed by the profile's numbers: ``acrobot_full`` turns them on.
 
 A scenario overrides any field: ``[realism.camera] exposure_s = 0.004``. Every magnitude has an
 upper bound here (``MAX_*``, each with the reason it is the limit), which the scenario's other
@@ -291,6 +298,190 @@ class HomingRealism:
         )
 
 
+def _check_correlation(name: str, rho: float) -> None:
+    """Refuse a correlation outside (−1, 1) (±1 would make the covariance singular)."""
+    if not -1.0 < rho < 1.0:
+        raise OptionError(name, f"must lie strictly between -1 and 1 (a correlation), got {rho}")
+
+
+@dataclass(frozen=True)
+class OpticsRealism:
+    """How the camera's calibration errors go together (all 0: independent draws, as before).
+
+    A calibration (Zhang's method, OpenCV, Kalibr) fits fx, fy, cx, cy and the distortion
+    coefficients together, and what it cannot tell apart it leaves correlated: the focal
+    lengths move together (the aspect ratio fy/fx is pinned far tighter than either), k1 and
+    k2 trade off against each other over the field, and a tangential coefficient trades off
+    against the principal point on the same axis. The errors are drawn from one multivariate
+    normal with the stds of :class:`CameraRealism` and these correlations
+    (:func:`cdpr_twin.sim.onboard_camera.calibrate`).
+
+    The lens and the light (:mod:`cdpr_twin.sim.optics`) act on each formed frame.
+
+    Attributes:
+        focal_correlation: ρ between the relative errors of fx and fy; the aspect ratio's
+            relative error then has std ``focal_error_std``·√(2(1 − ρ)).
+        radial_correlation: ρ between the errors of k1 and k2.
+        center_tangential_correlation: (ρ(cx, p2), ρ(cy, p1)): p2 moves points along x as cx
+            does, p1 along y as cy does.
+        defocus: blur each frame by the thin lens's circle of confusion at the tag's depth.
+        focus_distance: where the lens is focused [m].
+        focal_length: the lens's focal length [m] (its field is the camera model's).
+        f_number: the lens's f-number N (aperture diameter f/N).
+        vignetting_power: the exponent of the illumination's fall-off cos^n θ off the axis
+            (4: a thin lens's natural vignetting; 0: none).
+        flicker_depth: the lighting's relative modulation m, 1 + m·sin(2π f t + φ), φ drawn
+            per run (0: steady light).
+        flicker_hz: its frequency f [Hz] (lamps on 50 Hz mains: 100 Hz).
+        line_time: a rolling shutter's row-to-row delay [s]: row r's exposure ends
+            (H − 1 − r)·t_line before the last row's (0: a global shutter). The frame is then
+            formed from ``blur_subframes`` + 1 renders spread over the whole readout and
+            exposure, each row weighing them by its own window.
+        jpeg_quality: the camera delivers each frame JPEG-compressed at this IJG quality
+            (1–100; 0: uncompressed), as an MJPEG stream does.
+    """
+
+    focal_correlation: float = option(0.0)
+    radial_correlation: float = option(0.0)
+    center_tangential_correlation: tuple[float, ...] = option((0.0, 0.0))
+    defocus: bool = option(False)
+    focus_distance: float = option(0.15, minimum=0.0, exclusive=True, unit="m")
+    focal_length: float = option(3.04e-3, minimum=0.0, exclusive=True, unit="m")
+    f_number: float = option(2.0, minimum=0.5)
+    vignetting_power: float = option(0.0, minimum=0.0)
+    flicker_depth: float = option(0.0, minimum=0.0)
+    flicker_hz: float = option(100.0, minimum=1.0, unit="Hz")
+    line_time: float = option(0.0, minimum=0.0, unit="s")
+    jpeg_quality: int = option(0, minimum=0)
+
+    def __post_init__(self) -> None:
+        _check_correlation("focal_correlation", self.focal_correlation)
+        _check_correlation("radial_correlation", self.radial_correlation)
+        if len(self.center_tangential_correlation) != 2:
+            raise OptionError(
+                "center_tangential_correlation", "must list 2 values, ρ(cx, p2) and ρ(cy, p1)"
+            )
+        for rho in self.center_tangential_correlation:
+            _check_correlation("center_tangential_correlation", rho)
+        if not self.focus_distance > self.focal_length:
+            raise OptionError(
+                "focus_distance",
+                f"must exceed the focal length {self.focal_length} m (a real image), "
+                f"got {self.focus_distance} m",
+            )
+        check_at_most("vignetting_power", self.vignetting_power, 10.0, " (cos⁴ is a thin lens's)")
+        check_at_most("jpeg_quality", self.jpeg_quality, 100, " (the IJG scale runs 1–100)")
+        if self.flicker_depth > 1.0:
+            raise OptionError(
+                "flicker_depth", f"must be ≤ 1 (light is ≥ 0), got {self.flicker_depth}"
+            )
+
+    @property
+    def correlated(self) -> bool:
+        """Whether any calibration errors are drawn together."""
+        c = self.center_tangential_correlation
+        return bool(self.focal_correlation or self.radial_correlation or any(c))
+
+    @property
+    def forms(self) -> bool:
+        """Whether the lens, the light or the compression change the frame."""
+        return bool(
+            self.defocus
+            or self.vignetting_power
+            or self.flicker_depth
+            or self.line_time
+            or self.jpeg_quality
+        )
+
+    def calibration_correlation(self) -> np.ndarray:
+        """The correlation matrix of the errors of (fx, fy, cx, cy, k1, k2, p1, p2). Returns (8, 8).
+
+        Each correlation pairs two errors no other one touches: the matrix is block-diagonal in
+        2 × 2 blocks, positive definite for every |ρ| < 1.
+        """
+        c = np.eye(8)
+        c[0, 1] = c[1, 0] = self.focal_correlation
+        c[4, 5] = c[5, 4] = self.radial_correlation
+        c[2, 7] = c[7, 2] = self.center_tangential_correlation[0]
+        c[3, 6] = c[6, 3] = self.center_tangential_correlation[1]
+        return c
+
+
+MAX_DRIVE_LENGTH = 0.05
+"""The largest drive length a scenario may set [m] (a groove pitch, a backlash, a homing
+error's std, a departure offset): a winch's are millimetres; 5 cm is another machine."""
+
+
+MAX_ZERO_ERROR_STD = 0.005
+"""The largest std of a drum's zero error [m]: 5 mm on ACROBOT's cables is 1.5 kN, a robot
+homed that badly hangs on a few cables or tears them."""
+
+
+@dataclass(frozen=True)
+class DriveRealism:
+    """The winches' drums, gearboxes and motors, and how each drum is zeroed (all off: ideal).
+
+    :mod:`cdpr_twin.sim.drive` generates each effect as the physics steps.
+
+    Attributes:
+        helix_pitch: the drum's helical groove pitch [m] (0: a plain drum): the cable lies on a
+            helix (√(r² + (p/2π)²) per radian) and its departure point walks p per turn along
+            the drum.
+        guide_distance: from the drum's axis to the first fixed guide the cable runs to [m],
+            square to the drum axis.
+        departure_offset: where along the drum the cable departs at the zero of its drum angle,
+            from the foot of the guide's perpendicular [m].
+        winding_compliance: relative shrink of the effective winding radius per newton of
+            cable force [1/N] (the rope flattens on the drum): r(τ) = r'·(1 − κ·τ).
+        backlash: the gearbox's play, as cable length at the drum [m].
+        drum_holding_force: the cable force [N] that turns the drum against its bearing
+            friction: below it the drum stays where it is inside the play; above it the cable
+            pulls the drum against the flank that holds it.
+        friction_rate: the motor's Coulomb friction over the velocity loop's gain, as a cable
+            rate [m/s]: a winch at rest does not start below it, a moving one lags its command
+            by it (needs a finite ``[realism.winch] bandwidth_hz``).
+        zero_error_std: per-run std of each drum's zero [m of cable]: each winch is homed
+            against its own reference with its own error, and the start pose is where the
+            eight cables then settle.
+    """
+
+    helix_pitch: float = option(0.0, minimum=0.0, unit="m")
+    guide_distance: float = option(0.2, minimum=0.0, exclusive=True, unit="m")
+    departure_offset: float = option(0.0, unit="m")
+    winding_compliance: float = option(0.0, minimum=0.0, unit="1/N")
+    backlash: float = option(0.0, minimum=0.0, unit="m")
+    drum_holding_force: float = option(0.0, minimum=0.0, unit="N")
+    friction_rate: float = option(0.0, minimum=0.0, unit="m/s")
+    zero_error_std: float = option(0.0, minimum=0.0, unit="m")
+
+    def __post_init__(self) -> None:
+        why = " (a winch's groove, play and homing are millimetres)"
+        for name in ("helix_pitch", "backlash"):
+            check_at_most(name, getattr(self, name), MAX_DRIVE_LENGTH, " m" + why)
+        if abs(self.departure_offset) > MAX_DRIVE_LENGTH:
+            raise OptionError(
+                "departure_offset",
+                f"must lie within ±{MAX_DRIVE_LENGTH:g} m{why}, got {self.departure_offset:g}",
+            )
+        check_at_most(
+            "zero_error_std",
+            self.zero_error_std,
+            MAX_ZERO_ERROR_STD,
+            " m (on a cable of E·S/l ≈ 3e5 N/m each millimetre is 300 N)",
+        )
+        check_at_most(
+            "winding_compliance",
+            self.winding_compliance,
+            1e-3,
+            " /N (at 1e-3 a 1 kN cable would wind on no radius)",
+        )
+
+    @property
+    def drums(self) -> bool:
+        """Whether the drums or gearboxes do anything (the physics then winds them)."""
+        return bool(self.helix_pitch or self.winding_compliance or self.backlash)
+
+
 MAX_WRAP_DIAMETER = 0.05
 """The largest cable diameter [m] added to the sheaves' wrap radius: cable robots run cables
 of 1–12 mm; a 5 cm one is a hawser on another machine."""
@@ -441,6 +632,8 @@ class Realism:
         winch: winch and encoder imperfections.
         tension: tension-sensor imperfections.
         homing: start-pose repeatability.
+        optics: how the camera's calibration errors are correlated.
+        drive: drums, gearboxes, motors and how each drum is zeroed.
         cable: the cables as ropes.
         pulley: the pulleys as mechanisms and as built.
     """
@@ -450,6 +643,8 @@ class Realism:
     winch: WinchRealism = field(default_factory=WinchRealism)
     tension: TensionRealism = field(default_factory=TensionRealism)
     homing: HomingRealism = field(default_factory=HomingRealism)
+    optics: OpticsRealism = field(default_factory=OpticsRealism)
+    drive: DriveRealism = field(default_factory=DriveRealism)
     cable: CableRealism = field(default_factory=CableRealism)
     pulley: PulleyRealism = field(default_factory=PulleyRealism)
 
@@ -464,6 +659,8 @@ PARTS: dict[str, type] = {
     "winch": WinchRealism,
     "tension": TensionRealism,
     "homing": HomingRealism,
+    "optics": OpticsRealism,
+    "drive": DriveRealism,
     "cable": CableRealism,
     "pulley": PulleyRealism,
 }
@@ -502,9 +699,39 @@ ACROBOT: dict[str, dict[str, Any]] = {
 }
 """The ``acrobot`` profile: each magnitude and its source in ``models/acrobot/README.md``."""
 
+ACROBOT_FULL_OPTICS: dict[str, Any] = {
+    "focal_correlation": 0.98,
+    "radial_correlation": -0.90,
+    "center_tangential_correlation": (0.71, 0.45),
+    "defocus": True,
+    "focus_distance": 0.15,
+    "focal_length": 3.04e-3,
+    "f_number": 2.0,
+    "vignetting_power": 4.0,
+    "flicker_depth": 0.05,
+    "flicker_hz": 100.0,
+    "line_time": 3448 / 182.4e6,
+}
+"""The ``acrobot_full`` profile's calibration correlations (``models/acrobot/README.md``)."""
+
+ACROBOT_FULL_DRIVE: dict[str, Any] = {
+    "zero_error_std": 1e-5,
+    "helix_pitch": 0.0022,
+    "guide_distance": 0.2,
+    "departure_offset": 0.0,
+    "winding_compliance": 4e-5,
+    "backlash": 3.5e-4,
+    "drum_holding_force": 0.5,
+    "friction_rate": 5e-4,
+}
+"""The ``acrobot_full`` profile's drives (``models/acrobot/README.md``)."""
 
 ACROBOT_FULL: dict[str, dict[str, Any]] = {
     **ACROBOT,
+    # each drum is zeroed on its own (drive.zero_error_std): no rigid offset of the pose
+    "homing": {"position_std": 0.0, "rotation_std": 0.0},
+    "optics": ACROBOT_FULL_OPTICS,
+    "drive": ACROBOT_FULL_DRIVE,
     "cable": {
         "rope_stiffness_ratio": 0.6,
         "rope_stiffness_std": 0.05,
@@ -522,8 +749,8 @@ ACROBOT_FULL: dict[str, dict[str, Any]] = {
         "swivel_bore": 0.008,
     },
 }
-"""The ``acrobot_full`` profile: ``acrobot`` and the cables and pulleys as they are (each
-magnitude and its source in ``models/acrobot/README.md``)."""
+"""The ``acrobot_full`` profile: ``acrobot`` with the drives, the optics, the cables and the
+pulleys as they are (each magnitude and its source in ``models/acrobot/README.md``)."""
 
 
 def profile(name: str, **parts: dict[str, Any]) -> Realism:
@@ -550,7 +777,15 @@ def profile(name: str, **parts: dict[str, Any]) -> Realism:
     return out
 
 
-_STREAMS = {"camera": 1, "winch": 2, "tension": 3, "homing": 4, "cable": 5, "pulley": 6}
+_STREAMS = {
+    "camera": 1,
+    "winch": 2,
+    "tension": 3,
+    "homing": 4,
+    "cable": 5,
+    "pulley": 6,
+    "drive": 7,
+}
 
 
 def robot_rng(robot_seed: int, part: str) -> np.random.Generator:

@@ -27,6 +27,7 @@ from collections.abc import Sequence
 from typing import Protocol
 
 from cdpr_twin.estimators.base import SensorWatches
+from cdpr_twin.run.homing_and_teaching import home_by_drums
 from cdpr_twin.run.interrupts import shielded
 from cdpr_twin.run.metrics import deviations
 from cdpr_twin.types import Command, Measurement, PoseEstimate, TickRecord
@@ -178,14 +179,20 @@ def start(setup) -> None:
 
     The true platform settles at ``setup.true_start`` (the start pose moved by the homing
     offset); the encoders are homed, and the controller and estimators reset, at the
-    scenario's nominal start pose.
+    scenario's nominal start pose. With each drum homed on its own
+    (``setup.drum_zero_errors``), the platform settles instead where the cables, wound to the
+    nominal start's lengths from their erring zeros, hold it
+    (:func:`~cdpr_twin.run.homing_and_teaching.home_by_drums`).
 
     Args:
         setup: the prepared run (:class:`~cdpr_twin.run.runner.RunSetup`).
     """
     s = setup.scenario
-    setup.physics.reset(s.start_pose if setup.true_start is None else setup.true_start)
-    setup.sensors.home(s.start_pose)
+    if setup.drum_zero_errors is not None:  # each drum homed on its own: settle where held
+        home_by_drums(s, setup.physics, setup.sensors, setup.nominal, setup.drum_zero_errors)
+    else:
+        setup.physics.reset(s.start_pose if setup.true_start is None else setup.true_start)
+        setup.sensors.home(s.start_pose)
     if setup.controller is not None:
         setup.controller.reset(s.start_pose)
     # reset together and fed the same measurements: one set of sensor watches serves them all

@@ -3,6 +3,9 @@
 - Homing (``[realism.homing]``): each repetition's true start pose differs from the nominal
   start pose by a small per-run offset drawn from the run seed, while the encoders are homed
   (and the estimators and controller reset) as if the robot stood at the nominal start pose.
+- Homing per drum (``[realism.drive] zero_error_std``): each winch is zeroed against its own
+  reference with its own error, so each cable is off the start's rest length by its own
+  error, and the true platform starts where the cables then settle.
 - Teaching (:meth:`cdpr_twin.controllers.base.Controller.teach`): before the run the true robot
   is placed at a pose and the controller records what the sensors measure there (e.g. PBVS's
   ``goal = "taught"``), as experimenters do with their tracker.
@@ -17,8 +20,9 @@ import dataclasses
 import numpy as np
 
 from cdpr_twin.controllers.base import Controller
+from cdpr_twin.math.kinematics import cable_lengths, rest_lengths
 from cdpr_twin.math.se3 import so3_exp
-from cdpr_twin.math.statics import InfeasibleTensionError
+from cdpr_twin.math.statics import InfeasibleTensionError, tension_distribution
 from cdpr_twin.options import OptionError, spec_of
 from cdpr_twin.robot.realism import draw_homing_offset, run_rng
 from cdpr_twin.scenario.loading import Scenario, ScenarioError
@@ -60,6 +64,51 @@ def homing(s: Scenario) -> tuple[np.ndarray | None, np.ndarray]:
         return None, s.start_pose  # the start pose itself, bit for bit
     offset = draw_homing_offset(h, run_rng(s.seed, "homing"))
     return offset, true_start_pose(s.start_pose, offset)
+
+
+def drum_zero_errors(s: Scenario, n_cables: int) -> np.ndarray | None:
+    """This run's error of each drum's zero [m of cable], or ``None`` (pose homing).
+
+    Drawn from ``run_rng(seed, "drive")``, N(0, ``[realism.drive] zero_error_std``) per winch.
+    """
+    std = s.realism.drive.zero_error_std
+    if std == 0:
+        return None
+    return run_rng(s.seed, "drive").normal(0.0, std, n_cables)
+
+
+def home_by_drums(s: Scenario, physics, sensors, nominal, errors: np.ndarray) -> None:
+    """Home each drum on its own reference, wind to the start, and let the platform settle.
+
+    The robot's zero lengths were measured on the robot at its start pose (the true robot's
+    rest lengths there, under its tension distribution), and each winch is zeroed against its
+    reference with its own error δ_i: each true cable then has the start's rest length plus
+    δ_i. The platform comes to rest where those lengths hold it (some cables perhaps slack: a
+    millimetre on a cable of E·S/l ≈ 3e5 N/m is 300 N), and the encoders read the rest lengths
+    the nominal model predicts at the start pose (its own tension distribution): the robot
+    believes it stands there.
+
+    Args:
+        s: the scenario (its start pose).
+        physics: the simulated robot (:class:`cdpr_twin.sim.Physics`).
+        sensors: its sensors (:class:`cdpr_twin.sim.Sensors`).
+        nominal: what its software believes (:class:`cdpr_twin.sim.NominalRobot`).
+        errors: (m,) each drum's zero error δ_i [m].
+    """
+    T = s.start_pose
+    physics.settle_at_lengths(physics.rest_lengths_at(T) + errors, T)
+    sensors.encoders.home_lengths(start_rest_lengths(nominal.geometry, T))
+
+
+def start_rest_lengths(g, T: np.ndarray) -> np.ndarray:
+    """A geometry's rest lengths at a pose under its minimum-norm tension distribution (m,) [m].
+
+    Args:
+        g: the geometry (:class:`cdpr_twin.math.geometry.CdprGeometry`).
+        T: (4, 4) the platform pose.
+    """
+    tau = tension_distribution(g, T, *g.tension_bounds(None, None))
+    return rest_lengths(cable_lengths(g, T, "pulley"), tau, g.es)
 
 
 def teach(s: Scenario, physics, sensors, controller: Controller) -> np.ndarray | None:

@@ -34,7 +34,7 @@ from cdpr_twin.options import OptionError
 from cdpr_twin.recording.rerun import SceneInfo
 from cdpr_twin.recording.sinks import Recorders
 from cdpr_twin.run.episode import Episode, start
-from cdpr_twin.run.homing_and_teaching import homing, teach
+from cdpr_twin.run.homing_and_teaching import drum_zero_errors, homing, teach
 from cdpr_twin.run.interrupts import held_here, interruption, shielded
 from cdpr_twin.run.metrics import RunMetrics
 from cdpr_twin.run.summary import Tally, summarize, tag_view
@@ -71,6 +71,8 @@ class RunSetup:
         true_start: (4, 4) where the true platform starts: the start pose moved by the homing
             offset (truth: metrics and tests only).
         homing_offset: (6,) this run's homing offset [δp (m), δθ (rad)], or ``None`` (none).
+        drum_zero_errors: (m,) this run's error of each drum's zero [m], or ``None``: the
+            robot is homed by its pose (the start then settles where the cables hold it).
         shown_view: (4, 4) the true tag pose in the camera frame at the last pose shown to
             the controller (truth: the summary's true tag error only), or ``None``.
     """
@@ -87,6 +89,7 @@ class RunSetup:
     monitor: Monitor | None = None
     true_start: np.ndarray | None = None
     homing_offset: np.ndarray | None = None
+    drum_zero_errors: np.ndarray | None = None
     shown_view: np.ndarray | None = None
 
     def __post_init__(self) -> None:
@@ -185,6 +188,7 @@ def prepare(scenario: Scenario) -> RunSetup:
             occluder,
             s.model.nominal,
             (s.model.payload, s.model.payload_com),
+            drive=s.realism.drive,
             cable=s.realism.cable,
             pulley=s.realism.pulley,
         )
@@ -253,6 +257,7 @@ def _assemble(s: Scenario, physics, sensors, nominal) -> RunSetup:
         monitor=monitor,
         true_start=true_start,
         homing_offset=offset,
+        drum_zero_errors=drum_zero_errors(s, physics.n_cables),
         shown_view=shown_view,
     )
 

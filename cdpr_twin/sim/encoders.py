@@ -50,6 +50,8 @@ class Encoders:
         )
         self._offset = np.zeros(physics.n_cables)
         self._l0_home = np.zeros(physics.n_cables)  # true paid-out lengths when homed [m]
+        # the motors' positions when homed [m]
+        self._motor_home: np.ndarray | None = None
         # (m,) jumps of the readings since homing [m], or None
         self._glitch: np.ndarray | None = None
 
@@ -63,8 +65,10 @@ class Encoders:
     def ideal(self) -> bool:
         """Exact encoders on drums whose radii are the ones they are set to."""
         p = self.physics
-        return self.realism.encoder_counts == 0 and np.array_equal(
-            p.drum_radius_set, p.drum_radius_true
+        return (
+            self.realism.encoder_counts == 0
+            and np.array_equal(p.drum_radius_set, p.drum_radius_true)
+            and p.motor_positions is None
         )
 
     @property
@@ -82,11 +86,24 @@ class Encoders:
         """
         self._offset = np.zeros(self.physics.n_cables)
         self._l0_home = self.physics.rest_lengths
+        motor = self.physics.motor_positions
+        self._motor_home = None if motor is None else motor
         self._glitch = None
         if self.home_enabled:
             g = self.nominal
             l0_nominal = rest_lengths(cable_lengths(g, T_base_platform, "pulley"), tensions, g.es)
             self._offset = l0_nominal - self.physics.rest_lengths
+
+    def home_lengths(self, readings: np.ndarray) -> None:
+        """Zero the encoders so that they read ``readings`` (m,) [m] now.
+
+        The drums were homed each on its own reference, then wound to these lengths.
+        """
+        self.home_enabled = True
+        self._l0_home = self.physics.rest_lengths
+        self._motor_home = self.physics.motor_positions
+        self._glitch = None
+        self._offset = np.asarray(readings, dtype=float) - self._l0_home
 
     def read(self) -> np.ndarray:
         """The lengths the encoders report (m,) [m]."""
@@ -103,8 +120,11 @@ class Encoders:
         as floor(θ·N/2π) counts and reported as the radius the encoders are set to (nominal,
         or a calibration's: :meth:`Physics.set_drum_radii`) × counted angle.
         """
-        w = self.realism
-        theta = (self.physics.rest_lengths - self._l0_home) / self.physics.drum_radius_true
+        w, motor = self.realism, self.physics.motor_positions
+        if motor is not None:  # an encoder on the motor counts the motor's angle
+            theta = (motor - self._motor_home) / self.physics.drum_radius_set
+        else:
+            theta = (self.physics.rest_lengths - self._l0_home) / self.physics.drum_radius_true
         if w.encoder_counts:
             step = 2.0 * math.pi / w.encoder_counts
             theta = np.floor(theta / step) * step

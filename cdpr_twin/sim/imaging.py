@@ -135,6 +135,25 @@ def expose(
     return encode(out, gamma, in_place=True)
 
 
+def jpeg(gray: np.ndarray, quality: int) -> np.ndarray:
+    """A frame as a JPEG encoder delivers it: compressed at an IJG quality, then decoded.
+
+    Baseline JPEG (OpenCV's libjpeg): 8 × 8 blocks, each one's DCT coefficients rounded to
+    multiples of the IJG luminance table scaled by the quality.
+
+    Args:
+        gray: (H, W) uint8 frame.
+        quality: IJG quality 1–100.
+
+    Returns:
+        (H, W) uint8, the decoded frame.
+    """
+    ok, data = cv2.imencode(".jpg", gray, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    if not ok:
+        raise ValueError(f"realism.optics.jpeg_quality: OpenCV could not encode at {quality}")
+    return cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
+
+
 def distort_normalized(xy: np.ndarray, coeffs: Sequence[float]) -> np.ndarray:
     """Brown–Conrady distortion of normalized image coordinates (OpenCV's model).
 

@@ -45,9 +45,11 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import cv2
 import numpy as np
 
-from cdpr_twin.robot.realism import CameraRealism
+from cdpr_twin.options import OptionError
+from cdpr_twin.robot.realism import CameraRealism, OpticsRealism
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim import imaging
+from cdpr_twin.sim import optics as lens
 from cdpr_twin.sim.model import SimulationError
 from cdpr_twin.sim.physics import Physics
 from cdpr_twin.types import CameraIntrinsics, TagDetection
@@ -142,7 +144,10 @@ class ExposureRecorder:
 
 
 def calibrate(
-    nominal: CameraIntrinsics, realism: CameraRealism, rng: np.random.Generator
+    nominal: CameraIntrinsics,
+    realism: CameraRealism,
+    rng: np.random.Generator,
+    optics: OpticsRealism | None = None,
 ) -> tuple[CameraIntrinsics, tuple[float, ...] | None]:
     """The robot's calibrated intrinsics and distortion: the true ones plus calibration errors.
 
@@ -150,12 +155,16 @@ def calibrate(
     ``N(0, center_error_std_px)``, each distortion coefficient shifted by
     ``N(0, distortion_error_std)`` (drawn in that order from the per-robot generator; a
     4-sequence of stds, one per coefficient, is accepted too: a calibration pins k1, k2 and
-    p1, p2 to very different precisions).
+    p1, p2 to very different precisions). With correlations (``optics``), the eight errors are
+    instead drawn together, as a calibration leaves them: eight standard normals z (one draw),
+    then L·z with L the Cholesky factor of the covariance diag(σ)·R·diag(σ)
+    (:meth:`OpticsRealism.calibration_correlation`), the focal errors relative as above.
 
     Args:
         nominal: the nominal intrinsics (the true ones in this model).
         realism: the camera's imperfections.
         rng: the per-robot generator.
+        optics: the correlations of the errors (``None``: independent).
 
     Returns:
         The calibrated intrinsics and (k1, k2, p1, p2), or ``None`` for a pinhole (no draw is
@@ -166,9 +175,19 @@ def calibrate(
     if not (r.focal_error_std or r.center_error_std_px or dist_std.any()):
         dist = tuple(r.distortion) if any(r.distortion) else None
         return nominal, dist
-    df = rng.normal(0.0, r.focal_error_std, 2)
-    dc = rng.normal(0.0, r.center_error_std_px, 2)
-    dd = rng.normal(0.0, dist_std)
+    if optics is not None and optics.correlated:
+        std = np.concatenate([[r.focal_error_std] * 2, [r.center_error_std_px] * 2, dist_std])
+        cov = std[:, None] * optics.calibration_correlation() * std[None, :]
+        # (a zero std makes its row zero: the factor of the nonzero block, zeros elsewhere)
+        on = std > 0
+        L = np.zeros((8, 8))
+        L[np.ix_(on, on)] = np.linalg.cholesky(cov[np.ix_(on, on)])
+        e = L @ rng.standard_normal(8)
+        df, dc, dd = e[:2], e[2:4], e[4:]
+    else:
+        df = rng.normal(0.0, r.focal_error_std, 2)
+        dc = rng.normal(0.0, r.center_error_std_px, 2)
+        dd = rng.normal(0.0, dist_std)
     K = nominal
     calibrated = CameraIntrinsics(
         K.width, K.height, K.fx * (1 + df[0]), K.fy * (1 + df[1]), K.cx + dc[0], K.cy + dc[1]
@@ -195,6 +214,7 @@ class OnboardCamera:
             off by default: it moves corners by ~1e-5 px, which closed loops carry on).
         pipeline: with ``latency_ticks`` ≥ 1, form and detect each frame in a worker thread
             while the caller goes on (the same frames and detections, sooner).
+        optics: the optics' realism (correlated calibration errors; ``None``: none).
 
     Raises:
         SimulationError: without a camera in the model.
@@ -212,6 +232,7 @@ class OnboardCamera:
         period: float | None = None,
         tag_window: bool = False,
         pipeline: bool = True,
+        optics: OpticsRealism | None = None,
     ) -> None:
         if not physics.has_camera:
             raise SimulationError(
@@ -227,14 +248,28 @@ class OnboardCamera:
         # a run's generator comes from a seed: its bit generator holds a SeedSequence
         assert isinstance(seed_seq, np.random.SeedSequence)
         self._view_rng = np.random.default_rng(seed_seq.spawn(1)[0])
-        self.calibrated, self.calibrated_distortion = calibrate(intrinsics, r, robot_rng)
+        self.calibrated, self.calibrated_distortion = calibrate(intrinsics, r, robot_rng, optics)
         self._renderer: cam_mod.CameraRenderer | None = cam_mod.CameraRenderer(
             physics.model, scale=r.supersample, lens=r.distortion
         )
         self.margins = self._renderer.margins  # what the lens sees beyond the pinhole's field
         self.true_intrinsics = self._renderer.intrinsics
         self._maps = None
-        self._formed = r.noise or r.exposure_s > 0 or any(r.distortion) or r.supersample > 1
+        self.optics = OpticsRealism() if optics is None else optics
+        o = self.optics
+        self._formed = (
+            r.noise or r.exposure_s > 0 or any(r.distortion) or r.supersample > 1 or o.forms
+        )
+        self._vignette = (
+            lens.vignetting_map(self.true_intrinsics, o.vignetting_power)
+            if o.vignetting_power
+            else None
+        )
+        self._row_w: np.ndarray | None = None  # a rolling shutter's (canvas rows, K) weights
+        self._flicker_phase = 0.0
+        if o.flicker_depth:  # per run, from a stream of its own (the noise's stays as it was)
+            spawned = np.random.default_rng(run_rng.bit_generator.seed_seq.spawn(1)[0])
+            self._flicker_phase = float(spawned.uniform(0.0, 2.0 * math.pi))
         self._fifo: deque[Future] = deque()
         self._pool: ThreadPoolExecutor | None = None
         self._last_job: Future | None = None  # the worker's newest frame (it works in order)
@@ -256,12 +291,44 @@ class OnboardCamera:
         except BaseException:
             self.close()
             raise
-        if r.exposure_s > 0:
+        if o.line_time > 0:
+            offsets = self._rolling_offsets(period)
+            self.exposure = ExposureRecorder(physics, period, offsets)
+            physics.add_hook(self.exposure)
+        elif r.exposure_s > 0:
             offsets = imaging.subframe_offsets(r.exposure_s, r.blur_subframes)
             # check_exposure refused an exposure without a period
             assert period is not None
             self.exposure = ExposureRecorder(physics, period, offsets)
             physics.add_hook(self.exposure)
+
+    def _rolling_offsets(self, period: float | None) -> np.ndarray:
+        """A rolling shutter's sub-frame offsets before the read [s], and its rows' weights.
+
+        ``blur_subframes`` + 1 renders span the readout and exposure, from the first row's
+        exposure start to the last row's end; each row of the render canvas weighs them by its
+        sensor row's window (:func:`cdpr_twin.sim.optics.row_weights`).
+
+        Raises:
+            OptionError: naming ``realism.optics.line_time`` when readout and exposure do not
+                fit in the read period.
+        """
+        r, o, K = self.realism, self.optics, self.true_intrinsics
+        span = r.exposure_s + (K.height - 1) * o.line_time
+        if period is None or not span < period:
+            raise OptionError(
+                "realism.optics.line_time",
+                f"a readout of {(K.height - 1) * o.line_time:g} s and exposure of "
+                f"{r.exposure_s:g} s must fit in the camera's read period ({period} s)",
+            )
+        offsets = np.linspace(span, 0.0, r.blur_subframes + 1)
+        scale, margin = r.supersample, self.margins[1]
+        canvas_rows = np.arange(self._renderer.canvas.height)
+        sensor_rows = (canvas_rows - margin + 0.5) / scale - 0.5
+        self._row_w = lens.row_weights(
+            -offsets, sensor_rows, K.height, 0.0, r.exposure_s, o.line_time
+        )
+        return offsets
 
     def close(self) -> None:
         """Free the GL context and stop recording exposures.
@@ -297,7 +364,13 @@ class OnboardCamera:
         are without it.
         """
         self._drain()  # the frames in hand are formed before this one, as they were taken
-        return self._form(self._renders(), self._view_rng)
+        return self._form(self._renders(), self._view_rng, self._scene())
+
+    def _scene(self) -> tuple[float, float]:
+        """What the lens and the light need of this instant: (the tag's depth [m], time [s])."""
+        p = self.physics
+        depth = float(p.T_cam_tag[2, 3]) if self.optics.defocus and p.has_tag else math.nan
+        return depth, p.time
 
     def _renders(self) -> list[np.ndarray]:
         """The GL part of a frame: the render(s) of the exposure ending now (this thread's)."""
@@ -311,17 +384,30 @@ class OnboardCamera:
         return [self._renderer.render(self.physics.data)]
 
     def _form(
-        self, renders: list[np.ndarray], rng: np.random.Generator | None = None
+        self,
+        renders: list[np.ndarray],
+        rng: np.random.Generator | None = None,
+        scene: tuple[float, float] = (math.nan, 0.0),
     ) -> np.ndarray:
-        """The frame the sensor forms from the renders of its exposure (``rng``: the run's)."""
+        """The frame the sensor forms from the renders of its exposure (``rng``: the run's).
+
+        ``scene``: the tag's depth [m] (``nan``: no defocus) and the exposure's end [s].
+        """
         if not self._formed:
             return renders[0]
         r = self.realism
-        linear = imaging.average([imaging.linear_luminance(f, r.gamma) for f in renders])
+        frames = [imaging.linear_luminance(f, r.gamma) for f in renders]
+        if self._row_w is not None and len(frames) > 1:  # a rolling shutter's rows
+            linear = frames[0] * self._row_w[:, :1]
+            for k in range(1, len(frames)):
+                linear += frames[k] * self._row_w[:, k : k + 1]
+        else:
+            linear = imaging.average(frames)
         if self._maps is not None:
             linear = imaging.distort(linear, self._maps)
         if r.supersample > 1:
             linear = imaging.integrate_pixels(linear, r.supersample)
+        linear = self._lens_and_light(linear, *scene)
         if (r.black_level, r.white_level) != (0.0, 1.0):  # the scene's exposure levels
             linear *= np.float32(r.white_level - r.black_level)  # in place: b + (w − b)·L
             linear += np.float32(r.black_level)
@@ -330,15 +416,36 @@ class OnboardCamera:
             gray = imaging.expose(linear, r.full_well_e, r.read_noise_e, r.gamma, rng)
         else:
             gray = imaging.encode(linear, r.gamma)
+        if self.optics.jpeg_quality:  # the frame as the camera's encoder delivers it
+            gray = imaging.jpeg(gray, self.optics.jpeg_quality)
         return cv2.cvtColor(gray, cv2.COLOR_GRAY2RGB)
 
+    def _lens_and_light(self, linear: np.ndarray, depth: float, time: float) -> np.ndarray:
+        """The flicker of the light, the lens's defocus and vignetting, on the linear image."""
+        o = self.optics
+        if o.flicker_depth:
+            # each row's exposure ends (H − 1 − r)·t_line before the frame's (a rolling shutter
+            # bands the flicker; a global one dims or brightens the whole frame)
+            rows = np.arange(linear.shape[0], dtype=float)
+            ends = time - (linear.shape[0] - 1 - rows) * o.line_time
+            e, phase = self.realism.exposure_s, self._flicker_phase
+            gain = lens.flicker_gain(ends, e, o.flicker_hz, o.flicker_depth, phase)
+            linear = linear * gain.astype(np.float32)[:, None]
+        if o.defocus and math.isfinite(depth):
+            K = self.true_intrinsics
+            c = lens.blur_circle_px(depth, o.focus_distance, o.focal_length, o.f_number, K.fy)
+            linear = lens.defocus(linear, c)
+        if self._vignette is not None:
+            linear = linear * self._vignette
+        return linear
+
     def _develop(
-        self, renders: list[np.ndarray], forget: bool
+        self, renders: list[np.ndarray], forget: bool, scene: tuple[float, float]
     ) -> tuple[np.ndarray, TagDetection | None]:
         """Form the frame and detect the tag in it (a new run first forgets the last place)."""
         if forget:
             self._detector.forget()
-        image = self._form(renders)
+        image = self._form(renders, None, scene)
         return image, self._detector.detect(image)
 
     def _drain(self) -> None:
@@ -358,16 +465,16 @@ class OnboardCamera:
         """
         reset = self.physics.time < self._last_read
         forget = self.physics.time <= self._last_read  # a new run (or a re-read): search anew
-        renders = self._renders()
+        renders, scene = self._renders(), self._scene()
         d = self.realism.latency_ticks
         if self.pipeline and d > 0:
             if self._pool is None:
                 self._pool = ThreadPoolExecutor(1, thread_name_prefix="camera")
-            job = self._last_job = self._pool.submit(self._develop, renders, forget)
+            job = self._last_job = self._pool.submit(self._develop, renders, forget, scene)
         else:
             self._drain()  # switched off mid-run: the worker's frames come first
             job = Future()
-            job.set_result(self._develop(renders, forget))
+            job.set_result(self._develop(renders, forget, scene))
         first, self._last_read = not self._fifo, self.physics.time
         if d == 0:
             return job.result()

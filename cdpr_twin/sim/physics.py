@@ -25,10 +25,12 @@ from cdpr_twin.math import se3
 from cdpr_twin.math.geometry import CdprGeometry
 from cdpr_twin.math.kinematics import cable_lengths, rest_lengths
 from cdpr_twin.math.statics import tension_distribution
+from cdpr_twin.options import OptionError
 from cdpr_twin.robot.description import DRUM_SCALE_TOLERANCE as DRUM_TOL
-from cdpr_twin.robot.realism import WinchRealism, robot_rng
+from cdpr_twin.robot.realism import DriveRealism, WinchRealism, robot_rng
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim import winch as winch_mod
+from cdpr_twin.sim.drive import Drums
 from cdpr_twin.sim.events import StepHook, fire_due
 from cdpr_twin.sim.model import (
     PLATFORM_BODY,
@@ -59,9 +61,12 @@ class Physics:
         source: where the model came from, for error messages.
         winch: the winches' servo imperfections (default: they follow commands instantly).
         robot_seed: the truth seed (per-robot winch errors).
+        drive: the drums', gearboxes' and motors' imperfections (default: none).
 
     Raises:
         ModelError: when the model is not a cable robot this core can drive.
+        OptionError: naming ``realism.drive.friction_rate`` for friction on a winch without a
+            velocity loop.
     """
 
     def __init__(
@@ -71,6 +76,7 @@ class Physics:
         source: str = "model",
         winch: WinchRealism | None = None,
         robot_seed: int = 0,
+        drive: DriveRealism | None = None,
     ) -> None:
         if int(align_every) < 1:
             raise ValueError(f"align_every must be ≥ 1 physics step, got {align_every}")
@@ -81,7 +87,14 @@ class Physics:
         self.geometry: CdprGeometry = read_geometry(model)
         self.align_every = int(align_every)
         self.winch = winch_mod.robot_winch(model, winch)  # the drum radius: robot data
-        self._servos = WinchServos(self.winch, self.n_cables)
+        self.drive = DriveRealism() if drive is None else drive
+        self._servos = WinchServos(self.winch, self.n_cables, self.drive.friction_rate)
+        if self.drive.friction_rate > 0 and math.isinf(self.winch.bandwidth_hz):
+            raise OptionError(
+                "realism.drive.friction_rate",
+                "needs a velocity loop of finite gain: set [realism.winch] bandwidth_hz",
+            )
+        self._drums: Drums | None = None  # (set_drum_radii builds them when the drive has any)
         rng = robot_rng(robot_seed, "winch")  # per robot; the encoders read the same radii
         self.drum_radius_true = winch_mod.draw_drum_radii(self.winch, rng, self.n_cables)
         self.set_drum_radii(np.full(self.n_cables, self.winch.drum_radius))  # until told
@@ -222,6 +235,8 @@ class Physics:
         if radii.shape != (n,) or not np.all(abs(radii / r - 1) <= DRUM_TOL):  # NaN fails too
             raise ValueError(f"drum radii: {n} within {100 * DRUM_TOL:g} % of {r} m: {radii}")
         self.drum_radius_set, self._drum_ratio = radii, self.drum_radius_true / radii  # cable/cmd
+        if self.drive.drums:
+            self._drums = Drums(self.drive, self.drum_radius_true, radii)
 
     def clear_hooks(self) -> None:
         """Drop every hook: they hold this physics, a cycle that kept a closed run's model alive."""
@@ -280,12 +295,46 @@ class Physics:
             chunk = min(n, self.align_every)
             chunk = fire_due(self._hooks, self.data.time, dt, chunk) if self._hooks else chunk
             self.refresh()
-            if not self._servos.ideal:  # the chunk's exact mean rate: l0 exact at its end
-                rate = self._servos.run(chunk * dt)  # the drum's, in command units
-                self.data.ctrl[self._actuators] = self._stalled(rate * self._drum_ratio)
+            self._drive_winches(chunk * dt)
             mujoco.mj_step(self.model, self.data, nstep=chunk)
             n -= chunk
         self._check_state()
+
+    def _drive_winches(self, h: float) -> None:
+        """Set the winches' rates for the next ``h`` seconds (servo loops, drums)."""
+        if self._drums is not None:  # the motors turn, the drums follow, the cable winds
+            self.data.ctrl[self._actuators] = self._wind(h)
+        elif not self._servos.ideal:  # the chunk's exact mean rate: l0 exact at its end
+            rate = self._servos.run(h)  # the drum's, in command units
+            self.data.ctrl[self._actuators] = self._stalled(rate * self._drum_ratio)
+
+    def _drum_loads(self) -> tuple[np.ndarray, np.ndarray]:
+        """The cables' forces at the drums (m,) [N] and their stiffnesses from there (m,) [N/m]."""
+        return self.tensions, self._es / self.data.act[self._actuators]
+
+    def _wind(self, h: float) -> np.ndarray:
+        """The rates that pay out, over ``h`` seconds, what the drums wind (m,) [m/s]."""
+        motor_rate = self._servos.command if self._servos.ideal else self._servos.run(h)
+        tensions, stiffness = self._drum_loads()
+        return self._drums.advance(self._stalled(motor_rate) * h, tensions, stiffness) / h
+
+    def rest_lengths_at(self, T_base_platform: np.ndarray) -> np.ndarray:
+        """The rest lengths that hold the true robot at a pose (m,) [m].
+
+        Under the true geometry's minimum-norm tension distribution within the model's
+        ``cable_tension_range`` (what :meth:`reset` winds to by default).
+
+        Raises:
+            InfeasibleTensionError: if no tension distribution holds the platform there.
+        """
+        g = self.geometry
+        tau = tension_distribution(g, T_base_platform, *g.tension_bounds(None, None))
+        return self._rest_lengths(T_base_platform, tau)
+
+    @property
+    def motor_positions(self) -> np.ndarray | None:
+        """(m,) the motors' positions since reset, r_set·φ_m [m] (``None``: no drum model)."""
+        return None if self._drums is None else self._drums.motor.copy()
 
     def _check_state(self) -> None:
         d, bad = self.data, divergence(self.data)
@@ -306,7 +355,9 @@ class Physics:
         paid = self._servos.paid_out(rates, steps, self.timestep) * self._drum_ratio
         check_lengths(self.rest_lengths + paid, self._act_range)
         self._servos.set_command(rates)
-        if self._servos.ideal:  # (× 1.0 exactly without drum errors: bit for bit as before)
+        if (
+            self._servos.ideal and self._drums is None
+        ):  # (× 1.0 exactly without drum errors: bit for bit as before)
             self.data.ctrl[self._actuators] = self._stalled(rates * self._drum_ratio)
 
     def _stalled(self, ctrl: np.ndarray) -> np.ndarray:
@@ -386,16 +437,68 @@ class Physics:
         geom = self.geometry
         T = geom.check_pose_inside(T_base_platform, "reset pose")
         tau = tension_distribution(geom, T, *geom.tension_bounds(tau_min, tau_max))  # pulley
+        self._start(T, settle_time, tau=tau)
+
+    def settle_at_lengths(
+        self, rest_lengths: np.ndarray, T_guess: np.ndarray, settle_time: float = 2.0
+    ) -> None:
+        """Wind the cables to these rest lengths and let the platform settle where they hold it.
+
+        What a robot whose drums were each zeroed on its own does: the platform is released
+        near ``T_guess`` and comes to rest where the cables' elastic forces balance its weight,
+        some cables perhaps slack. Time restarts at 0; every cable is enabled again.
+
+        Args:
+            rest_lengths: (m,) unstretched lengths l0 [m].
+            T_guess: (4, 4) where the platform is released.
+            settle_time: how long to settle [s] (the slowest mode of ACROBOT's platform decays
+                by e in ≈ 0.25 s: 2 s leaves 3e-4 of the first offset).
+
+        Raises:
+            ValueError: if the pose leaves the frame or a length is not positive.
+        """
+        T = self.geometry.check_pose_inside(T_guess, "start pose")
+        l0 = np.array(rest_lengths, dtype=float)
+        if l0.shape != (self.n_cables,) or not np.all(l0 > 0):
+            raise ValueError(f"rest lengths: {self.n_cables} positive lengths [m], got {l0}")
+        self._start(T, settle_time, l0=l0)
+
+    def _start(
+        self,
+        T: np.ndarray,
+        settle: float,
+        *,
+        tau: np.ndarray | None = None,
+        l0: np.ndarray | None = None,
+    ) -> None:
+        """Rest lengths at pose T, winches at rest, then settle ``settle`` seconds.
+
+        The cables are first wound to hold the tensions τ at T (subclasses set their internal
+        state there, as a robot long at rest at T); ``l0``, if given, then replaces the rest
+        lengths, and the platform settles where they hold it.
+
+        Args:
+            T: (4, 4) the pose the platform is released at.
+            settle: how long to settle [s].
+            tau: (m,) the tensions [N] at T (default: :meth:`rest_lengths_at`'s).
+            l0: (m,) the rest lengths [m] to wind instead of those holding τ.
+        """
         mujoco.mj_resetData(self.model, self.data)
         self._servos.reset()  # winches at rest
         self.cable_enabled[:] = True
         self._running = None
-        self.data.act[self._actuators] = self._rest_lengths(T, tau)
+        if tau is None:
+            held = self.rest_lengths_at(T)
+        else:
+            held = self._rest_lengths(T, tau)
+        self.data.act[self._actuators] = held if l0 is None else l0
+        if self._drums is not None:
+            self._drums.reset()
         self.place(T)
         self.was_reset = True
         hooks, self._hooks = self._hooks, []  # no event acts while settling
         try:
-            self.step(round(settle_time / self.timestep))
+            self.step(round(settle / self.timestep))
         finally:
             self._hooks = hooks
         self.settle_error = se3.pose_distance(T, self.T_base_platform)

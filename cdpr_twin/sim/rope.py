@@ -295,6 +295,14 @@ class RopePhysics(Physics):
         self.eps_d[:] = eps
         return self.u_p + self.drum_segment / (1.0 + eps) - self.drum_segment
 
+    def _drum_loads(self) -> tuple[np.ndarray, np.ndarray]:
+        """The drum segments' forces (m,) [N] and the ropes' stiffnesses E₀/(l0 + l_d) (m,) [N/m].
+
+        What pulls a drum inside its gearbox's play: the whole rope's instantaneous stiffness.
+        """
+        l0 = self.data.act[self._actuators]
+        return self.pulley_tensions, self.es0 / (l0 + self.drum_segment)
+
     def refresh(self) -> None:
         """Turn the swivels, point MuJoCo's at their B_i, and set the cables' forces.
 
@@ -366,9 +374,7 @@ class RopePhysics(Physics):
             chunk = min(n, self.align_every)
             chunk = fire_due(self._hooks, d.time, dt, chunk) if self._hooks else chunk
             self.refresh()
-            if not self._servos.ideal:
-                rate = self._servos.run(chunk * dt)
-                d.ctrl[self._actuators] = self._stalled(rate * self._drum_ratio)
+            self._drive_winches(chunk * dt)
             mujoco.mj_step(m, d)
             # the compiled update (the hot path: one call per physics step)
             update, args = kernel.update_ropes, self._kernel_args()
@@ -391,9 +397,7 @@ class RopePhysics(Physics):
             chunk = min(n, self.align_every)
             chunk = fire_due(self._hooks, d.time, dt, chunk) if self._hooks else chunk
             self.refresh()
-            if not self._servos.ideal:
-                rate = self._servos.run(chunk * dt)
-                d.ctrl[self._actuators] = self._stalled(rate * self._drum_ratio)
+            self._drive_winches(chunk * dt)
             lw = self.drum_segment
             share = (self.cable_lengths + lw) / (d.act[self._actuators] + lw)
             paid = self._damping_time * share * d.ctrl[self._actuators]

@@ -118,6 +118,7 @@ class Sensors:
                 run_rng(noise_seed, "camera"),
                 period=period,
                 tag_window=tag_window,
+                optics=realism.optics,
             )
 
     def close(self) -> None:

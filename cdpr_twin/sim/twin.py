@@ -22,7 +22,7 @@ import numpy.typing as npt
 from cdpr_twin import resources
 from cdpr_twin.math.se3 import matrix_from_quat_wxyz, transform
 from cdpr_twin.robot.deviations import DeviationSpec, TruthDeviations
-from cdpr_twin.robot.realism import CableRealism, PulleyRealism, WinchRealism
+from cdpr_twin.robot.realism import CableRealism, DriveRealism, PulleyRealism, WinchRealism
 from cdpr_twin.robot.schema import MAX_TIMESTEP, MIN_TIMESTEP
 from cdpr_twin.sim import camera as cam_mod
 from cdpr_twin.sim.model import (
@@ -186,6 +186,7 @@ def build_robot(
     occluder: bool = False,
     nominal_path: str | Path | None = None,
     payload: tuple[float, npt.ArrayLike] = (0.0, np.zeros(3)),
+    drive: DriveRealism | None = None,
     cable: CableRealism | None = None,
     pulley: PulleyRealism | None = None,
 ) -> BuiltRobot:
@@ -204,6 +205,7 @@ def build_robot(
             (:func:`nominal_from_description`).
         payload: (mass [kg], (3,) centre of mass in F_p [m]) fixed to the platform, on the
             robot and in what its software believes (the operator knows the load).
+        drive: the drums', gearboxes' and motors' imperfections (default: none).
         cable: the cables as ropes (default: the paper's elastic cables); per-robot draws use
             the deviations' seed.
         pulley: the pulleys as mechanisms and as built (default: the paper's pulleys).
@@ -222,6 +224,7 @@ def build_robot(
     add_payload(model, payload[0], np.asarray(payload[1], dtype=float), str(path))
     _set_timestep(model, timestep)
     args = (model, align_every, str(path))
+    kwargs = {"winch": winch, "robot_seed": robot_seed, "drive": drive}
     cable = CableRealism() if cable is None else cable
     pulley = PulleyRealism() if pulley is None else pulley
     sag = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "cable_sag") >= 0
@@ -235,14 +238,14 @@ def build_robot(
     if ropes:
         from cdpr_twin.sim.rope import RopePhysics  # the cables and pulleys as they are
 
-        physics = RopePhysics(*args, winch=winch, robot_seed=robot_seed, cable=cable, pulley=pulley)
+        physics = RopePhysics(*args, **kwargs, cable=cable, pulley=pulley)
     elif sag:
         from cdpr_twin.sim.sag import SaggingPhysics  # heavy cables (robot.toml: sag = true)
 
         rho = float(numeric(model, "cable_linear_density")[0])
-        physics = SaggingPhysics(*args, winch=winch, robot_seed=robot_seed, linear_density=rho)
+        physics = SaggingPhysics(*args, **kwargs, linear_density=rho)
     else:
-        physics = Physics(*args, winch=winch, robot_seed=robot_seed)
+        physics = Physics(*args, **kwargs)
     if nominal.drum_radii is not None:  # its drives and encoders, set as it believes
         try:
             physics.set_drum_radii(nominal.drum_radii)

@@ -25,6 +25,7 @@ import math
 from dataclasses import replace
 
 import numpy as np
+from scipy.optimize import brentq
 
 from cdpr_twin.robot.realism import WinchRealism
 
@@ -108,6 +109,57 @@ def loop_response(
     return np.where(t2 > 0.0, u, r1), paid + u * t2
 
 
+def friction_response(
+    r0: np.ndarray, u: np.ndarray, h: float, tau: float, accel: float, lag: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The velocity loop's response over h seconds with Coulomb friction on the motor.
+
+    A proportional velocity loop of time constant τ against a friction torque T_c:
+    ṙ = clip((u − r)/τ, ±a) − (f/τ)·sign(r), f = T_c/K_v the rate lag (``lag``). While the rate
+    keeps its sign this is the loop of :func:`loop_response` aimed at
+    u − f·sign(r); a resting motor sticks while |u| ≤ f (the loop's torque does not break it
+    loose); a rate that reaches 0 stops there and starts again the same way.
+
+    Args:
+        r0: (m,) rates at the start [m/s].
+        u: (m,) commanded rates [m/s].
+        h: duration [s].
+        tau: time constant [s] (> 0).
+        accel: acceleration limit [m/s²] (``inf``: none).
+        lag: the friction's rate lag f [m/s].
+
+    Returns:
+        (rates at h [m/s], lengths paid out over [0, h] [m]), each (m,).
+    """
+    rate, paid = np.empty_like(r0), np.zeros_like(r0)
+    for i in range(r0.size):
+        r, left = float(r0[i]), h
+        while True:
+            if r != 0.0:
+                s = math.copysign(1.0, r)
+            elif abs(u[i]) > lag:  # the loop's torque breaks the motor loose
+                s = math.copysign(1.0, u[i])
+            else:  # at rest, stuck
+                break
+            target = np.array([u[i] - lag * s])
+            end, length = loop_response(np.array([r]), target, left, tau, accel)
+            if end[0] * s >= 0.0:  # kept its sign to the end
+                r, paid[i] = float(end[0]), paid[i] + float(length[0])
+                break
+            # it reaches 0 inside: stop there, then go on from rest
+
+            def rate_at(t, r=r, target=target):
+                return float(loop_response(np.array([r]), target, t, tau, accel)[0][0])
+
+            t0 = brentq(rate_at, 0.0, left, xtol=1e-12)
+            paid[i] += float(loop_response(np.array([r]), target, t0, tau, accel)[1][0])
+            r, left = 0.0, left - t0
+            if left <= 0.0:
+                break
+        rate[i] = r
+    return rate, paid
+
+
 class WinchServos:
     """The velocity loops of a robot's winches: their actual rates, persistent across ticks.
 
@@ -117,6 +169,8 @@ class WinchServos:
     Args:
         winch: bandwidth and acceleration limit.
         n: number of winches.
+        friction_rate: the motors' Coulomb friction as a rate lag [m/s]
+            (:func:`friction_response`; 0: none).
 
     Attributes:
         ideal: whether the winches follow commands instantly.
@@ -126,10 +180,16 @@ class WinchServos:
         command: (n,) commanded rates [m/s], constant until the next command.
     """
 
-    def __init__(self, winch: WinchRealism, n: int) -> None:
+    def __init__(self, winch: WinchRealism, n: int, friction_rate: float = 0.0) -> None:
         self.ideal = math.isinf(winch.bandwidth_hz) and math.isinf(winch.max_accel)
         self.tau, self.accel = time_constant(winch.bandwidth_hz), float(winch.max_accel)
         self.rate, self.command = np.zeros(n), np.zeros(n)
+        self.friction_rate = float(friction_rate)
+
+    def _response(self, rates: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+        if self.friction_rate > 0.0:
+            return friction_response(self.rate, rates, h, self.tau, self.accel, self.friction_rate)
+        return loop_response(self.rate, rates, h, self.tau, self.accel)
 
     def reset(self) -> None:
         """Winches at rest, no command."""
@@ -152,7 +212,7 @@ class WinchServos:
         """
         if self.ideal:
             return rates * steps * dt
-        return loop_response(self.rate, rates, steps * dt, self.tau, self.accel)[1]
+        return self._response(rates, steps * dt)[1]
 
     def run(self, duration: float) -> np.ndarray:
         """Advance the loops by ``duration`` s under the current command (not for ideal ones).
@@ -161,7 +221,7 @@ class WinchServos:
             (n,) the mean rate over that time [m/s]: an integrator fed it for ``duration``
             ends at the exact paid-out length.
         """
-        self.rate, paid = loop_response(self.rate, self.command, duration, self.tau, self.accel)
+        self.rate, paid = self._response(self.command, duration)
         return paid / duration
 
 

@@ -275,6 +275,20 @@ def _excess(mv: dict) -> str:
     return "" if excess is None else f", its arc longer than the chord by ≤ {excess:.3g} m"
 
 
+def _error_budget() -> list[str]:
+    """Where the error budget of every realism effect is (written by its own command)."""
+    return [
+        "",
+        "## Error budget",
+        "",
+        "What each effect of the fullest realism profile (`acrobot_full`: drives, optics, cables",
+        "and pulleys as they are) does to each estimator, alone, all together and none, over",
+        "robots built to the same tolerances, with the PBVS repeatability of the fullest",
+        "profile: [docs/error_budget/budget.md](error_budget/budget.md)",
+        "(`python benchmarks/error_budget.py`).",
+    ]
+
+
 def write_report(out: Path, rep: dict, figures: list[Path], wall_time_s: float) -> Path:
     """``report.md``: the paper's numbers beside the twin's, and the findings with verdicts.
 
@@ -295,7 +309,7 @@ def write_report(out: Path, rep: dict, figures: list[Path], wall_time_s: float) 
     else:
         lines += _findings(rep)
     lines += [*_paper_table(rep), *_accuracy(rep)]
-    lines += _estimator_table(rep) + _spread(rep)
+    lines += _estimator_table(rep) + _spread(rep) + _error_budget()
     lines += ["", "## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figures]
     return write_atomic(out / "report.md", "\n".join(lines) + "\n")
 
