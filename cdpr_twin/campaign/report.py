@@ -147,10 +147,14 @@ def attribution_intervals(
     n = len(X)
     draws = [attribution(X[i], Y[i], m)[0] for i in rng.integers(0, n, (ATTRIBUTION_RESAMPLES, n))]
     q = ((1.0 - confidence) / 2.0, (1.0 + confidence) / 2.0)
-    out = {}
+    out: dict[str, tuple[float, float]] = {}
     for g in GROUPS:
         v = np.array([d[g] for d in draws])
-        out[g] = (math.nan, math.nan) if np.isnan(v).all() else tuple(map(float, np.quantile(v, q)))
+        if np.isnan(v).all():
+            out[g] = (math.nan, math.nan)
+        else:
+            low, high = np.quantile(v, q)
+            out[g] = (float(low), float(high))
     return out
 
 

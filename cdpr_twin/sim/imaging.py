@@ -151,7 +151,10 @@ def jpeg(gray: np.ndarray, quality: int) -> np.ndarray:
     ok, data = cv2.imencode(".jpg", gray, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
     if not ok:
         raise ValueError(f"realism.optics.jpeg_quality: OpenCV could not encode at {quality}")
-    return cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
+    decoded = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
+    if decoded is None:
+        raise ValueError(f"realism.optics.jpeg_quality: OpenCV could not decode at {quality}")
+    return decoded
 
 
 def distort_normalized(xy: np.ndarray, coeffs: Sequence[float]) -> np.ndarray:

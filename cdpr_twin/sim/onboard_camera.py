@@ -268,7 +268,7 @@ class OnboardCamera:
         self._row_w: np.ndarray | None = None  # a rolling shutter's (canvas rows, K) weights
         self._flicker_phase = 0.0
         if o.flicker_depth:  # per run, from a stream of its own (the noise's stays as it was)
-            spawned = np.random.default_rng(run_rng.bit_generator.seed_seq.spawn(1)[0])
+            spawned = np.random.default_rng(seed_seq.spawn(1)[0])
             self._flicker_phase = float(spawned.uniform(0.0, 2.0 * math.pi))
         self._fifo: deque[Future] = deque()
         self._pool: ThreadPoolExecutor | None = None
@@ -293,6 +293,8 @@ class OnboardCamera:
             raise
         if o.line_time > 0:
             offsets = self._rolling_offsets(period)
+            # _rolling_offsets refused a rolling shutter without a read period
+            assert period is not None
             self.exposure = ExposureRecorder(physics, period, offsets)
             physics.add_hook(self.exposure)
         elif r.exposure_s > 0:
@@ -323,6 +325,8 @@ class OnboardCamera:
             )
         offsets = np.linspace(span, 0.0, r.blur_subframes + 1)
         scale, margin = r.supersample, self.margins[1]
+        # the renderer is closed only by close(), never before the constructor returns
+        assert self._renderer is not None
         canvas_rows = np.arange(self._renderer.canvas.height)
         sensor_rows = (canvas_rows - margin + 0.5) / scale - 0.5
         self._row_w = lens.row_weights(

@@ -191,17 +191,17 @@ def row_weights(
     # (beyond the rendered span the hat is constant: its integral goes on linearly)
     lo, hi = min(times[0], (ends - exposure).min()) - 1.0, max(times[-1], ends.max()) + 1.0
     grid = np.concatenate([[lo], times, [hi]])
-    w = []
+    columns: list[np.ndarray] = []
     for k in range(times.size):
         hat = np.interp(grid, times, eye[k])
         cum = np.concatenate([[0.0], np.cumsum(0.5 * (hat[1:] + hat[:-1]) * np.diff(grid))])
         # the integral is piecewise quadratic: interpolate it exactly by sub-sampling each
         # segment's hat linearly (np.interp of cum alone would be off inside a segment)
-        w.append(
+        columns.append(
             (_hat_integral(grid, hat, cum, ends) - _hat_integral(grid, hat, cum, ends - exposure))
             / exposure
         )
-    return np.stack(w, axis=1).astype(np.float32)
+    return np.stack(columns, axis=1).astype(np.float32)
 
 
 def _hat_integral(grid: np.ndarray, hat: np.ndarray, cum: np.ndarray, t: np.ndarray) -> np.ndarray:

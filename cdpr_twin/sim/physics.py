@@ -303,7 +303,7 @@ class Physics:
     def _drive_winches(self, h: float) -> None:
         """Set the winches' rates for the next ``h`` seconds (servo loops, drums)."""
         if self._drums is not None:  # the motors turn, the drums follow, the cable winds
-            self.data.ctrl[self._actuators] = self._wind(h)
+            self.data.ctrl[self._actuators] = self._wind(self._drums, h)
         elif not self._servos.ideal:  # the chunk's exact mean rate: l0 exact at its end
             rate = self._servos.run(h)  # the drum's, in command units
             self.data.ctrl[self._actuators] = self._stalled(rate * self._drum_ratio)
@@ -312,11 +312,11 @@ class Physics:
         """The cables' forces at the drums (m,) [N] and their stiffnesses from there (m,) [N/m]."""
         return self.tensions, self._es / self.data.act[self._actuators]
 
-    def _wind(self, h: float) -> np.ndarray:
+    def _wind(self, drums: Drums, h: float) -> np.ndarray:
         """The rates that pay out, over ``h`` seconds, what the drums wind (m,) [m/s]."""
         motor_rate = self._servos.command if self._servos.ideal else self._servos.run(h)
         tensions, stiffness = self._drum_loads()
-        return self._drums.advance(self._stalled(motor_rate) * h, tensions, stiffness) / h
+        return drums.advance(self._stalled(motor_rate) * h, tensions, stiffness) / h
 
     def rest_lengths_at(self, T_base_platform: np.ndarray) -> np.ndarray:
         """The rest lengths that hold the true robot at a pose (m,) [m].

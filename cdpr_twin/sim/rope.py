@@ -58,7 +58,13 @@ import mujoco
 import numpy as np
 
 from cdpr_twin.math.se3 import quat_wxyz_from_matrix, so3_exp
-from cdpr_twin.robot.realism import CableRealism, PulleyRealism, WinchRealism, robot_rng
+from cdpr_twin.robot.realism import (
+    CableRealism,
+    DriveRealism,
+    PulleyRealism,
+    WinchRealism,
+    robot_rng,
+)
 from cdpr_twin.sim import rope_kernel as kernel
 from cdpr_twin.sim.events import fire_due
 from cdpr_twin.sim.model import ModelError, as_slice, sheave_geom, side_site
@@ -169,6 +175,7 @@ class RopePhysics(Physics):
         source: str = "model",
         winch: WinchRealism | None = None,
         robot_seed: int = 0,
+        drive: DriveRealism | None = None,
         *,
         cable: CableRealism,
         pulley: PulleyRealism,
@@ -178,7 +185,7 @@ class RopePhysics(Physics):
         n = cable_count(model)
         self.pulley_draws = draw_pulley_geometry(pulley, robot_seed, n)
         apply_pulley_geometry(model, pulley, self.pulley_draws, n)
-        super().__init__(model, align_every, source, winch, robot_seed)
+        super().__init__(model, align_every, source, winch, robot_seed, drive)
         if pulley.sheave_efficiency < 1.0 and cable.drum_segment <= 0.0:
             raise ModelError(
                 "realism.pulley.sheave_efficiency: a sheave with friction needs "

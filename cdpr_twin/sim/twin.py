@@ -223,8 +223,7 @@ def build_robot(
     model = build_model(path, deviations, occluder)
     add_payload(model, payload[0], np.asarray(payload[1], dtype=float), str(path))
     _set_timestep(model, timestep)
-    args = (model, align_every, str(path))
-    kwargs = {"winch": winch, "robot_seed": robot_seed, "drive": drive}
+    source = str(path)
     cable = CableRealism() if cable is None else cable
     pulley = PulleyRealism() if pulley is None else pulley
     sag = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "cable_sag") >= 0
@@ -238,14 +237,18 @@ def build_robot(
     if ropes:
         from cdpr_twin.sim.rope import RopePhysics  # the cables and pulleys as they are
 
-        physics = RopePhysics(*args, **kwargs, cable=cable, pulley=pulley)
+        physics = RopePhysics(
+            model, align_every, source, winch, robot_seed, drive, cable=cable, pulley=pulley
+        )
     elif sag:
         from cdpr_twin.sim.sag import SaggingPhysics  # heavy cables (robot.toml: sag = true)
 
         rho = float(numeric(model, "cable_linear_density")[0])
-        physics = SaggingPhysics(*args, **kwargs, linear_density=rho)
+        physics = SaggingPhysics(
+            model, align_every, source, winch, robot_seed, drive, linear_density=rho
+        )
     else:
-        physics = Physics(*args, **kwargs)
+        physics = Physics(model, align_every, source, winch, robot_seed, drive)
     if nominal.drum_radii is not None:  # its drives and encoders, set as it believes
         try:
             physics.set_drum_radii(nominal.drum_radii)

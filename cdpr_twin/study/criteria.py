@@ -218,7 +218,7 @@ def share_interval(k: int, n: int, confidence: float) -> tuple[float, float]:
     return (float(ci.low), float(ci.high))
 
 
-def judge(rule: Rule, values: Sequence[float]) -> Verdict:
+def judge(rule: Rule, values: Sequence[float] | np.ndarray) -> Verdict:
     """The verdict of a rule over a population's metric values (one per robot; NaN: none)."""
     v = np.asarray(values, dtype=float)
     v = v[~np.isnan(v)]

@@ -8,13 +8,15 @@ from __future__ import annotations
 
 import math
 
+from cdpr_twin.study.criteria import Verdict
+
 TOLERANCE_BLOCKS = {"tolerances_half": "×0.5", "tolerances_double": "×2"}
 """The sensitivity populations: every tolerance of ``[truth]`` scaled."""
 ENTRY = "cdpr_twin/study/criteria.toml"
 """How the report names the criteria file."""
 
 
-def _share(v) -> str:
+def _share(v: Verdict) -> str:
     if not v.n:
         return "no robots"
     low, high = v.interval
@@ -82,7 +84,7 @@ def sensitivity_table(pop: dict) -> list[str]:
     if not pop["sensitivity"]:
         return []
     base = {v.rule.id: v for v in pop["verdicts"]}
-    rows: dict[str, dict[str, object]] = {}
+    rows: dict[str, dict[str, Verdict]] = {}
     for rule, block, v in pop["sensitivity"]:
         rows.setdefault(rule.id, {})[block] = v
     lines = [
