@@ -284,17 +284,37 @@ def _interaction_section(
     return [*lines, ""]
 
 
+ATTRIBUTION_MIN_ROBOTS = 100
+"""Runs a block needs for its attribution: 90 regressors (eight cables) want ten times as many."""
+
+
 def _attribution_section(campaign: Campaign, rows: list[dict]) -> list[str]:
+    """The variance attribution of the error at p1, block by block.
+
+    A block is one population, drawn to one set of tolerances: runs of several blocks (other
+    tolerances, repetitions of a few robots) do not make one sample of deviations, and a
+    regression over them fits their mixture, not a population (shares well above 100 %).
+    """
     tasks = {t.run_id: t for t in campaign.tasks}
     rows = [r for r in rows if r["ok"] and r["run_id"] in tasks and r.get("cp1.t_m") is not None]
-    if len(rows) < 100:
-        return []
+    blocks: dict[str, list[dict]] = {}
+    for r in rows:
+        blocks.setdefault(str(r.get("block")), []).append(r)
+    lines: list[str] = []
+    for block, block_rows in blocks.items():
+        if len(block_rows) >= ATTRIBUTION_MIN_ROBOTS:
+            title = "" if len(blocks) == 1 else f" (block `{block}`)"
+            lines += _attribution(tasks, block_rows, title)
+    return lines
+
+
+def _attribution(tasks: dict, rows: list[dict], title: str) -> list[str]:
     X, Y = deviation_matrix(tasks, rows), _miss_vectors(rows)
     m = len(json.loads(rows[0]["summary"])["final_tensions_n"])
     shares, r2 = attribution(X, Y, m)
     ci = attribution_intervals(X, Y, m)
     lines = [
-        "## Which calibration error drives the error at p1",
+        f"## Which calibration error drives the error at p1{title}",
         "",
         f"Linear least squares of the 3-D error at the first checkpoint on the {X.shape[1]} "
         f"drawn deviations of each of the {len(rows)} robots (R² = {r2:.3f}); each group's "

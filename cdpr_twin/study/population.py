@@ -18,10 +18,11 @@ from pathlib import Path
 import numpy as np
 
 from cdpr_twin.estimators import PAPER_ESTIMATORS
+from cdpr_twin.resources import campaigns_dir
 from cdpr_twin.study.criteria import Rule, judge, load_criteria
 
-POPULATION_CAMPAIGN = Path(__file__).resolve().parents[2] / "campaigns" / "paper_population.toml"
-"""The population's campaign file (in the repository beside the package)."""
+POPULATION_CAMPAIGN = campaigns_dir() / "paper_population.toml"
+"""The population's campaign file (shipped with the package, as every campaign)."""
 ILLUSTRATION_ROBOT = 19
 """The truth seed of the study's single robot (its figures): chosen for its ≈ 1 cm miss."""
 BOOTSTRAP_RESAMPLES = 2000
