@@ -27,9 +27,9 @@ MAX_MODEL_BYTES = 16 << 20
 """The largest MJCF model file [bytes] (16 MiB): the shipped scenes are 14 kB (meshes and
 textures live in files of their own); 16 MiB is a thousand times that."""
 MAX_NESTING = 32
-"""The deepest nesting of tables and arrays in a TOML input: the shipped files nest 6 levels at
-most (a campaign block's axis's values that are tables); 32 keeps the copies, JSON and messages
-of the data far from Python's recursion limit (1 000 frames)."""
+"""The deepest nesting of tables and arrays in a TOML input: the shipped files nest 9 levels at
+most (a campaign block's axis whose values are realism tables with arrays in them); 32 keeps
+the copies, JSON and messages of the data far from Python's recursion limit (1 000 frames)."""
 MAX_ARRAY_ITEMS = 100_000
 """The longest array in a TOML input: a campaign's axis lists at most one value per run
 (``campaign.spec.MAX_RUNS``, 100 000); no other list of any schema comes near it."""

@@ -82,7 +82,11 @@ def test_nesting_deeper_than_any_schema_is_one_line_naming_the_file(
 
 
 def test_the_deepest_shipped_nesting_is_far_inside_the_bound():
-    """The bound's reason: no shipped input nests more than 6 levels."""
+    """The bound's reason: no shipped input nests more than 9 levels.
+
+    (``campaigns/error_budget.toml``: blocks, an axis, its values, a realism table, its part,
+    an array of correlations.)
+    """
 
     def depth(node) -> int:
         if isinstance(node, dict):
@@ -94,7 +98,7 @@ def test_the_deepest_shipped_nesting_is_far_inside_the_bound():
     files = [*ROOT.glob("scenarios/*.toml"), *ROOT.glob("campaigns/*.toml")]
     files += [*ROOT.glob("models/*/robot.toml")]
     deepest = max(depth(tomllib.loads(p.read_text())) for p in files)
-    assert 2 <= deepest <= 6 < MAX_NESTING
+    assert 2 <= deepest <= 9 < MAX_NESTING
 
 
 @pytest.mark.parametrize("command", COMMANDS)
