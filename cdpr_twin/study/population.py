@@ -191,7 +191,8 @@ def collect(out: Path, confidence: float) -> dict[str, list[dict]]:
     """Every run's metrics by block: ``{block: [{"truth_seed", "seed", "ok", …metrics}]}``.
 
     Blocks whose name starts with ``robots_`` get the whole-run metrics (time series); the
-    repetition and tolerance blocks those of ``summary.json`` (and the model variants' spread).
+    repetition blocks those of ``summary.json``; the sensitivity blocks (``tolerances_*``,
+    ``profile_*``) those too and the model variants' spread.
     """
     from cdpr_twin.campaign import load_table
 
@@ -211,8 +212,8 @@ def collect(out: Path, confidence: float) -> dict[str, list[dict]]:
             if pbvs:
                 run |= pbvs_metrics(run_dir, whole)
             else:
-                tolerances = row["block"].startswith("tolerances_")
-                run |= open_loop_metrics(run_dir, confidence, whole or tolerances)
+                sensitivity = row["block"].startswith(("tolerances_", "profile_"))
+                run |= open_loop_metrics(run_dir, confidence, whole or sensitivity)
         blocks.setdefault(row["block"], []).append(run)
     for runs in blocks.values():
         runs.sort(key=lambda r: (r["truth_seed"], r["seed"]))

@@ -275,8 +275,13 @@ def _excess(mv: dict) -> str:
     return "" if excess is None else f", its arc longer than the chord by ≤ {excess:.3g} m"
 
 
-def _error_budget() -> list[str]:
-    """Where the error budget of every realism effect is (written by its own command)."""
+def _error_budget(rep: dict) -> list[str]:
+    """Where the error budget of ACROBOT's realism effects is (written by its own command).
+
+    Only for a study run with one of ACROBOT's realism profiles: the budget is that robot's.
+    """
+    if not str(rep.get("realism", {}).get("profile", "ideal")).startswith("acrobot"):
+        return []
     return [
         "",
         "## Error budget",
@@ -309,7 +314,7 @@ def write_report(out: Path, rep: dict, figures: list[Path], wall_time_s: float) 
     else:
         lines += _findings(rep)
     lines += [*_paper_table(rep), *_accuracy(rep)]
-    lines += _estimator_table(rep) + _spread(rep) + _error_budget()
+    lines += _estimator_table(rep) + _spread(rep) + _error_budget(rep)
     lines += ["", "## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figures]
     return write_atomic(out / "report.md", "\n".join(lines) + "\n")
 
