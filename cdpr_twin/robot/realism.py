@@ -734,8 +734,11 @@ ACROBOT_FULL_OPTICS: dict[str, Any] = {
     "flicker_depth": 0.05,
     "flicker_hz": 100.0,
     "line_time": 3448 / 182.4e6,
+    "prnu_std": 0.007,
+    "dsnu_e": 0.0,
 }
-"""The ``acrobot_full`` profile's calibration correlations (``models/acrobot/README.md``)."""
+"""The ``acrobot_full`` profile's optics: calibration correlations, lens, light, shutter and
+pixels (``models/acrobot/README.md``)."""
 
 ACROBOT_FULL_DRIVE: dict[str, Any] = {
     "zero_error_std": 1e-5,
