@@ -30,6 +30,7 @@ import os
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -51,7 +52,7 @@ def variants() -> dict[str, Scenario]:
     full = base.with_realism("acrobot_full")
     optics = full.realism.optics
 
-    def with_optics(**fields: float) -> Scenario:
+    def with_optics(**fields: Any) -> Scenario:
         realism = replace(full.realism, optics=replace(optics, **fields))
         return replace(full, realism=realism)
 

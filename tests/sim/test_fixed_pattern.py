@@ -116,7 +116,7 @@ def test_the_pattern_is_the_robots_and_off_forms_the_old_frames(twin):
     ]
     try:
         a, b, other, off = cams
-        assert a._pattern is not None and other._pattern is not None
+        assert a._pattern is not None and b._pattern is not None and other._pattern is not None
         K = twin.nominal.intrinsics
         assert a._pattern[0].shape == (K.height, K.width)
         # same robot, another run: the same map; another robot: another map
