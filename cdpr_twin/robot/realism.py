@@ -49,8 +49,8 @@ gain): a non-positive draw is then a 10σ event; built and calibrated parts are 
 MAX_FULL_WELL_E = 1e30
 """The largest full well [e-] the float32 frame arithmetic holds without overflow."""
 MAX_DSNU_E = 1000.0
-"""The largest std of a pixel's dark offset [e-]: sensors' DSNU is a few electrons (EMVA 1288
-data sheets); 1000 e- is a tenth of a 10 ke- full well, a sensor that shows its own pattern."""
+"""The largest std of a pixel's dark offset [e-]: a tenth of a 10 ke- full well, 26 steps of an
+8-bit frame; a sensor that offset shows its own pattern in every frame, not the scene's."""
 MAX_LATENCY_TICKS = 100
 """The longest camera latency [control ticks] (4 s at 25 Hz)."""
 MAX_CENTER_ERROR_STD_PX = 20.0
@@ -386,7 +386,7 @@ class OpticsRealism:
             "dsnu_e",
             self.dsnu_e,
             MAX_DSNU_E,
-            " e- (sensors' pixel offsets differ by a few e-; larger is a defective sensor)",
+            " e- (a tenth of a 10 ke- well: the frame would show the sensor's own pattern)",
         )
         if self.flicker_depth > 1.0:
             raise OptionError(

@@ -125,7 +125,8 @@ def expose(
     fw = np.float32(full_well_e)
     e = np.clip(linear, 0.0, 1.0, dtype=np.float32)
     e *= fw
-    if pattern is not None:  # the pixel's gain scales its photo-electrons (and their shot noise)
+    if pattern is not None:
+        # the pixel's gain scales its photo-electrons, and so their shot noise
         e *= pattern[0]
     z = np.empty(e.shape, np.float32)
     cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))  # OpenCV's normal draws: 3× numpy's speed
@@ -138,7 +139,8 @@ def expose(
     low = e < POISSON_EXACT_BELOW
     if low.any():  # exact Poisson draws; z, independent of them, is the read noise there
         out[low] = rng.poisson(e[low]).astype(np.float32) + np.float32(read_noise_e) * z[low]
-    if pattern is not None:  # the dark offset adds to the charge before it is read out
+    if pattern is not None:
+        # the dark offset adds to the charge before it is read out (and rounded)
         out += pattern[1]
     out *= np.float32(1.0) / fw
     return encode(out, gamma, in_place=True)

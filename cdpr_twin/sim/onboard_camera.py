@@ -270,7 +270,8 @@ class OnboardCamera:
         )
         self._row_w: np.ndarray | None = None  # a rolling shutter's (canvas rows, K) weights
         self._pattern: tuple[np.ndarray, np.ndarray] | None = None
-        if o.fixed_pattern:  # per robot, from a stream of its own (the calibration's stays)
+        if o.fixed_pattern:
+            # per robot, from a stream of its own: the calibration's draws stay as they were
             robot_seq = robot_rng.bit_generator.seed_seq
             # a robot's generator comes from a seed: its bit generator holds a SeedSequence
             assert isinstance(robot_seq, np.random.SeedSequence)
