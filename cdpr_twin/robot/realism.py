@@ -13,7 +13,8 @@ Profiles: ``profile = "ideal"`` is the twin before realism, bit for bit; ``acrob
 - per robot (drawn from the truth seed, fixed across repetitions, like one physical robot):
   intrinsics calibration error (its parts drawn together with the correlations of
   ``[realism.optics]``), drum radius error, tension-sensor bias and gain, each rope's stiffness,
-  the pulleys' swivel tilts and sheave offsets;
+  the pulleys' swivel tilts and sheave offsets, the camera pixels' gains and dark offsets
+  (``[realism.optics] prnu_std``, ``dsnu_e``);
 - per run (drawn from the run seed): pixel noise, tension repeatability noise, the homing offset
   of the start pose, or each drum's zero error (``[realism.drive]``), the light's flicker
   phase.
@@ -47,6 +48,9 @@ MAX_RELATIVE_STD = 0.1
 gain): a non-positive draw is then a 10σ event; built and calibrated parts are within 1 %."""
 MAX_FULL_WELL_E = 1e30
 """The largest full well [e-] the float32 frame arithmetic holds without overflow."""
+MAX_DSNU_E = 1000.0
+"""The largest std of a pixel's dark offset [e-]: a tenth of a 10 ke- full well, 26 steps of an
+8-bit frame; a sensor that offset shows its own pattern in every frame, not the scene's."""
 MAX_LATENCY_TICKS = 100
 """The longest camera latency [control ticks] (4 s at 25 Hz)."""
 MAX_CENTER_ERROR_STD_PX = 20.0
@@ -339,6 +343,10 @@ class OpticsRealism:
             exposure, each row weighing them by its own window.
         jpeg_quality: the camera delivers each frame JPEG-compressed at this IJG quality
             (1–100; 0: uncompressed), as an MJPEG stream does.
+        prnu_std: photo-response non-uniformity: the relative std of each pixel's gain on its
+            signal electrons (EMVA 1288's PRNU; 0: every pixel alike). Drawn once per robot.
+        dsnu_e: dark-signal non-uniformity: the std of each pixel's offset [e⁻], added to its
+            electrons before the read noise (EMVA 1288's DSNU; 0: none). Drawn once per robot.
     """
 
     focal_correlation: float = option(0.0)
@@ -353,6 +361,8 @@ class OpticsRealism:
     flicker_hz: float = option(100.0, minimum=1.0, unit="Hz")
     line_time: float = option(0.0, minimum=0.0, unit="s")
     jpeg_quality: int = option(0, minimum=0)
+    prnu_std: float = option(0.0, minimum=0.0)
+    dsnu_e: float = option(0.0, minimum=0.0, unit="e-")
 
     def __post_init__(self) -> None:
         _check_correlation("focal_correlation", self.focal_correlation)
@@ -371,6 +381,13 @@ class OpticsRealism:
             )
         check_at_most("vignetting_power", self.vignetting_power, 10.0, " (cos⁴ is a thin lens's)")
         check_at_most("jpeg_quality", self.jpeg_quality, 100, " (the IJG scale runs 1–100)")
+        check_relative_std("prnu_std", self.prnu_std, "pixel's gain")
+        check_at_most(
+            "dsnu_e",
+            self.dsnu_e,
+            MAX_DSNU_E,
+            " e- (a tenth of a 10 ke- well: the frame would show the sensor's own pattern)",
+        )
         if self.flicker_depth > 1.0:
             raise OptionError(
                 "flicker_depth", f"must be ≤ 1 (light is ≥ 0), got {self.flicker_depth}"
@@ -384,14 +401,20 @@ class OpticsRealism:
 
     @property
     def forms(self) -> bool:
-        """Whether the lens, the light or the compression change the frame."""
+        """Whether the lens, the light, the pixels' pattern or the compression change the frame."""
         return bool(
             self.defocus
             or self.vignetting_power
             or self.flicker_depth
             or self.line_time
             or self.jpeg_quality
+            or self.fixed_pattern
         )
+
+    @property
+    def fixed_pattern(self) -> bool:
+        """Whether the pixels differ from each other in gain or offset."""
+        return bool(self.prnu_std or self.dsnu_e)
 
     def calibration_correlation(self) -> np.ndarray:
         """The correlation matrix of the errors of (fx, fy, cx, cy, k1, k2, p1, p2). Returns (8, 8).
@@ -711,8 +734,11 @@ ACROBOT_FULL_OPTICS: dict[str, Any] = {
     "flicker_depth": 0.05,
     "flicker_hz": 100.0,
     "line_time": 3448 / 182.4e6,
+    "prnu_std": 0.007,
+    "dsnu_e": 0.0,
 }
-"""The ``acrobot_full`` profile's calibration correlations (``models/acrobot/README.md``)."""
+"""The ``acrobot_full`` profile's optics: calibration correlations, lens, light, shutter and
+pixels (``models/acrobot/README.md``)."""
 
 ACROBOT_FULL_DRIVE: dict[str, Any] = {
     "zero_error_std": 1e-5,

@@ -10,7 +10,8 @@ renders the way the light reaches the sensor:
 2. :func:`average`: motion blur, the mean of sub-frames rendered during the exposure;
 3. :func:`distort`: the lens, a Brown–Conrady distortion applied by a remap;
 4. :func:`expose`: photo-electrons with shot and read noise, the encoding gamma and 8-bit
-   quantisation (or :func:`encode` for a noise-free sensor).
+   quantisation (or :func:`encode` for a noise-free sensor); each pixel's own gain and dark
+   offset (:func:`fixed_pattern`, the sensor's fixed-pattern noise) act on its electrons.
 
 Pixel coordinates follow OpenCV (the centre of the top-left pixel is (0, 0)).
 """
@@ -97,14 +98,16 @@ def expose(
     read_noise_e: float,
     gamma: float,
     rng: np.random.Generator,
+    pattern: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """A noisy 8-bit frame: photo-electrons, shot and read noise, gamma, quantisation.
 
-    Each pixel collects ``e = L · full_well_e`` electrons on average (L = 1 fills the well: the
-    render's brightest level saturates), draws shot noise (Poisson; its normal limit above
-    :data:`POISSON_EXACT_BELOW`) and Gaussian read noise, and is read out as
-    ``round(255 · clip(e'/full_well_e, 0, 1)^γ)``. Its std is then, to first order,
-    ``σ_DN² = (dDN/de)² (e + read²) + 1/12`` (the last term: 8-bit rounding).
+    Each pixel collects ``e = g · L · full_well_e`` electrons on average (L = 1 fills the well:
+    the render's brightest level saturates; g its gain, 1 without a ``pattern``), draws shot
+    noise (Poisson; its normal limit above :data:`POISSON_EXACT_BELOW`), adds its dark offset
+    d and Gaussian read noise, and is read out as ``round(255 · clip(e'/full_well_e, 0, 1)^γ)``.
+    Its std is then, to first order, ``σ_DN² = (dDN/de)² (e + read²) + 1/12`` (the last term:
+    8-bit rounding), its mean ``255 · ((g·L·FW + d)/FW)^γ``.
 
     Args:
         linear: (H, W) float32 linear luminance in 0…1.
@@ -113,6 +116,8 @@ def expose(
         gamma: the encoding gamma γ.
         rng: the run's generator (it draws the Poisson counts, and seeds OpenCV's generator
             for the normal ones).
+        pattern: the sensor's fixed pattern, (H, W) float32 gains g and (H, W) float32 dark
+            offsets d [e⁻] (:func:`fixed_pattern`); ``None``: every pixel alike.
 
     Returns:
         (H, W) uint8.
@@ -120,6 +125,9 @@ def expose(
     fw = np.float32(full_well_e)
     e = np.clip(linear, 0.0, 1.0, dtype=np.float32)
     e *= fw
+    if pattern is not None:
+        # the pixel's gain scales its photo-electrons, and so their shot noise
+        e *= pattern[0]
     z = np.empty(e.shape, np.float32)
     cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))  # OpenCV's normal draws: 3× numpy's speed
     # (OpenCV's stubs omit the scalar form of mean and stddev, which it documents)
@@ -131,8 +139,54 @@ def expose(
     low = e < POISSON_EXACT_BELOW
     if low.any():  # exact Poisson draws; z, independent of them, is the read noise there
         out[low] = rng.poisson(e[low]).astype(np.float32) + np.float32(read_noise_e) * z[low]
+    if pattern is not None:
+        # the dark offset adds to the charge before it is read out (and rounded)
+        out += pattern[1]
     out *= np.float32(1.0) / fw
     return encode(out, gamma, in_place=True)
+
+
+def fixed_pattern(
+    shape: tuple[int, int], prnu_std: float, dsnu_e: float, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """A sensor's fixed-pattern noise: each pixel's gain and dark offset, drawn once.
+
+    Two (H, W) standard normal fields z₁, z₂ are drawn, in that order, whatever the
+    magnitudes (a map stays the same when the other is switched off): gains
+    ``g = 1 + prnu_std · z₁`` (EMVA 1288's PRNU, a relative std) and dark offsets
+    ``d = dsnu_e · z₂`` [e⁻] (its DSNU), about the black level the sensor's clamp subtracts.
+
+    Args:
+        shape: (H, W) of the sensor.
+        prnu_std: relative std of the gains.
+        dsnu_e: std of the dark offsets [e⁻].
+        rng: the robot's generator (a sensor's pattern is its own, the same in every run).
+
+    Returns:
+        (H, W) float32 gains and (H, W) float32 offsets [e⁻].
+    """
+    z = rng.standard_normal((2, *shape))
+    gain = (1.0 + prnu_std * z[0]).astype(np.float32)
+    return gain, (dsnu_e * z[1]).astype(np.float32)
+
+
+def apply_pattern(
+    linear: np.ndarray, pattern: tuple[np.ndarray, np.ndarray], full_well_e: float
+) -> np.ndarray:
+    """A noise-free sensor's mean signal with its fixed pattern: ``g·L + d/FW`` (0…1 scale).
+
+    Args:
+        linear: (H, W) float32 linear luminance (the fraction of the full well).
+        pattern: gains and offsets [e⁻] (:func:`fixed_pattern`).
+        full_well_e: electrons at full scale [e⁻].
+
+    Returns:
+        (H, W) float32.
+    """
+    out = np.clip(linear, 0.0, 1.0, dtype=np.float32)
+    out *= pattern[0]
+    out += pattern[1] * np.float32(1.0 / full_well_e)
+    return out
 
 
 def jpeg(gray: np.ndarray, quality: int) -> np.ndarray:

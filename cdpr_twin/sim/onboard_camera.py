@@ -19,6 +19,8 @@ monochrome camera forms it (:mod:`cdpr_twin.sim.imaging`):
   samples, as a sensor pixel integrates the light over its area (a point-sampled render
   aliases edges narrower than a pixel);
 - sensor noise: shot and read noise in electrons, the encoding gamma, 8-bit quantisation;
+  each pixel's own gain (PRNU) and dark offset (DSNU), drawn once per robot
+  (``[realism.optics] prnu_std``, ``dsnu_e``), act on its electrons;
 - the detector uses the robot's *calibrated* intrinsics and distortion (true values plus a
   per-robot calibration error), not the true ones;
 - latency: the frame (and tag) delivered at a read is the one exposed ``latency_ticks`` reads
@@ -205,7 +207,8 @@ class OnboardCamera:
             equal to the true, rendered ones in this model).
         tag_size: the tag's edge the detector assumes [m].
         realism: the camera's imperfections.
-        robot_rng: the per-robot generator (calibration errors).
+        robot_rng: the per-robot generator (calibration errors; the pixels' fixed pattern
+            from a stream spawned from its seed).
         run_rng: the run's generator (pixel noise).
         period: the time between reads [s] (the control period); needed for motion blur
             (``exposure_s > 0``), whose sub-frames are recorded while the physics steps towards
@@ -266,6 +269,19 @@ class OnboardCamera:
             else None
         )
         self._row_w: np.ndarray | None = None  # a rolling shutter's (canvas rows, K) weights
+        self._pattern: tuple[np.ndarray, np.ndarray] | None = None
+        if o.fixed_pattern:
+            # per robot, from a stream of its own: the calibration's draws stay as they were
+            robot_seq = robot_rng.bit_generator.seed_seq
+            # a robot's generator comes from a seed: its bit generator holds a SeedSequence
+            assert isinstance(robot_seq, np.random.SeedSequence)
+            K = self.true_intrinsics
+            self._pattern = imaging.fixed_pattern(
+                (K.height, K.width),
+                o.prnu_std,
+                o.dsnu_e,
+                np.random.default_rng(robot_seq.spawn(1)[0]),
+            )
         self._flicker_phase = 0.0
         if o.flicker_depth:  # per run, from a stream of its own (the noise's stays as it was)
             spawned = np.random.default_rng(seed_seq.spawn(1)[0])
@@ -417,8 +433,12 @@ class OnboardCamera:
             linear += np.float32(r.black_level)
         if r.noise:
             rng = self.run_rng if rng is None else rng
-            gray = imaging.expose(linear, r.full_well_e, r.read_noise_e, r.gamma, rng)
+            gray = imaging.expose(
+                linear, r.full_well_e, r.read_noise_e, r.gamma, rng, self._pattern
+            )
         else:
+            if self._pattern is not None:
+                linear = imaging.apply_pattern(linear, self._pattern, r.full_well_e)
             gray = imaging.encode(linear, r.gamma)
         if self.optics.jpeg_quality:  # the frame as the camera's encoder delivers it
             gray = imaging.jpeg(gray, self.optics.jpeg_quality)
