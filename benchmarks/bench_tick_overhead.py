@@ -42,6 +42,8 @@ def measure() -> dict[str, float]:
         run(s, Path(tmp) / "warm-up")
         result = run(s, Path(tmp) / "run")
     ticks = int(result.summary["ticks_recorded"])
+    # bench_scenarios.physics_only's loop, kept here: that module imports what an older
+    # revision's package may not have
     with Twin(
         s.model.file,
         deviations=s.truth,

@@ -22,17 +22,11 @@ from pathlib import Path
 import pandas as pd
 from matplotlib.figure import Figure
 
+from cdpr_twin.estimators import EXTRA_ESTIMATORS, PAPER_ESTIMATORS
+
 ROOT = Path(__file__).resolve().parents[1]
 CAMPAIGN = ROOT / "campaigns" / "error_budget.toml"
-ESTIMATORS = (
-    "control",
-    "image",
-    "model_simple",
-    "model_elastic",
-    "model_pulley",
-    "model_elastic_pulley",
-    "fused",
-)
+ESTIMATORS = (*PAPER_ESTIMATORS, *EXTRA_ESTIMATORS)
 
 
 EFFECTS = {
