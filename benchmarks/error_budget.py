@@ -50,6 +50,8 @@ EFFECTS = {
     "vignetting_power": "vignetting",
     "flicker_depth": "light flicker",
     "line_time": "rolling shutter",
+    "prnu_std": "pixels' fixed pattern",
+    "jpeg_quality": "JPEG compression",
 }
 """Each ``+`` row's name, by the field that switches its effect on."""
 

@@ -791,16 +791,41 @@ def profile(name: str, **parts: dict[str, Any]) -> Realism:
     """
     if name not in PROFILES:
         raise ValueError(f"unknown realism profile {name!r}; choose one of {', '.join(PROFILES)}")
-    base = {"acrobot": ACROBOT, "acrobot_full": ACROBOT_FULL}.get(name, {})
     out = Realism(profile=name)
-    for part, cls in PARTS.items():
-        values = {**base.get(part, {}), **parts.get(part, {})}
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"realism.{part}: unknown field {unknown[0]!r}")
-        out = replace(out, **{part: cls(**values)})
+    for part in PARTS:
+        out = replace(out, **{part: profile_part(name, part, **parts.get(part, {}))})
+    _check_one_homing(out)
     return out
+
+
+def profile_part(name: str, part: str, **values: Any) -> Any:
+    """One part of a named profile with some of its fields overridden (SI units).
+
+    Raises:
+        ValueError: for an unknown field, or a value out of its bounds (naming it).
+    """
+    base = {"acrobot": ACROBOT, "acrobot_full": ACROBOT_FULL}.get(name, {})
+    cls = PARTS[part]
+    values = {**base.get(part, {}), **values}
+    unknown = sorted(set(values) - {f.name for f in fields(cls)})
+    if unknown:
+        raise ValueError(f"realism.{part}: unknown field {unknown[0]!r}")
+    return cls(**values)
+
+
+def _check_one_homing(realism: Realism) -> None:
+    """A run starts from one homing: drums zeroed on their own, or the pose's rigid offset.
+
+    Raises:
+        OptionError: naming ``realism.drive.zero_error_std``.
+    """
+    homing = realism.homing.position_std > 0.0 or realism.homing.rotation_std > 0.0
+    if realism.drive.zero_error_std > 0.0 and homing:
+        raise OptionError(
+            "realism.drive.zero_error_std",
+            "each drum homed on its own replaces the rigid homing offset of the pose; "
+            "set [realism.homing] position_std and rotation_std_deg to 0",
+        )
 
 
 _STREAMS = {
@@ -861,7 +886,9 @@ def without_source(realism: Realism, source: str) -> Realism:
     if source == "pixel_noise":
         return replace(realism, camera=replace(realism.camera, noise=False))
     if source == "homing":
-        return replace(realism, homing=HomingRealism())
+        # the homing is the pose offset's, or each drum's zero when drums are homed on their own
+        drive = replace(realism.drive, zero_error_std=0.0)
+        return replace(realism, homing=HomingRealism(), drive=drive)
     if source == "tension_noise":
         return replace(realism, tension=replace(realism.tension, noise_std=0.0))
     raise ValueError(f"unknown source of variation {source!r}; choose one of {RUN_SOURCES}")

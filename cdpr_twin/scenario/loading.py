@@ -43,6 +43,7 @@ from cdpr_twin.robot.realism import (
     check_at_most,
     check_relative_std,
     profile,
+    profile_part,
     without_source,
 )
 from cdpr_twin.robot.schema import MAX_TIMESTEP, MIN_TIMESTEP
@@ -118,11 +119,14 @@ def read_realism(top: OptionReader) -> Realism:
             build_options(t, cls, functools.partial(_one_part, name, part), v)  # names a bad field
             values[part] = v
     r.done(tuple(PARTS))
-    return profile(name, **values)
+    try:
+        return profile(name, **values)
+    except OptionError as exc:  # a rule across the parts (each part's own are checked above)
+        raise r.fail(exc.field.removeprefix("realism."), exc.problem) from None
 
 
-def _one_part(name: str, part: str, **values: Any) -> Realism:
-    return profile(name, **{part: values})
+def _one_part(name: str, part: str, **values: Any) -> Any:
+    return profile_part(name, part, **values)
 
 
 def read_plugins(top: OptionReader) -> tuple[str, ...]:

@@ -427,10 +427,11 @@ class OnboardCamera:
             linear = imaging.distort(linear, self._maps)
         if r.supersample > 1:
             linear = imaging.integrate_pixels(linear, r.supersample)
-        linear = self._lens_and_light(linear, *scene)
         if (r.black_level, r.white_level) != (0.0, 1.0):  # the scene's exposure levels
             linear *= np.float32(r.white_level - r.black_level)  # in place: b + (w − b)·L
             linear += np.float32(r.black_level)
+        # the lamp and the lens act on all the light of the scene, the ink's black included
+        linear = self._lens_and_light(linear, *scene)
         if r.noise:
             rng = self.run_rng if rng is None else rng
             gray = imaging.expose(

@@ -94,6 +94,7 @@ class Physics:
                 "realism.drive.friction_rate",
                 "needs a velocity loop of finite gain: set [realism.winch] bandwidth_hz",
             )
+        self._check_winding(model)
         self._drums: Drums | None = None  # (set_drum_radii builds them when the drive has any)
         rng = robot_rng(robot_seed, "winch")  # per robot; the encoders read the same radii
         self.drum_radius_true = winch_mod.draw_drum_radii(self.winch, rng, self.n_cables)
@@ -228,6 +229,25 @@ class Physics:
     def add_hook(self, hook: StepHook) -> None:
         """Let ``hook`` act between physics steps (stepping stops at its times)."""
         self._hooks.append(hook)
+
+    def _check_winding(self, model: mujoco.MjModel) -> None:
+        """Refuse a winding compliance that would shrink a drum by 10 % at the tension ceiling.
+
+        Raises:
+            OptionError: naming ``realism.drive.winding_compliance``.
+        """
+        kappa = self.drive.winding_compliance
+        found = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "cable_tension_range")
+        if not kappa or found < 0:
+            return
+        tau_max = float(numeric(model, "cable_tension_range")[1])
+        if kappa * tau_max >= 0.1:
+            raise OptionError(
+                "realism.drive.winding_compliance",
+                f"{kappa:g} /N shrinks the drum by {100 * kappa * tau_max:.0f} % at this "
+                f"robot's {tau_max:g} N ceiling (measured: 0.3–1.2 %); keep it below "
+                f"{0.1 / tau_max:.3g} /N",
+            )
 
     def set_drum_radii(self, radii: np.ndarray) -> None:
         """Set the drives and encoders to these drum radii (m,) [m] (the software's belief)."""

@@ -297,3 +297,20 @@ def test_the_relative_std_bound_keeps_negative_draws_beyond_10_sigma():
     with pytest.raises(OptionError, match=r"once in 20\.9 robots"):  # P(z < −1/0.6) = 0.0478
         WinchRealism(drum_radius_error_std=0.6)
     assert 0.5 * math.erfc(1 / MAX_RELATIVE_STD / math.sqrt(2)) < 1e-22
+
+
+def test_a_run_starts_from_one_homing_drums_or_pose_offset():
+    """Drums zeroed on their own replace the rigid pose offset: both at once are refused."""
+    with pytest.raises(OptionError) as err:
+        rl.profile("acrobot", drive={"zero_error_std": 1e-5})
+    assert "zero_error_std" in str(err.value) and "\n" not in str(err.value)
+    off = {"position_std": 0.0, "rotation_std": 0.0}
+    by_drums = rl.profile("acrobot", drive={"zero_error_std": 1e-5}, homing=off)
+    assert by_drums.drive.zero_error_std == 1e-5
+
+
+def test_without_homing_the_full_profiles_drums_are_zeroed_exactly():
+    full = rl.profile("acrobot_full")
+    assert full.drive.zero_error_std > 0.0
+    exact = rl.without_source(full, "homing")
+    assert exact.drive.zero_error_std == 0.0 and exact.homing.position_std == 0.0

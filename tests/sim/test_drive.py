@@ -152,3 +152,20 @@ def test_the_full_profile_winds_the_drums_and_acrobot_does_not():
     assert full.drive.drums and not acro.drive.drums and acro.drive == DriveRealism()
     p = _physics(full.drive, full.winch).physics
     assert p.motor_positions is not None
+
+
+def test_a_winding_compliance_that_would_shrink_the_drum_by_a_tenth_is_refused():
+    """r(τ) = r′(1 − κτ): at CoGiRo's 5 kN ceiling κ = 2e-4 /N winds on no radius at all."""
+    import tomllib
+
+    from cdpr_twin.resources import robot_description
+
+    description = robot_description("cogiro")
+    scene = description.parent / "scene.xml"
+    tau_max = tomllib.loads(description.read_text())["winches"]["tension_range_n"][1]
+    kappa = 2e-4
+    assert kappa * tau_max >= 1.0  # the radius this κ would give is ≤ 0
+    with pytest.raises(OptionError) as err:
+        build_robot(scene, drive=DriveRealism(winding_compliance=kappa))
+    message = str(err.value)
+    assert "realism.drive.winding_compliance" in message and "\n" not in message
