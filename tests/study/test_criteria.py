@@ -89,6 +89,59 @@ def test_verdicts_follow_the_pinned_thresholds():
     _check(CRITERIA_FILE)
 
 
+SHARE_BOUNDS = {"agrees_above": 0.5, "disagrees_below": 0.5, "confidence": 0.95}
+"""The verdict's bounds on the share of robots, and the intervals' level, as pinned."""
+
+
+def _pinned_verdict(k: int, n: int) -> str:
+    """The verdict of k robots of n holding, from SciPy's beta quantiles (Clopper–Pearson)."""
+    from scipy.stats import beta
+
+    alpha = 1.0 - SHARE_BOUNDS["confidence"]
+    low = beta.ppf(alpha / 2, k, n - k + 1) if k > 0 else 0.0
+    high = beta.ppf(1 - alpha / 2, k + 1, n - k) if k < n else 1.0
+    if low > SHARE_BOUNDS["agrees_above"]:
+        return AGREES
+    if high < SHARE_BOUNDS["disagrees_below"]:
+        return DISAGREES
+    return INCONCLUSIVE
+
+
+def _check_shares(path) -> None:
+    """Every judged rule of ``path`` turns k of 50 robots into the pinned verdict, k = 0…50.
+
+    At 95 % and 0.5 the verdict turns at 33/50 (lower bound 0.512; 32/50: 0.492) and 17/50:
+    any change of ``agrees_above``, ``disagrees_below`` or ``confidence`` moves a turn.
+    """
+    for rule in load_criteria(path).values():
+        if not rule.judged:
+            continue
+        low, high = PINNED[rule.id]
+        low = -math.inf if low is None else low
+        high = math.inf if high is None else high
+        (inside, *_), (outside, *_) = _probes(low, high)
+        for k in range(N + 1):
+            verdict = judge(rule, [inside] * k + [outside] * (N - k)).verdict
+            assert verdict == _pinned_verdict(k, N), (rule.id, k)
+
+
+def test_verdicts_follow_the_pinned_share_bounds():
+    _check_shares(CRITERIA_FILE)
+
+
+@pytest.mark.parametrize(
+    ("field", "new"), [("agrees_above", "0.75"), ("disagrees_below", "0.25"), ("confidence", "0.8")]
+)
+def test_a_changed_share_bound_fails_the_pinned_test(tmp_path, field, new):
+    text = CRITERIA_FILE.read_text(encoding="utf-8")
+    changed = re.sub(rf"\n{field} = [0-9.]+", f"\n{field} = {new}", text, count=1)
+    assert changed != text
+    mutant = tmp_path / "criteria.toml"
+    mutant.write_text(changed, encoding="utf-8")
+    with pytest.raises(AssertionError):
+        _check_shares(mutant)
+
+
 def test_every_judged_rule_is_pinned():
     judged = {r.id for r in load_criteria().values() if r.judged}
     assert judged == set(PINNED)
