@@ -106,6 +106,8 @@ class Verdict:
         interval: the share's exact interval (``rule.confidence``, e.g. 95 %).
         verdict: :data:`AGREES`, :data:`DISAGREES`, :data:`INCONCLUSIVE` or :data:`NOT_JUDGED`.
         median: the metric's median over the robots.
+        missing: robots of the population without the metric (a run a fault stopped, or a
+            metric undefined on it): in neither ``k`` nor ``n``.
     """
 
     rule: Rule
@@ -115,6 +117,7 @@ class Verdict:
     interval: tuple[float, float]
     verdict: str
     median: float
+    missing: int = 0
 
 
 def _number(path: Path, where: str, table: dict, field: str, default: float) -> float:
@@ -221,6 +224,7 @@ def share_interval(k: int, n: int, confidence: float) -> tuple[float, float]:
 def judge(rule: Rule, values: Sequence[float] | np.ndarray) -> Verdict:
     """The verdict of a rule over a population's metric values (one per robot; NaN: none)."""
     v = np.asarray(values, dtype=float)
+    missing = int(np.count_nonzero(np.isnan(v)))
     v = v[~np.isnan(v)]
     n = len(v)
     k = int(np.count_nonzero(holds(rule, v)))
@@ -235,4 +239,4 @@ def judge(rule: Rule, values: Sequence[float] | np.ndarray) -> Verdict:
         verdict = DISAGREES
     else:
         verdict = INCONCLUSIVE
-    return Verdict(rule, n, k, share, (low, high), verdict, median)
+    return Verdict(rule, n, k, share, (low, high), verdict, median, missing)

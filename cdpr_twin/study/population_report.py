@@ -19,10 +19,12 @@ ENTRY = "cdpr_twin/study/criteria.toml"
 
 
 def _share(v: Verdict) -> str:
+    # robots without the metric (a fault stopped the run) are in neither k nor n: say how many
+    lacking = f" ({v.missing} without a value)" if v.missing else ""
     if not v.n:
-        return "no robots"
+        return "no robots" + lacking
     low, high = v.interval
-    return f"{v.k}/{v.n} = {v.share * 100:.0f} % [{low * 100:.0f}, {high * 100:.0f}] %"
+    return f"{v.k}/{v.n} = {v.share * 100:.0f} % [{low * 100:.0f}, {high * 100:.0f}] %{lacking}"
 
 
 def _number(x: float) -> str:
@@ -60,8 +62,10 @@ def verdict_table(pop: dict, illustration: dict) -> list[str]:
         "robot; *share* the robots on which it holds, with its exact 95 % interval "
         "(Clopper–Pearson); the verdict is **agrees** when the whole interval lies above the "
         "entry's `agrees_above`, **disagrees** when it lies below `disagrees_below`, "
-        "**inconclusive** otherwise. *Robot 19* is the study's illustration robot (chosen, for "
-        "its ≈ 1 cm miss): its value and its percentile in the population.",
+        "**inconclusive** otherwise. A robot without a value (its run stopped by a fault, such "
+        "as fewer than six taut cables, or the metric undefined on it) counts in neither the "
+        "share nor its robots; the cell says how many. *Robot 19* is the study's illustration "
+        "robot (chosen, for its ≈ 1 cm miss): its value and its percentile in the population.",
         "",
         *_convergence(blocks),
         "| finding | paper | population | holds on one robot | share [95 %] | median | verdict |"

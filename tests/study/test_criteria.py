@@ -180,7 +180,7 @@ def test_share_interval_is_clopper_pearson():
 def test_missing_values_are_not_robots():
     rule = load_criteria()["open_loop_miss"]
     v = judge(rule, [0.01] * 10 + [math.nan] * 5)
-    assert (v.n, v.k) == (10, 10)
+    assert (v.n, v.k, v.missing) == (10, 10, 5)
 
 
 def test_bad_entry_is_one_line_naming_the_field(tmp_path):
@@ -351,7 +351,7 @@ def test_nees_of_errors_drawn_from_the_covariance_is_chi2():
     assert np.allclose(axes.mean(axis=0), 1.0, atol=0.25)
 
 
-def _run(seed: int, x: float) -> dict:
+def _run(seed: int, x: float | None) -> dict:
     return {"truth_seed": seed, "seed": 0, "ok": True, "open_loop_miss_m": x}
 
 
@@ -433,3 +433,12 @@ def test_accuracy_ratios_pair_each_robot_with_its_own_open_loop_run():
     assert by_seed[1]["accuracy_ratio_t"] == pytest.approx(10.0)
     assert by_seed[1]["accuracy_ratio_r"] == pytest.approx(4.0)
     assert by_seed[2]["accuracy_ratio_t"] == pytest.approx(2.0)
+
+
+def test_a_cell_says_how_many_robots_had_no_value():
+    rule = load_criteria()["open_loop_miss"]
+    runs = [_run(i, 0.01) for i in range(46)] + [_run(i, None) for i in range(46, 50)]
+    verdict = judge(rule, population.values(runs, rule.metric))
+    pop = {"blocks": {rule.population: runs}, "verdicts": [verdict]}
+    (row,) = [ln for ln in population_report.verdict_table(pop, {}) if "`open_loop_miss`" in ln]
+    assert "46/46 = 100 %" in row and "(4 without a value)" in row
