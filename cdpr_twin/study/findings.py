@@ -390,12 +390,20 @@ def repeatability(rep: dict, crit: Criteria) -> Finding | None:
             + ". Per-robot errors (geometry, calibration, drum radii, sensor bias) move every "
             "repetition alike: they set the mean, not the spread."
         )
-    else:
+    elif rep.get("realism", {}).get("profile", "ideal") == "ideal":
         why = (
             "with the ideal profile the only thing that changes between repetitions is the "
             "tension-sensor noise, which the open-loop robot never reads and PBVS never sees, "
             "so runs repeat to micrometres; a realism profile (e.g. acrobot) adds pixel noise "
             "and homing."
+        )
+    else:
+        why = (
+            "what changes between repetitions on one robot is the per-run noise of the "
+            f"{rep['realism']['profile']} profile (homing, pixel and tension noise); these runs "
+            "do not separate its sources (`--decompose` does), and their few repetitions give "
+            "the spread no useful interval: the population's repetitions, 30 per robot with "
+            "each source switched off in turn, give both."
         )
     criterion, verdict = _criterion(crit, repeatability=None)
     return Finding(
@@ -521,12 +529,12 @@ def _rotation_reference(rep: dict, name: str) -> str:
         " Every measurement the filter fuses is relative to the start: the encoders are homed "
         "there and the tag is anchored at its first detection from the filter's own pose, so "
         "none tells it the homing offset's rotation, which the control estimate keeps as it is. "
-        f"Over the runs its rotation is no better than control's ({', '.join(rows)}, control "
-        "RMS / fused RMS). The filter's rotation is as uncertain as the geometry and "
-        "calibration errors the robot's tolerances allow, and it weighs its sensors by that; "
-        "the study has one robot, whose control and cable-based estimates happen to keep "
-        "their rotation error small. Robot by robot, over 20 robots built to the same "
-        "tolerances: "
+        f"Over these runs control's rotation RMS over the filter's is {', '.join(rows)} "
+        "(above 1: the filter's is smaller). The filter's rotation is as uncertain as the "
+        "geometry and calibration errors the robot's tolerances allow, and it weighs its "
+        "sensors by that; these runs are of one robot, whose control and cable-based "
+        "estimates may keep their rotation error small or not. Robot by robot: the verdicts "
+        "over populations above, and over 20 robots built to the same tolerances "
         "campaigns/estimators_over_robots.toml (its report: "
         "docs/estimators_over_robots/report.md)."
     )
