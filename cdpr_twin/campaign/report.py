@@ -123,6 +123,8 @@ def attribution(X: np.ndarray, Y: np.ndarray, m: int) -> tuple[dict[str, float],
 
 ATTRIBUTION_RESAMPLES = 400
 """Bootstrap resamples of the robots behind each variance share's interval."""
+NULL_SHUFFLES = 100
+"""Shuffles of a group's draws behind its share's no-effect quantile."""
 
 
 def attribution_intervals(
@@ -308,27 +310,64 @@ def _attribution_section(campaign: Campaign, rows: list[dict]) -> list[str]:
     return lines
 
 
+def attribution_nulls(
+    X: np.ndarray, Y: np.ndarray, m: int, confidence: float = 0.95, seed: int = 0
+) -> dict[str, float]:
+    """Each group's share when it cannot matter: the ``confidence`` quantile under permutation.
+
+    A share is a variance, never below 0, and a fit lends every group some of the noise (about
+    its columns / n of the unexplained variance): a small share is told apart from no effect
+    only above what the same group gets with its rows shuffled across the robots (its draws
+    kept, their link to the error broken), refitted ``NULL_SHUFFLES`` times.
+
+    Returns:
+        ``{group: share quantile}`` (NaN for a group the runs share).
+    """
+    rng = np.random.default_rng(seed)
+    sizes = (3 * m, 3 * m, m, m, 6, 6, m, 6)
+    out, start = {}, 0
+    for g, size in zip(GROUPS, sizes, strict=True):
+        cols = slice(start, start + size)
+        start += size
+        if not np.any(np.ptp(X[:, cols], axis=0) > 0.0):
+            out[g] = math.nan
+            continue
+        draws = []
+        for _ in range(NULL_SHUFFLES):
+            Xp = X.copy()
+            Xp[:, cols] = X[rng.permutation(len(X)), cols]
+            draws.append(attribution(Xp, Y, m)[0][g])
+        out[g] = float(np.quantile(draws, confidence))
+    return out
+
+
 def _attribution(tasks: dict, rows: list[dict], title: str) -> list[str]:
     X, Y = deviation_matrix(tasks, rows), _miss_vectors(rows)
     m = len(json.loads(rows[0]["summary"])["final_tensions_n"])
     shares, r2 = attribution(X, Y, m)
     ci = attribution_intervals(X, Y, m)
+    null = attribution_nulls(X, Y, m)
     lines = [
         f"## Which calibration error drives the error at p1{title}",
         "",
         f"Linear least squares of the 3-D error at the first checkpoint on the {X.shape[1]} "
         f"drawn deviations of each of the {len(rows)} robots (R² = {r2:.3f}); each group's "
         "share of the error's variance, with its 95 % bootstrap interval (the robots resampled "
-        f"{ATTRIBUTION_RESAMPLES} times):",
+        f"{ATTRIBUTION_RESAMPLES} times). A share is never below 0 and the fit lends every "
+        "group some noise: a share at or below what the group gets with its draws shuffled "
+        f"across the robots (the 95 % quantile of {NULL_SHUFFLES} shuffles) is *not told "
+        "apart from 0*.",
         "",
-        "| deviation group | share of variance | 95 % interval |",
-        "|---|---|---|",
+        "| deviation group | share of variance | 95 % interval | shuffled, 95 % |",
+        "|---|---|---|---|",
     ]
     varied = {g: s for g, s in shares.items() if not math.isnan(s)}
-    lines += [
-        f"| {g} | {100 * s:.1f} % | [{100 * ci[g][0]:.1f}, {100 * ci[g][1]:.1f}] % |"
-        for g, s in sorted(varied.items(), key=lambda kv: -kv[1])
-    ]
+    for g, share in sorted(varied.items(), key=lambda kv: -kv[1]):
+        mark = " *not told apart from 0*" if share <= null[g] else ""
+        lines.append(
+            f"| {g} | {100 * share:.1f} %{mark} | [{100 * ci[g][0]:.1f}, {100 * ci[g][1]:.1f}] % "
+            f"| {100 * null[g]:.2f} % |"
+        )
     if same := [g for g in shares if g not in varied]:
         lines += ["", f"The same in every run (no share): {', '.join(same)}."]
     return [*lines, ""]

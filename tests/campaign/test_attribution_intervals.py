@@ -7,7 +7,7 @@ noise, both unit variance per axis), so the exit points' share of the variance i
 
 import numpy as np
 
-from cdpr_twin.campaign.report import GROUPS, attribution, attribution_intervals
+from cdpr_twin.campaign.report import GROUPS, attribution, attribution_intervals, attribution_nulls
 
 M = 1
 """Cables: 9m + 18 = 27 deviation columns."""
@@ -37,3 +37,17 @@ def test_a_group_shared_by_every_run_has_no_interval():
     X[:, -6:] = 0.0  # the homing offset the same in every run
     low, high = attribution_intervals(X, Y, M)["homing offset"]
     assert np.isnan(low) and np.isnan(high)
+
+
+def test_only_a_group_that_matters_is_told_apart_from_no_effect():
+    # the exit points carry half the variance; the others none: their shares are fitted noise,
+    # about columns / n of the unexplained half (3/300 · 0.5 = 0.005 for 3 columns)
+    X, Y = _population()
+    shares, _ = attribution(X, Y, M)
+    null = attribution_nulls(X, Y, M)
+    assert shares["exit points"] > 10 * null["exit points"]
+    for g in GROUPS[1:]:
+        assert 0.0 < null[g] < 0.05, g
+    told = [g for g in GROUPS[1:] if shares[g] > null[g]]
+    # a 95 % quantile: one null group of seven may exceed it by chance, not most
+    assert len(told) <= 1, told
