@@ -100,23 +100,28 @@ def deviation_matrix(tasks: dict, rows: list[dict]) -> np.ndarray:
     return np.array(out)
 
 
+def group_columns(m: int) -> dict[str, slice]:
+    """Each deviation group's columns of :func:`deviation_matrix` (m cables), in its order."""
+    sizes = (3 * m, 3 * m, m, m, 6, 6, m, 6)
+    ends = np.cumsum(sizes)
+    return {g: slice(int(e - n), int(e)) for g, n, e in zip(GROUPS, sizes, ends, strict=True)}
+
+
 def attribution(X: np.ndarray, Y: np.ndarray, m: int) -> tuple[dict[str, float], float]:
     """Variance shares of each deviation group in a linear fit of ``Y`` (n, 3) on ``X``.
 
     Returns:
         ``({group: share}, R²)``; shares of the total variance of ``Y`` (summed over axes).
     """
-    sizes = (3 * m, 3 * m, m, m, 6, 6, m, 6)
     Xc, Yc = X - X.mean(axis=0), Y - Y.mean(axis=0)
     beta, *_ = np.linalg.lstsq(Xc, Yc, rcond=None)
     total = float(np.sum(Yc.var(axis=0)))
-    shares, start = {}, 0
-    for name, size in zip(GROUPS, sizes, strict=True):
-        part = Xc[:, start : start + size] @ beta[start : start + size]
-        varied = np.any(np.ptp(X[:, start : start + size], axis=0) > 0.0)
+    shares = {}
+    for name, cols in group_columns(m).items():
+        part = Xc[:, cols] @ beta[cols]
+        varied = np.any(np.ptp(X[:, cols], axis=0) > 0.0)
         # a group the runs share (e.g. one homing offset for all) has no share: NaN
         shares[name] = float(np.sum(part.var(axis=0)) / total) if total > 0 and varied else math.nan
-        start += size
     residual = Yc - Xc @ beta
     return shares, 1.0 - float(np.sum(residual.var(axis=0)) / total) if total > 0 else math.nan
 
@@ -324,11 +329,8 @@ def attribution_nulls(
         ``{group: share quantile}`` (NaN for a group the runs share).
     """
     rng = np.random.default_rng(seed)
-    sizes = (3 * m, 3 * m, m, m, 6, 6, m, 6)
-    out, start = {}, 0
-    for g, size in zip(GROUPS, sizes, strict=True):
-        cols = slice(start, start + size)
-        start += size
+    out = {}
+    for g, cols in group_columns(m).items():
         if not np.any(np.ptp(X[:, cols], axis=0) > 0.0):
             out[g] = math.nan
             continue

@@ -40,6 +40,7 @@ from cdpr_twin.sim.model import (
     anchor_site,
     as_slice,
     cable_count,
+    has_numeric,
     numeric,
     read_geometry,
     static_site_pose,
@@ -237,8 +238,7 @@ class Physics:
             OptionError: naming ``realism.drive.winding_compliance``.
         """
         kappa = self.drive.winding_compliance
-        found = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, "cable_tension_range")
-        if not kappa or found < 0:
+        if not kappa or not has_numeric(model, "cable_tension_range"):
             return
         tau_max = float(numeric(model, "cable_tension_range")[1])
         if kappa * tau_max >= 0.1:
