@@ -51,6 +51,11 @@ COV_AXES = ("x", "y", "z", "rx", "ry", "rz")
 """Axes of a pose covariance's columns: δ = [v, ω] in F_p."""
 COV_INDEX = tuple((i, j) for i in range(6) for j in range(i, 6))
 """The (row, column) of each covariance column, upper triangle row by row (21)."""
+_COV_ROWS, _COV_COLS = np.array(COV_INDEX).T
+_NO_COVARIANCE = np.full((6, 6), np.nan)
+"""The covariance cells of an estimate that gives none: NaN."""
+_EYE = np.eye(4)
+"""What stands for an absent plan or tag until its cells are left empty."""
 
 
 def covariance_columns(prefix: str) -> list[str]:
@@ -119,8 +124,9 @@ class TimeseriesWriter:
         self.flush_every = flush_every
         with writing(self._partial):
             self._file = self._out.file("w", newline="", encoding="utf-8")
-            line = ",".join(header(self.estimators, n_cables, self.covariance))
-            self._file.write(line + "\n")
+            columns = header(self.estimators, n_cables, self.covariance)
+            self._file.write(",".join(columns) + "\n")
+        self._plan_at = columns.index(pose_columns("plan")[0])
         self._rows: list[tuple] = []
         self._formats: dict[tuple[bool, bool], str] = {}
         self.rows = 0
@@ -147,23 +153,25 @@ class TimeseriesWriter:
             marks: what happened during the tick (events, faults), in words.
         """
         m = measurement
-        poses: list[np.ndarray | None] = [T_true]
-        flags: list[int] = []
+        tag = None if m.tag is None else m.tag.T_cam_tag
+        # the arrays as they are, converted to numbers a batch at a time (:meth:`flush`); an
+        # absent plan or tag stands as the identity, its cells left empty
+        poses = [T_true]
+        valid = []
         for n in self.estimators:
-            poses.append(estimates[n].T_base_platform)
-            flags.append(int(estimates[n].valid))
-        poses.append(plan)
-        poses.append(None if m.tag is None else m.tag.T_cam_tag)
-        valid: list[int] | list[tuple[int, list[float]]] = flags
-        if self.covariance:
-            valid = [
-                (v, _cov21(estimates[n]) if n in self.covariance else [])
-                for v, n in zip(flags, self.estimators, strict=True)
-            ]
-        sensors = [*m.tensions.tolist(), *m.cable_lengths.tolist(), *m.cable_rates.tolist()]
+            e = estimates[n]
+            poses.append(e.T_base_platform)
+            valid.append(e.valid)
+        poses += [_EYE if plan is None else plan, _EYE if tag is None else tag]
+        covariances = []
+        for n in self.covariance:
+            P = estimates[n].covariance
+            covariances.append(_NO_COVARIANCE if P is None else P)
+        sensors = (m.tensions, m.cable_lengths, m.cable_rates)
         status = command.status if command is not None else Status.START
         event = "; ".join(marks).replace(",", ";").replace("\n", " ")
-        self._rows.append((time, poses, valid, sensors, status, event))
+        present = (plan is not None, tag is not None)
+        self._rows.append((time, poses, valid, covariances, sensors, present, status, event))
         if len(self._rows) >= self.flush_every:
             self.flush()
 
@@ -184,43 +192,44 @@ class TimeseriesWriter:
             self._formats[key] = ",".join(cells)
         return self._formats[key]
 
-    def _pose7(self) -> tuple[np.ndarray, np.ndarray]:
-        """Buffered poses as (rows, poses, 7) [x, y, z, qw, qx, qy, qz], and which are present."""
-        n_poses = len(self._rows[0][1])
-        T = np.tile(np.eye(4), (len(self._rows), n_poses, 1, 1))
-        present = np.ones((len(self._rows), n_poses), dtype=bool)
-        for i, (_, poses, *_) in enumerate(self._rows):
-            for j, P in enumerate(poses):
-                if P is None:
-                    present[i, j] = False
-                else:
-                    T[i, j] = P
-        q = quat_wxyz_from_matrix(T[:, :, :3, :3])
-        return np.concatenate([T[:, :, :3, 3], q], axis=2), present
+    def _numbers(self) -> list[list[float]]:
+        """The buffered rows' numbers in column order, plan and tag included (all seven each).
+
+        Returns:
+            (rows, columns) as lists of Python floats: every column up to ``status``.
+        """
+        rows, k = self._rows, len(self.estimators)
+        T = np.array([r[1] for r in rows])  # (rows, k + 3, 4, 4): truth, estimators, plan, tag
+        pose7 = np.concatenate([T[..., :3, 3], quat_wxyz_from_matrix(T[..., :3, :3])], axis=2)
+        valid = np.array([r[2] for r in rows], dtype=float).reshape(len(rows), k)
+        blocks = [np.array([r[0] for r in rows])[:, None], pose7[:, 0]]
+        if self.covariance:
+            cov = np.array([r[3] for r in rows])[:, :, _COV_ROWS, _COV_COLS]  # (rows, c, 21)
+        c = 0
+        for j, name in enumerate(self.estimators):
+            blocks += [pose7[:, 1 + j], valid[:, j, None]]
+            if name in self.covariance:
+                blocks.append(cov[:, c])
+                c += 1
+        sensors = np.array([r[4] for r in rows]).reshape(len(rows), -1)  # tensions, lengths, rates
+        blocks += [sensors, pose7[:, k + 1], pose7[:, k + 2]]
+        return np.concatenate(blocks, axis=1).tolist()
 
     def flush(self) -> None:
         """Write the buffered rows (floats exactly, to 17 digits) and flush the file."""
         if not self._rows:
             return
-        pose7, present = self._pose7()
-        k = len(self.estimators)
-        lines = []
-        for i, (t, _, valid, sensors, status, event) in enumerate(self._rows):
-            has_plan, has_tag = bool(present[i, k + 1]), bool(present[i, k + 2])
-            values = [t, *pose7[i, 0].tolist()]
-            for j in range(k):
-                if self.covariance:
-                    v, cov = valid[j]
-                    values += [*pose7[i, 1 + j].tolist(), v, *cov]
-                else:
-                    values += [*pose7[i, 1 + j].tolist(), valid[j]]
-            values += sensors
-            if has_plan:
-                values += pose7[i, k + 1].tolist()
-            if has_tag:
-                values += pose7[i, k + 2].tolist()
-            values += [status, event]
-            lines.append(self._row_format(has_plan, has_tag) % tuple(values))
+        plan_at, lines = self._plan_at, []
+        for numbers, (*_, (has_plan, has_tag), status, event) in zip(
+            self._numbers(), self._rows, strict=True
+        ):
+            # an absent pose's cells stay empty: its placeholder numbers go (the tag's first)
+            if not has_tag:
+                del numbers[plan_at + 7 : plan_at + 14]
+            if not has_plan:
+                del numbers[plan_at : plan_at + 7]
+            numbers += (status, event)
+            lines.append(self._row_format(has_plan, has_tag) % tuple(numbers))
         with writing(self._partial):
             self._file.write("\n".join(lines) + "\n")
             self._file.flush()
@@ -343,14 +352,6 @@ class Timeseries:
     def matrix(self, prefix: str) -> np.ndarray:
         """Per-cable columns ``<prefix>_1 … <prefix>_m`` (e.g. ``tension``) as (n, m)."""
         return np.stack([self.columns[c] for c in cable_columns(prefix, self.n_cables)], axis=1)
-
-
-def _cov21(estimate: PoseEstimate) -> list[float]:
-    """The 21 upper-triangle entries of an estimate's covariance (NaN when it has none)."""
-    P = estimate.covariance
-    if P is None:
-        return [float("nan")] * len(COV_INDEX)
-    return [float(P[i, j]) for i, j in COV_INDEX]
 
 
 def load_timeseries(path: str | Path) -> Timeseries:
