@@ -7,8 +7,8 @@ every tick with ``perf_counter`` around the calls of :meth:`cdpr_twin.run.episod
 (nothing else changes): physics (``Physics.advance`` of one period: MuJoCo's ``mj_step``
 blocks, the swivel refreshes, the step hooks such as the fault monitor), the sensor read, each
 estimator's ``update``, the tick's record (the events fired, the monitor's look, the
-``TickRecord`` and its deviations, sinks excluded), and each sink (the metrics, the CSV and
-Rerun rows, the summary's tally). The baseline, measured in the same run: the twin alone
+``TickRecord``, sinks excluded), and each sink (the metrics with the estimates' deviations, the
+CSV and Rerun rows, the summary's tally). The baseline, measured in the same run: the twin alone
 stepping the same period at zero rates (``bench_scenarios.physics_only``). The ratio, run /
 physics alone, is physics-alone µs per tick divided by the run's µs per tick.
 """

@@ -7,11 +7,12 @@ controllers built on it run on a real robot's logs as well as on the twin's.
 from __future__ import annotations
 
 import enum
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from cdpr_twin.math.se3 import rot_x, transform
+from cdpr_twin.math.se3 import pose_distance, rot_x, transform
 
 T_TAGPUPIL_TAGVISP = transform(rot_x(np.pi), np.zeros(3))
 """ViSP's tag frame (z out of the tag, y up; the paper's ᶜp_o) in pupil-apriltags' tag frame
@@ -279,8 +280,6 @@ class TickRecord:
         T_base_platform: (4, 4) the true platform pose.
         tensions: (m,) the true cable tensions [N].
         T_cam_tag: (4, 4) the true tag pose in the camera frame, when asked for, else ``None``.
-        deviations: each estimator's distance from the true pose (translation [m], rotation
-            [rad]), by name.
         events: the scenario's events fired during the tick (since the last tick's read):
             (simulation time [s], event, ``"start"`` or ``"end"``) each.
         faults: the faults the robot's monitor saw during the tick
@@ -297,10 +296,22 @@ class TickRecord:
     T_base_platform: np.ndarray
     tensions: np.ndarray
     T_cam_tag: np.ndarray | None
-    deviations: dict[str, tuple[float, float]]
     events: tuple = ()
     faults: tuple = ()
     stop: str | None = None
+
+    @functools.cached_property
+    def deviations(self) -> dict[str, tuple[float, float]]:
+        """Each estimator's distance from the true pose (translation [m], rotation [rad]), by name.
+
+        Computed when first asked for: the run's metrics and recording compute theirs a batch of
+        ticks at a time, and a Gymnasium step or a calibration's reading needs none.
+        """
+        if not self.estimates:  # (a calibration's episode runs no estimator)
+            return {}
+        T_est = np.array([e.T_base_platform for e in self.estimates.values()])
+        dts, drs = pose_distance(T_est, self.T_base_platform)
+        return dict(zip(self.estimates, zip(dts.tolist(), drs.tolist(), strict=True), strict=True))
 
     @property
     def marks(self) -> tuple[str, ...]:

@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from cdpr_twin.files.transaction import OutputError, Partial, writing
-from cdpr_twin.math.se3 import covariance_ellipsoids, quat_xyzw_from_matrix
+from cdpr_twin.math.se3 import covariance_ellipsoids, pose_distance, quat_xyzw_from_matrix
 from cdpr_twin.recording import watchdog
 from cdpr_twin.types import CameraIntrinsics, Measurement, PoseEstimate
 
@@ -232,7 +232,6 @@ class RerunRecorder:
         m: Measurement,
         T_true: np.ndarray,
         estimates: dict[str, PoseEstimate],
-        deviations: dict[str, tuple[float, float]],
         plan: np.ndarray | None,
     ) -> None:
         """Buffer one tick (sent column-wise every ``flush_every`` ticks); log the image now."""
@@ -251,7 +250,6 @@ class RerunRecorder:
                 P = estimates[name].covariance
                 covariances.append(_NO_COVARIANCE if P is None else P)
             b["covariance"].append(covariances)
-        b["deviation"].append([deviations[name] for name in self.estimators])
         if plan is not None:
             b["plan_time"].append(m.time)
             b["plan"].append(plan)
@@ -283,16 +281,7 @@ class RerunRecorder:
             rec.log("events", rr.TextLog(text, level=level))
 
     def _new_buffer(self) -> dict[str, list]:
-        keys = (
-            "time",
-            "poses",
-            "tension",
-            "length",
-            "covariance",
-            "deviation",
-            "plan_time",
-            "plan",
-        )
+        keys = ("time", "poses", "tension", "length", "covariance", "plan_time", "plan")
         return {k: [] for k in keys}
 
     def _flush(self) -> None:
@@ -330,16 +319,16 @@ class RerunRecorder:
         rec.send_columns(
             "length", indexes=index, columns=rr.Scalars.columns(scalars=np.array(b["length"]))
         )
-        dev = np.array(b["deviation"])  # (n, estimators, 2)
+        dts, drs = pose_distance(poses[:, 1:], poses[:, :1])  # (n, estimators) each
         rec.send_columns(
             "deviation/translation_mm",
             indexes=index,
-            columns=rr.Scalars.columns(scalars=dev[:, :, 0] * 1e3),
+            columns=rr.Scalars.columns(scalars=dts * 1e3),
         )
         rec.send_columns(
             "deviation/rotation_deg",
             indexes=index,
-            columns=rr.Scalars.columns(scalars=np.degrees(dev[:, :, 1])),
+            columns=rr.Scalars.columns(scalars=np.degrees(drs)),
         )
         self._buf = self._new_buffer()
 

@@ -75,7 +75,7 @@ class Recorders:
                 tick.time, tick.T_base_platform, tick.estimates, m, tick.command, tick.plan, marks
             )
         if self.rrd is not None:
-            self.rrd.tick(m, tick.T_base_platform, tick.estimates, tick.deviations, tick.plan)
+            self.rrd.tick(m, tick.T_base_platform, tick.estimates, tick.plan)
             if marks:
                 self.rrd.mark(m.time, marks)
 

@@ -29,7 +29,6 @@ from typing import Protocol
 from cdpr_twin.estimators.base import SensorWatches
 from cdpr_twin.run.homing_and_teaching import home_by_drums
 from cdpr_twin.run.interrupts import shielded
-from cdpr_twin.run.metrics import deviations
 from cdpr_twin.types import Command, Measurement, PoseEstimate, TickRecord
 
 
@@ -150,17 +149,15 @@ class Episode:
         stop = None
         if faults and setup.scenario.monitor.on_fault == "stop":
             stop = faults[0].status
-        T_true = physics.T_base_platform
         tick = TickRecord(
             time=m.time,
             measurement=m,
             estimates=estimates,
             command=command,
             plan=plan,
-            T_base_platform=T_true,
+            T_base_platform=physics.T_base_platform,
             tensions=physics.tensions,
             T_cam_tag=physics.T_cam_tag if self.true_tag_view else None,
-            deviations=deviations(estimates, T_true),
             events=events,
             faults=faults,
             stop=stop,

@@ -112,46 +112,62 @@ class DeviationTrack:
         return summary if self.count else {**summary, **_NO_DEVIATION}
 
 
-def deviations(
-    estimates: dict[str, PoseEstimate], T_true: np.ndarray
-) -> dict[str, tuple[float, float]]:
-    """Each estimate's distance from the true pose: (translation [m], rotation [rad]), by name."""
-    if not estimates:  # (a calibration's episode runs no estimator)
-        return {}
-    dts, drs = pose_distance(
-        np.array([e.T_base_platform for e in estimates.values()]), T_true[None]
-    )
-    return {name: (float(a), float(b)) for name, a, b in zip(estimates, dts, drs, strict=True)}
-
-
 class RunMetrics:
     """Every estimator's deviation from ground truth, tick by tick, and the checkpoints.
+
+    The deviations are accounted ``batch`` ticks at a time (one
+    :func:`~cdpr_twin.math.se3.pose_distance` over them all), and the rest when
+    :meth:`estimators` is asked for.
 
     Args:
         names: the estimators, in recording order.
         checkpoints: (time [s], pose) pairs at which to record where the platform is.
         period: the control period [s] (a checkpoint matches the tick within half of it).
+        batch: ticks whose deviations are computed together.
     """
 
     def __init__(
-        self, names: tuple[str, ...], checkpoints: list[tuple[float, np.ndarray]], period: float
+        self,
+        names: tuple[str, ...],
+        checkpoints: list[tuple[float, np.ndarray]],
+        period: float,
+        batch: int = 25,
     ) -> None:
         self.tracks = {name: DeviationTrack() for name in names}
-        self.checkpoints, self.period = checkpoints, period
+        self.checkpoints, self.period, self.batch = checkpoints, period, batch
         self.segment_ends: list[dict] = []
+        self._pending: list[tuple[dict[str, PoseEstimate], np.ndarray]] = []
 
     def add(self, tick: TickRecord) -> None:
         """Account one tick: each estimator's deviation, and a checkpoint if one is due."""
-        for name, e in tick.estimates.items():
-            self.tracks[name].add(e, tick.deviations[name])
+        self._pending.append((tick.estimates, tick.T_base_platform))
+        if len(self._pending) >= self.batch:
+            self._account()
         for t_c, waypoint in self.checkpoints:
             if abs(tick.time - t_c) < 0.5 * self.period:
                 self.segment_ends.append(
                     _segment_end(tick.time, waypoint, tick.T_base_platform, tick.estimates)
                 )
 
+    def _account(self) -> None:
+        """Add the pending ticks' deviations to the tracks, in time order."""
+        pending, self._pending = self._pending, []
+        names = tuple(self.tracks)
+        if not (pending and names):
+            return
+        T_est = np.array(
+            [[estimates[n].T_base_platform for n in names] for estimates, _ in pending]
+        )
+        T_true = np.array([T for _, T in pending])[:, None]
+        dts, drs = pose_distance(T_est, T_true)  # (ticks, estimators) each
+        tracks = tuple(self.tracks.values())
+        for (estimates, _), dt_row, dr_row in zip(pending, dts.tolist(), drs.tolist(), strict=True):
+            for name, track, dt, dr in zip(names, tracks, dt_row, dr_row, strict=True):
+                track.add(estimates[name], (dt, dr))
+
     def estimators(self) -> dict[str, dict]:
         """Each estimator's summary (max/final deviations, invalid updates, flags)."""
+        self._account()
         return {name: t.summary() for name, t in self.tracks.items()}
 
 
