@@ -12,8 +12,9 @@ from cdpr_twin import plugins
 from cdpr_twin.campaign.table import flatten
 from cdpr_twin.cli import main
 from cdpr_twin.estimators.base import NO_INPUTS, Estimator
-from cdpr_twin.run.metrics import NON_FINITE_ESTIMATE, DeviationTrack
-from cdpr_twin.types import PoseEstimate
+from cdpr_twin.math.se3 import pose_from_vector, rot_z, transform
+from cdpr_twin.run.metrics import NON_FINITE_ESTIMATE, DeviationTrack, RunMetrics
+from cdpr_twin.types import Measurement, PoseEstimate, TickRecord
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -73,3 +74,36 @@ def test_a_nan_estimate_is_counted_invalid_not_dropped_from_the_deviations():
     assert s["rms_translation_m"] == pytest.approx(math.sqrt((0.001**2 + 0.003**2) / 2))
     track.add(PoseEstimate(0.16, np.full((4, 4), np.nan)), (math.nan, math.nan))
     assert math.isnan(track.summary()["final_translation_m"])  # the last estimate: none
+
+
+def test_deviations_accounted_a_batch_at_a_time_are_each_ticks_own():
+    # truth: an estimate T_true · (Rz(θ), d) is |d| and θ from the truth, whatever T_true is
+    rng = np.random.default_rng(4)
+    d = rng.uniform(0.001, 0.01, (8, 3))
+    theta = rng.uniform(0.01, 0.5, 8)
+    metrics = RunMetrics(("moved", "lost"), [], 0.04, batch=3)
+    for k in range(8):
+        t = 0.04 * k
+        T_true = pose_from_vector(np.r_[rng.normal(0.0, 0.2, 3), rng.uniform(-90.0, 90.0, 3)])
+        lost = np.full((4, 4), np.nan) if k == 5 else T_true
+        estimates = {
+            "moved": PoseEstimate(t, T_true @ transform(rot_z(theta[k]), d[k])),
+            "lost": PoseEstimate(t, lost),
+        }
+        m = Measurement(t, np.ones(8), np.zeros(8))
+        tick = TickRecord(t, m, estimates, None, None, T_true, np.zeros(8), None)
+        assert tick.deviations["moved"] == pytest.approx((np.linalg.norm(d[k]), theta[k]), 1e-12)
+        metrics.add(tick)
+        if k == 3:  # asked for midway: the ticks so far (none counted twice after)
+            so_far = metrics.estimators()["moved"]["final_translation_m"]
+            assert so_far == pytest.approx(np.linalg.norm(d[3]), rel=1e-12)
+    s = metrics.estimators()
+    moved, lost = s["moved"], s["lost"]
+    dt = np.linalg.norm(d, axis=1)
+    assert moved["max_translation_m"] == pytest.approx(dt.max(), rel=1e-12)
+    assert moved["max_translation_time_s"] == pytest.approx(0.04 * dt.argmax())
+    assert moved["max_rotation_deg"] == pytest.approx(np.degrees(theta.max()), rel=1e-12)
+    assert moved["final_translation_m"] == pytest.approx(dt[-1], rel=1e-12)
+    assert moved["rms_translation_m"] == pytest.approx(np.sqrt(np.mean(dt**2)), rel=1e-12)
+    assert lost["invalid_updates"] == 1 and lost["flags"] == {NON_FINITE_ESTIMATE: 1}
+    assert lost["max_translation_m"] < 1e-15 and lost["final_translation_m"] < 1e-15
