@@ -22,7 +22,8 @@ T_TAGPUPIL_TAGVISP = transform(rot_x(np.pi), np.zeros(3))
 
 def _frozen(value: object, dtype: type | None = None) -> np.ndarray:
     out = np.array(value, dtype=dtype)
-    out.flags.writeable = False
+    # (setflags: cheaper than assigning flags.writeable, and values are made every tick)
+    out.setflags(write=False)
     return out
 
 
@@ -196,7 +197,7 @@ class PoseEstimate:
     def __post_init__(self) -> None:
         # (the freezing inline: six estimates a tick)
         T = np.array(self.T_base_platform, dtype=float)
-        T.flags.writeable = False
+        T.setflags(write=False)
         object.__setattr__(self, "T_base_platform", T)
         if not isinstance(self.flags, frozenset):
             object.__setattr__(self, "flags", frozenset(self.flags))

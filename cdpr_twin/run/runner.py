@@ -94,22 +94,25 @@ class RunSetup:
 
     def __post_init__(self) -> None:
         # each estimator's inputs read once: estimate() runs every tick, for every estimator
-        self._plan = tuple((name, self.estimators[name]) for name in self.order)
-        self._needs = {name: est.inputs for name, est in self._plan}
+        ests = self.estimators
+        self._plan = tuple((name, ests[name], ests[name].inputs) for name in self.order)
+        # updated in recording order (the usual case): the estimates need no reordering
+        self._reordered = self.order != tuple(ests)
 
     def estimate(self, m: Measurement) -> dict[str, PoseEstimate]:
         """Update every estimator (in dependency order); returns estimates in recording order."""
         out: dict[str, PoseEstimate] = {}
-        needs = self._needs
         # loops, not comprehensions: this runs every tick, for every estimator
-        for name, est in self._plan:
-            if needs[name]:
+        for name, est, needs in self._plan:
+            if needs:
                 inputs = {}
-                for n in needs[name]:
+                for n in needs:
                     inputs[n] = out[n]
                 out[name] = est.update(m, inputs)
             else:
                 out[name] = est.update(m)
+        if not self._reordered:
+            return out
         recorded: dict[str, PoseEstimate] = {}
         for name in self.estimators:
             recorded[name] = out[name]
