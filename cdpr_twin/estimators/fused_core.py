@@ -80,7 +80,14 @@ def joseph_update(
     Returns:
         (c,) the corrected states' correction and the normalised innovation squared.
     """
-    HP = mm(H, P)  # (k, n) = (P Hᵀ)ᵀ, P symmetric
+    return joseph_update_hp(P, H, mm(H, P), R, r, c)
+
+
+@jit
+def joseph_update_hp(
+    P: np.ndarray, H: np.ndarray, HP: np.ndarray, R: np.ndarray, r: np.ndarray, c: int
+) -> tuple[np.ndarray, float]:
+    """:func:`joseph_update` given HP = H P (k, n), for a caller that has it already."""
     S = add_to(mt(HP, H), R)
     S_inv = inv(S)
     K = tm(HP, S_inv)[:c].copy()  # (c, k)
@@ -346,12 +353,13 @@ def update_cables(
     k = len(idx)
     if k == 0:
         return CABLES_NONE, outlier, np.zeros(c)
-    Hu, R, ru = np.empty((k, n)), np.zeros((k, k)), np.empty(k)
+    Hu, HPu, R, ru = np.empty((k, n)), np.empty((k, n)), np.zeros((k, k)), np.empty(k)
     for j in range(k):
         for a in range(n):
             Hu[j, a] = H[idx[j], a]
+            HPu[j, a] = HP[idx[j], a]  # the gate's H P: the same rows, not computed again
         R[j, j], ru[j] = var[idx[j]], r[idx[j]]
-    return CABLES_USED, outlier, joseph_update(P, Hu, R, ru, c)[0]
+    return CABLES_USED, outlier, joseph_update_hp(P, Hu, HPu, R, ru, c)[0]
 
 
 @jit

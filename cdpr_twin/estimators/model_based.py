@@ -248,7 +248,8 @@ class ModelEstimator(Estimator):
         targets = self.corrected_lengths(lengths, tensions)
         solution = self.solve(targets, cables, self._T)
         T, residual, iterations = solution.T, solution.residual, solution.iterations
-        if not (residual <= self.max_residual and math.isfinite(np.add.reduce(T, axis=None))):
+        # (NaN and inf propagate to the sum of the pose's sixteen Python floats)
+        if not (residual <= self.max_residual and math.isfinite(sum(T.ravel().tolist()))):
             return self._held(
                 m,
                 NOT_CONVERGED,
