@@ -90,7 +90,7 @@ def joseph_update_hp(
     """:func:`joseph_update` given HP = H P (k, n), for a caller that has it already."""
     S = add_to(mt(HP, H), R)
     S_inv = inv(S)
-    K = tm(HP, S_inv)[:c].copy()  # (c, k)
+    K = tm(HP[:, :c], S_inv)  # (c, k): the corrected states' rows only
     KHP = mm(K, HP)  # (c, n)
     KSK = mt(mm(K, S), K)
     n = P.shape[0]
