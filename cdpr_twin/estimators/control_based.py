@@ -8,6 +8,7 @@ from collections.abc import Mapping
 from cdpr_twin.estimators import newton
 from cdpr_twin.estimators.base import NO_TWIST, NON_FINITE_INPUT, Estimator, SensorWatch
 from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.options import NoOptions
 from cdpr_twin.types import Measurement, PoseEstimate
 
 
@@ -20,9 +21,9 @@ class ControlEstimator(Estimator):
     name = "control"
     watches = SensorWatch.ENCODERS
 
-    def __init__(self, geometry: CdprGeometry, options=None) -> None:
+    def __init__(self, geometry: CdprGeometry, options: NoOptions | None = None) -> None:
         super().__init__(geometry, options)
-        newton.warm_up()
+        newton.warm_up()  # its compose_exp: compiled (or loaded) now, not at the first update
 
     def _step(
         self,
