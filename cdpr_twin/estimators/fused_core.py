@@ -3,9 +3,9 @@
 An update of :mod:`cdpr_twin.estimators.fused` works on arrays of 3 to 88 elements, where
 NumPy's per-call overhead (about a microsecond a call, a few hundred calls an update) outweighed
 the arithmetic: 420–465 µs an update as the paper scenarios configure it. Here each stage —
-prediction, cable update, tag update — is one compiled call on the filter's arrays. The
-equations are those of :mod:`cdpr_twin.estimators.fused_models` (the reference formulations,
-NumPy, with ``tests/estimators/reference_fused.py``) and :mod:`cdpr_twin.math.se3`;
+prediction, cable readings, cable update, tag update — is one compiled call on the filter's
+arrays. The equations are those of :mod:`cdpr_twin.estimators.fused_models` (the reference
+formulations, NumPy, with ``tests/estimators/reference_fused.py``) and :mod:`cdpr_twin.math.se3`;
 ``tests/estimators/test_fused_core.py`` holds every function here to them (round-off apart: the
 products are summed in another order).
 
