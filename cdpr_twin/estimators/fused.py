@@ -373,6 +373,12 @@ class FusedEstimator(Estimator):
         if not dt >= 0:
             raise ValueError(f"fused: measurement time {m.time} s precedes {self._time} s")
         twist = m.twist_platform
+        shapes = (m.cable_lengths.shape, m.tensions.shape, m.cable_rates.shape)
+        if shapes != ((self._m,),) * 3:  # (the compiled stages read m entries of each)
+            raise ValueError(
+                f"fused: cable_lengths, tensions and the command's cable_rates must have "
+                f"{self._m} entries (the geometry's cables), got shapes {shapes}"
+            )
         # NaN and inf propagate to one sum of Python floats: a scalar test
         total = sum(m.cable_lengths.tolist()) + sum(m.tensions.tolist())
         if twist is not None:  # (no command yet: no twist, rates)
