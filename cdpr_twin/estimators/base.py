@@ -61,17 +61,27 @@ class TensionWatch:
 
     def __init__(self, ticks: int = 25) -> None:
         self.ticks = ticks
-        self._last: np.ndarray | None = None
-        self._same: np.ndarray | None = None
+        self._last: list[float] | None = None
+        self._same: list[int] = []
 
     def check(self, tensions: np.ndarray) -> tuple[int, ...]:
-        """Add one reading; the sensors (from 0) stuck for ``ticks`` readings."""
-        if self._last is None or self._same is None:
-            self._last, self._same = tensions.copy(), np.zeros(len(tensions), dtype=int)
+        """Add one reading (m,) [N]; the sensors (from 0) stuck for ``ticks`` readings."""
+        # Python floats and ints: m comparisons cost less than NumPy's calls on an m-vector
+        now = tensions.tolist()
+        if self._last is None:
+            self._last, self._same = now, [0] * len(now)
             return ()
-        self._same = np.where(tensions == self._last, self._same + 1, 0)
-        self._last = tensions.copy()
-        return tuple((self._same >= self.ticks).nonzero()[0].tolist())
+        if len(now) != len(self._last):
+            raise ValueError(
+                f"tensions: {len(now)} readings after {len(self._last)}; feed one robot's "
+                "measurements (reset the estimator for another)"
+            )
+        pairs = zip(self._same, now, self._last, strict=True)
+        self._same = same = [n + 1 if a == b else 0 for n, a, b in pairs]
+        self._last = now
+        if max(same) < self.ticks:
+            return ()
+        return tuple(i for i, n in enumerate(same) if n >= self.ticks)
 
 
 class EncoderWatch:
@@ -108,8 +118,9 @@ class EncoderWatch:
         else:  # the oldest drops out; the rows stay in time order (the same sum, bit for bit)
             self._diffs[:-1] = self._diffs[1:]
         self._diffs[self._n - 1] = diff
-        total = np.add.reduce(self._diffs[: self._n], axis=0)
-        return tuple((np.abs(total) > self.threshold).nonzero()[0].tolist())
+        total = np.add.reduce(self._diffs[: self._n], axis=0).tolist()
+        # Python floats: the m sums scanned without NumPy's calls on an m-vector
+        return tuple(i for i, v in enumerate(total) if abs(v) > self.threshold)
 
 
 class SensorWatch(enum.Flag):
@@ -125,6 +136,15 @@ class SensorWatch(enum.Flag):
     """:class:`EncoderWatch`: ``ENCODER_MISMATCH`` while an encoder disagrees with its commands."""
     TENSIONS = enum.auto()
     """:class:`TensionWatch`: ``TENSION_STUCK`` while a tension sensor reads a constant."""
+
+
+_WATCH_FLAGS: dict[tuple[bool, bool], frozenset[str]] = {
+    (False, False): frozenset(),
+    (True, False): frozenset({ENCODER_MISMATCH}),
+    (False, True): frozenset({TENSION_STUCK}),
+    (True, True): frozenset({ENCODER_MISMATCH, TENSION_STUCK}),
+}
+"""What :meth:`SensorWatches.flags` returns, by (encoder mismatch, tension stuck): built once."""
 
 
 class SensorWatches:
@@ -144,18 +164,16 @@ class SensorWatches:
 
     def flags(self, m: Measurement, encoders: bool, tensions: bool) -> frozenset[str]:
         """The flags the asked-for watches raise on ``m`` (each watch ingests it once)."""
-        flags = set()
+        mismatch = stuck = False
         if encoders:
             if m is not self._encoders_seen:
                 self._encoders_seen, self._encoder_flags = m, self.encoders.check(m)
-            if self._encoder_flags:
-                flags.add(ENCODER_MISMATCH)
+            mismatch = bool(self._encoder_flags)
         if tensions:
             if m is not self._tensions_seen:
                 self._tensions_seen, self._tension_flags = m, self.tensions.check(m.tensions)
-            if self._tension_flags:
-                flags.add(TENSION_STUCK)
-        return frozenset(flags)
+            stuck = bool(self._tension_flags)
+        return _WATCH_FLAGS[mismatch, stuck]
 
 
 NO_INPUTS: Mapping[str, PoseEstimate] = MappingProxyType({})

@@ -282,7 +282,10 @@ def mt(A: np.ndarray, B: np.ndarray) -> np.ndarray:
         for j in range(r):
             acc = 0.0
             for k in range(q):
-                acc += A[i, k] * B[j, k]
+                b = B[j, k]
+                # B's zeros skipped, as mm skips A's: H and F rows are mostly zeros
+                if b != 0.0:
+                    acc += A[i, k] * b
             out[i, j] = acc
     return out
 

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
-import numpy as np
-
+from cdpr_twin.estimators import newton
 from cdpr_twin.estimators.base import NO_TWIST, NON_FINITE_INPUT, Estimator, SensorWatch
-from cdpr_twin.math.se3 import se3_exp
+from cdpr_twin.math.geometry import CdprGeometry
+from cdpr_twin.options import NoOptions
 from cdpr_twin.types import Measurement, PoseEstimate
 
 
@@ -20,6 +21,10 @@ class ControlEstimator(Estimator):
     name = "control"
     watches = SensorWatch.ENCODERS
 
+    def __init__(self, geometry: CdprGeometry, options: NoOptions | None = None) -> None:
+        super().__init__(geometry, options)
+        newton.warm_up()  # its compose_exp: compiled (or loaded) now, not at the first update
+
     def _step(
         self,
         measurement: Measurement,
@@ -29,7 +34,7 @@ class ControlEstimator(Estimator):
         """Compose the estimate with the exponential of the last commanded twist."""
         m = measurement
         dt = m.time - self._time
-        if not np.isfinite(dt) or dt < 0:
+        if not math.isfinite(dt) or dt < 0:
             raise ValueError(
                 f"control: measurement time {m.time} s precedes the last one "
                 f"({self._time} s); feed measurements in time order"
@@ -39,8 +44,12 @@ class ControlEstimator(Estimator):
             if dt == 0:
                 return PoseEstimate(m.time, self._T)
             return self._held(m, NO_TWIST)
-        if not np.all(np.isfinite(twist)):
+        # six Python floats, checked one by one, then one compiled T · exp(ξΔt): a tenth of
+        # the time of the NumPy calls on 6-vectors and 4×4 matrices
+        v = twist.tolist()
+        if not all(map(math.isfinite, v)):
             return self._held(m, NON_FINITE_INPUT)
-        self._T = self._T @ se3_exp(np.asarray(twist) * dt)
+        vx, vy, vz, wx, wy, wz = v
+        self._T = newton.compose_exp(self._T, vx * dt, vy * dt, vz * dt, wx * dt, wy * dt, wz * dt)
         self._time = m.time
         return PoseEstimate(m.time, self._T, flags=watch_flags)

@@ -193,14 +193,29 @@ class FusedEstimator(Estimator):
         self._gate1 = fm.chi2_gate(1, o.gate_probability)
         self._gate6 = fm.chi2_gate(6, o.gate_probability)
         self._es = np.broadcast_to(np.asarray(geometry.es, dtype=float), m).copy()
-        self._process_var = np.array(
-            [o.process_position_std**2] * 3 + [o.process_rotation_std**2] * 3
+        # τ_w, then the random walk's variance rate per pose axis: the prediction's noise
+        self._process_noise = np.array(
+            [o.winch_time_constant]
+            + [o.process_position_std**2] * 3
+            + [o.process_rotation_std**2] * 3
         )
         self._T_platform_cam = np.array(geometry.T_platform_cam, dtype=float)  # writeable
         self._tag_options = np.array(
             [o.tag_size, o.focal_px, o.pixel_std, o.tag_latency, o.winch_time_constant]
         )
         self._lens = np.array(o.lens, dtype=float)
+        self._cable_noise = np.array(
+            [
+                o.damping_time,
+                o.encoder_quantum,
+                o.length_noise_std,
+                o.tension_noise_std,
+                o.taut_threshold,
+            ]
+        )
+        self._max_condition = float(o.max_condition)
+        self._no_rates = np.zeros(m)
+        self._no_rates.flags.writeable = False  # the compiled signature's: a Command's rates
         self.P = np.zeros((self._n, self._n))
         fc.warm_up(self._cables, self._n, self._blocks)
 
@@ -213,7 +228,7 @@ class FusedEstimator(Estimator):
         self._rho = np.zeros(self._m)
         self._T_tag = np.eye(4)
         self._anchored = False
-        self._ref: tuple[np.ndarray, np.ndarray] | None = None  # (lengths, corrected) at t₀
+        self._ref: np.ndarray | None = None  # (2, m): the lengths and corrected readings at t₀
         self._last_twist = np.zeros(6)
         P0 = np.diag([o.initial_position_std**2] * 3 + [o.initial_rotation_std**2] * 3)
         self.P = np.zeros((self._n, self._n))
@@ -252,18 +267,19 @@ class FusedEstimator(Estimator):
             rates: (m,) commanded winch rates [m/s].
             taut: (m,) bools, the cables the platform hangs on (last reading).
         """
-        o = self.options
-        twist = np.array(twist, dtype=float)  # a writeable copy: the compiled signature
-        lag = o.winch_time_constant * np.abs(twist - self._last_twist)
+        # writeable float copies: the compiled signature (a Command's arrays are read-only)
+        twist = np.array(twist, dtype=float)
         self._T = fc.predict(
             self._T,
             self.P,
-            twist * dt,
-            np.asarray(rates, dtype=float) * dt,
+            twist,
+            self._last_twist,
+            dt,
+            np.array(rates, dtype=float),
             np.asarray(taut, dtype=bool),
-            self._process_var * dt + lag * lag,
+            self._process_noise,
             self._cables,
-            float(o.max_condition),
+            self._max_condition,
             self._blocks,
         )
         self._last_twist = twist
@@ -285,24 +301,18 @@ class FusedEstimator(Estimator):
     def update_cables(self, m: Measurement, taut=None) -> set[str]:
         """Fuse the taut cables' lengths (taut: m bools, list or array, if known); returns flags."""
         o = self.options
-        c = fm.corrected_readings(
-            m.cable_lengths, m.tensions, m.cable_rates, self._es, o.damping_time
-        )
         if self._ref is None:
-            self._ref = (m.cable_lengths.copy(), c)
+            c = fm.corrected_readings(
+                m.cable_lengths, m.tensions, m.cable_rates, self._es, o.damping_time
+            )
+            self._ref = np.array([m.cable_lengths, c])
             return set()
         taut = self._taut(m, o.taut_threshold) if taut is None else np.array(taut, dtype=bool)
         flags = set() if np.logical_and.reduce(taut) else {SLACK_CABLES}
-        var = fm.cable_noise_var(
-            m.cable_lengths,
-            np.maximum(m.tensions, 1e-9),
-            self._es,
-            o.encoder_quantum,
-            o.length_noise_std,
-            o.tension_noise_std,
-            o.taut_threshold,
+        rates = self._no_rates if m.command is None else m.cable_rates
+        readings, var = fc.cable_readings(
+            m.cable_lengths, m.tensions, rates, self._ref, self._es, self._cable_noise
         )
-        readings = np.array([c, self._ref[1], m.cable_lengths - self._ref[0]])
         outcome, outlier, dx = fc.update_cables(
             self._T,
             self._T0,
@@ -363,10 +373,17 @@ class FusedEstimator(Estimator):
         if not dt >= 0:
             raise ValueError(f"fused: measurement time {m.time} s precedes {self._time} s")
         twist = m.twist_platform
-        readings = [m.cable_lengths, m.tensions]
+        shapes = (m.cable_lengths.shape, m.tensions.shape, m.cable_rates.shape)
+        if shapes != ((self._m,),) * 3:  # (the compiled stages read m entries of each)
+            raise ValueError(
+                f"fused: cable_lengths, tensions and the command's cable_rates must have "
+                f"{self._m} entries (the geometry's cables), got shapes {shapes}"
+            )
+        # NaN and inf propagate to one sum of Python floats: a scalar test
+        total = sum(m.cable_lengths.tolist()) + sum(m.tensions.tolist())
         if twist is not None:  # (no command yet: no twist, rates)
-            readings += [twist, m.cable_rates]
-        if not np.isfinite(np.concatenate(readings)).all():
+            total += sum(twist.tolist()) + sum(m.cable_rates.tolist())
+        if not math.isfinite(total):
             return self._held(m, NON_FINITE_INPUT, covariance=self.P[fm.POSE, fm.POSE])
         if dt > 0:
             moving = twist is not None

@@ -3,9 +3,9 @@
 An update of :mod:`cdpr_twin.estimators.fused` works on arrays of 3 to 88 elements, where
 NumPy's per-call overhead (about a microsecond a call, a few hundred calls an update) outweighed
 the arithmetic: 420–465 µs an update as the paper scenarios configure it. Here each stage —
-prediction, cable update, tag update — is one compiled call on the filter's arrays. The
-equations are those of :mod:`cdpr_twin.estimators.fused_models` (the reference formulations,
-NumPy, with ``tests/estimators/reference_fused.py``) and :mod:`cdpr_twin.math.se3`;
+prediction, cable readings, cable update, tag update — is one compiled call on the filter's
+arrays. The equations are those of :mod:`cdpr_twin.estimators.fused_models` (the reference
+formulations, NumPy, with ``tests/estimators/reference_fused.py``) and :mod:`cdpr_twin.math.se3`;
 ``tests/estimators/test_fused_core.py`` holds every function here to them (round-off apart: the
 products are summed in another order).
 
@@ -80,10 +80,17 @@ def joseph_update(
     Returns:
         (c,) the corrected states' correction and the normalised innovation squared.
     """
-    HP = mm(H, P)  # (k, n) = (P Hᵀ)ᵀ, P symmetric
+    return joseph_update_hp(P, H, mm(H, P), R, r, c)
+
+
+@jit
+def joseph_update_hp(
+    P: np.ndarray, H: np.ndarray, HP: np.ndarray, R: np.ndarray, r: np.ndarray, c: int
+) -> tuple[np.ndarray, float]:
+    """:func:`joseph_update` given HP = H P (k, n), for a caller that has it already."""
     S = add_to(mt(HP, H), R)
     S_inv = inv(S)
-    K = tm(HP, S_inv)[:c].copy()  # (c, k)
+    K = tm(HP[:, :c], S_inv)  # (c, k): the corrected states' rows only
     KHP = mm(K, HP)  # (c, n)
     KSK = mt(mm(K, S), K)
     n = P.shape[0]
@@ -167,23 +174,30 @@ def transition(
 def predict(
     T: np.ndarray,
     P: np.ndarray,
-    step: np.ndarray,
-    rates_dt: np.ndarray,
+    twist: np.ndarray,
+    last_twist: np.ndarray,
+    dt: float,
+    rates: np.ndarray,
     hanging: np.ndarray,
-    lag_var: np.ndarray,
+    noise: np.ndarray,
     cables: np.ndarray,
     max_condition: float,
     blocks: np.ndarray,
 ) -> np.ndarray:
-    """Propagate pose and covariance over one step: P ← F P Fᵀ + diag(lag_var), in place.
+    """Propagate pose and covariance over one step: P ← F P Fᵀ + Q, in place.
+
+    The step is ξΔt, the winches pay out l̇Δt, and Q = diag(q Δt + (τ_w |ξ − ξ_last|)²): the
+    random walk and the winches' lag behind the change of command.
 
     Args:
         T: (4, 4) pose before the step.
         P: (n, n) covariance.
-        step: (6,) ξΔt [m, rad] in F_p.
-        rates_dt: (m,) commanded winch rates × Δt [m].
+        twist: (6,) commanded platform twist ξ [m/s, rad/s] in F_p.
+        last_twist: (6,) the previous step's ξ_last [m/s, rad/s].
+        dt: Δt [s].
+        rates: (m,) commanded winch rates l̇ [m/s].
         hanging: (m,) bool, the cables the platform hangs on.
-        lag_var: (6,) process noise added to the pose's diagonal [m², rad²].
+        noise: (7,) τ_w [s], then the random walk's q per pose axis (6,) [m²/s, rad²/s].
         cables: (m, 7) :func:`~cdpr_twin.estimators.compiled_kernels.kernel`'s cables.
         max_condition: A's largest condition number for the drum and geometry columns.
         blocks: (7,) the layout.
@@ -191,6 +205,10 @@ def predict(
     Returns:
         (4, 4) the predicted pose.
     """
+    step, rates_dt, lag_var = scaled(twist, dt), scaled(rates, dt), np.empty(6)
+    for i in range(6):
+        lag = noise[0] * abs(twist[i] - last_twist[i])
+        lag_var[i] = noise[1 + i] * dt + lag * lag
     n = P.shape[0]
     T_new, F = transition(T, step, rates_dt, hanging, cables, max_condition, blocks, n)
     X = mm(F, P)  # (6, n): F P, the new pose rows
@@ -235,6 +253,50 @@ def cable_rows(
             )
             H[i, anchor0 + 3 * i + b] = rows_now[i, b] - rows_0[i, b]
     return H, l_now - l_0
+
+
+@jit
+def cable_readings(
+    lengths: np.ndarray,
+    tensions: np.ndarray,
+    rates: np.ndarray,
+    reference: np.ndarray,
+    es: np.ndarray,
+    noise: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The cable update's readings and their variances, from one measurement.
+
+    ``fused_models``' :func:`~cdpr_twin.estimators.fused_models.corrected_readings` and
+    :func:`~cdpr_twin.estimators.fused_models.cable_noise_var` (at tensions floored to 1e-9 N),
+    element by element in one call.
+
+    Args:
+        lengths: (m,) encoder lengths [m].
+        tensions: (m,) measured tensions [N].
+        rates: (m,) commanded winch rates over the last period [m/s].
+        reference: (2, m) the encoder lengths and the corrected readings at the reference [m].
+        es: (m,) nominal E·S [N].
+        noise: (5,) damping time η [s], encoder quantum q [m], the noise floor's std [m], a
+            tension reading's std [N], the taut threshold [N].
+
+    Returns:
+        (3, m) :func:`update_cables`' ``readings`` (the corrected readings c, those of the
+        reference c₀, the encoder counts since the reference Δl) [m], and (m,) their
+        variances [m²].
+    """
+    eta, quantum, floor_std, tension_std, threshold = noise
+    m = lengths.shape[0]
+    readings, var = np.empty((3, m)), np.empty(m)
+    floor = quantum**2 / 12.0 + floor_std**2
+    for i in range(m):
+        length, tension = lengths[i], tensions[i]
+        readings[0, i] = length + length * tension / es[i] - eta * rates[i]
+        readings[1, i] = reference[1, i]
+        readings[2, i] = length - reference[0, i]
+        elastic = length * tension_std / es[i]
+        near_slack = max(3.0 * threshold / max(tension, 1e-9), 1.0)
+        var[i] = (floor + 2.0 * elastic**2) * near_slack**4.0
+    return readings, var
 
 
 @jit
@@ -291,12 +353,13 @@ def update_cables(
     k = len(idx)
     if k == 0:
         return CABLES_NONE, outlier, np.zeros(c)
-    Hu, R, ru = np.empty((k, n)), np.zeros((k, k)), np.empty(k)
+    Hu, HPu, R, ru = np.empty((k, n)), np.empty((k, n)), np.zeros((k, k)), np.empty(k)
     for j in range(k):
         for a in range(n):
             Hu[j, a] = H[idx[j], a]
+            HPu[j, a] = HP[idx[j], a]  # the gate's H P: the same rows, not computed again
         R[j, j], ru[j] = var[idx[j]], r[idx[j]]
-    return CABLES_USED, outlier, joseph_update(P, Hu, R, ru, c)[0]
+    return CABLES_USED, outlier, joseph_update_hp(P, Hu, HPu, R, ru, c)[0]
 
 
 @jit
@@ -433,7 +496,10 @@ def warm_up(cables: np.ndarray, n: int, blocks: np.ndarray) -> None:
     T[:3, 3] = cables[:, :3].mean(axis=0) * 0.5 + np.array([0.0123, -0.0071, -0.2])
     P = np.eye(n) * 1e-6
     hanging = np.ones(m, dtype=bool)
-    predict(T, P, np.full(6, 1e-3), np.zeros(m), hanging, np.full(6, 1e-9), cables, 1e12, blocks)
+    noise = np.full(7, 1e-9)
+    predict(
+        T, P, np.full(6, 0.03), np.zeros(6), 0.04, np.zeros(m), hanging, noise, cables, 1e12, blocks
+    )
     update_cables(
         T,
         T,
@@ -447,6 +513,9 @@ def warm_up(cables: np.ndarray, n: int, blocks: np.ndarray) -> None:
         1e300,
         blocks,
     )
+    frozen = np.ones(m)
+    frozen.flags.writeable = False  # as a Measurement's (and its Command's) arrays
+    cable_readings(frozen, frozen, frozen, np.ones((2, m)), np.ones(m), np.ones(5))
     z = np.eye(4)
     z[:3, 3] = [0.01, 0.02, 0.3]
     options, lens = np.array([0.04, 400.0, 1.0, 0.04, 0.008]), np.zeros(4)

@@ -136,6 +136,7 @@ class ModelEstimator(Estimator):
         radii = geometry.pulley_radius if self.pulley else None
         self._cables = _cable_tuples(geometry.a_base, geometry.b_platform, radii)
         self._cable_array = np.array(self._cables)
+        self._chosen: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray]] = {}
         # the compiled Newton treats a zero sheave radius as a point exit: same branch only if
         # every pulley of a pulley model has a sheave
         self._compiled = self.backend == "fast" and (radii is None or bool(np.all(radii > 0)))
@@ -148,16 +149,25 @@ class ModelEstimator(Estimator):
             return lengths
         return lengths + elastic_elongation(lengths, tensions, self.geometry.es, self.tension0)
 
+    def _chosen_cables(self, cables: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        """The compiled Newton's (k, 7) cables and their indices (k,), built once per set."""
+        key = tuple(cables)
+        chosen = self._chosen.get(key)
+        if chosen is None:
+            index = np.array(key, dtype=np.intp)
+            chosen = self._chosen[key] = (self._cable_array[index], index)
+        return chosen
+
     def solve(self, targets: np.ndarray, cables: list[int], T0: np.ndarray) -> PoseSolution:
         """Solve for the pose matching ``targets`` on ``cables`` (indices from 0) from ``T0``."""
         if self.backend == "fast":
-            goal = np.asarray(targets, dtype=float)[cables]
             if self._compiled:  # the same operations compiled; the reference where it must
-                T, residual, it, outcome = newton.newton(
-                    self._cable_array[cables], goal, T0, 30, 1e-12
-                )
+                rows, index = self._chosen_cables(cables)
+                goal = np.asarray(targets, dtype=float).take(index)
+                T, residual, it, outcome = newton.newton(rows, goal, T0, 30, 1e-12)
                 if outcome == newton.MAIN:
                     return PoseSolution(T, residual, it)
+            goal = np.asarray(targets, dtype=float)[cables]
             return _newton([self._cables[i] for i in cables], self.pulley, goal, T0)
         index = np.asarray(cables)
         g = self.geometry
@@ -222,10 +232,10 @@ class ModelEstimator(Estimator):
         """One pass of Algorithm 1's loop (lines 7-12), with the chosen cable selection."""
         m = measurement
         lengths, tensions = m.cable_lengths, m.tensions
-        # NaN/inf propagate (np.add.reduce: the sum ndarray.sum() computes, without its wrapper)
-        if not math.isfinite(float(np.add.reduce(lengths) + np.add.reduce(tensions))):
-            return self._held(m, NON_FINITE_INPUT)
+        # Python floats (the tensions are ranked as such too); NaN and inf propagate to the sum
         tl = tensions.tolist()
+        if not math.isfinite(sum(lengths.tolist()) + sum(tl)):
+            return self._held(m, NON_FINITE_INPUT)
         if self.selection != "most_tensioned":
             return self._update_selected(m, lengths, tensions, watch_flags)
         cables = most_tensioned(tl)  # line 8
@@ -238,7 +248,8 @@ class ModelEstimator(Estimator):
         targets = self.corrected_lengths(lengths, tensions)
         solution = self.solve(targets, cables, self._T)
         T, residual, iterations = solution.T, solution.residual, solution.iterations
-        if not (residual <= self.max_residual and math.isfinite(np.add.reduce(T, axis=None))):
+        # (NaN and inf propagate to the sum of the pose's sixteen Python floats)
+        if not (residual <= self.max_residual and math.isfinite(sum(T.ravel().tolist()))):
             return self._held(
                 m,
                 NOT_CONVERGED,

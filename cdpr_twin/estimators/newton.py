@@ -117,6 +117,11 @@ def newton(cables: np.ndarray, goal: np.ndarray, T0: np.ndarray, max_iterations:
 
 
 def warm_up() -> None:
-    """Compile (or load from the disk cache) :func:`newton` before the first update."""
+    """Compile (or load from the disk cache) :func:`newton` and :func:`compose_exp`.
+
+    Called when an estimator is built, before its first update (as the fused filter's
+    :func:`cdpr_twin.estimators.fused_core.warm_up`).
+    """
     cables = np.array([[1.0, 0, 0, 0, 0, 0, 0.0], [0, 1, 0, 0, 0, 0, 0.0]] * 3)
     newton(cables, np.ones(6), np.eye(4), 1, 1e-12)
+    compose_exp(np.eye(4), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)

@@ -267,6 +267,16 @@ def test_the_fast_joseph_update_is_the_product_form_with_zero_considered_gains()
         assert nis == pytest.approx(r @ np.linalg.solve(S, r), rel=1e-12)
 
 
+def test_a_measurement_of_another_robot_is_refused_in_one_line(twin):
+    """The compiled stages read one entry per cable of the geometry: seven readings for
+    eight cables are an error that names the fields, not a read past an array's end."""
+    est = make_estimator("fused", twin.nominal_geometry)
+    est.reset(paper_pose("p0"))
+    seven = Measurement(0.04, np.ones(7), np.full(7, 20.0), Command(np.zeros(7), np.zeros(6)))
+    with pytest.raises(ValueError, match=r"^fused: cable_lengths, tensions and the command's "):
+        est.update(seven)
+
+
 def test_a_layout_with_a_corrected_state_after_a_considered_one_is_refused():
     from cdpr_twin.estimators import fused_models as fm
 

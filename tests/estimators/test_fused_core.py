@@ -180,16 +180,21 @@ def test_the_prediction_is_the_reference_transition(twin, layout, conditioned):
     for trial in range(10):
         T = paper_pose("p1") @ random_pose(rng, 0.02)
         P = random_covariance(rng, layout.n)
-        step = rng.normal(size=6) * 1e-3
-        rates_dt = rng.normal(size=8) * 1e-3
+        dt = 0.04
+        twist, last_twist = rng.normal(size=(2, 6)) * 0.025
+        rates = rng.normal(size=8) * 0.025
         hanging = np.ones(8, dtype=bool)
         hanging[rng.choice(8, size=trial % 3, replace=False)] = False
-        lag_var = rng.uniform(size=6) * 1e-8
+        tau, q = 0.008, rng.uniform(size=6) * 1e-7
         max_condition = 1e9 if conditioned else 1.0
         P_got = P.copy()
+        noise = np.array([tau, *q])
         T_got = fc.predict(
-            T, P_got, step, rates_dt, hanging, lag_var, cables, max_condition, blocks
+            T, P_got, twist, last_twist, dt, rates, hanging, noise, cables, max_condition, blocks
         )
+        # the random walk's q·Δt, and the winches' lag τ_w behind the change of command
+        step, rates_dt = twist * dt, rates * dt
+        lag_var = q * dt + (tau * np.abs(twist - last_twist)) ** 2
         T_new = T @ se3.se3_exp(step)
         F = np.eye(layout.n)
         F[:6, :6] = se3.adjoint(se3.inverse(se3.se3_exp(step)))
@@ -206,6 +211,30 @@ def test_the_prediction_is_the_reference_transition(twin, layout, conditioned):
         assert close(T_got, T_new, 1e-14)
         assert close(P_got, P_ref, 1e-10)
         assert np.array_equal(P_got[6:, 6:], P[6:, 6:])
+
+
+def test_the_cable_readings_are_the_models_formulas():
+    """Row 0 c = l + lτ/E·S − ηl̇, row 1 c₀, row 2 Δl = l − l₀; the variances those of
+    ``fused_models`` (floored tension, slack-prone cables trusted less): to an ulp or two."""
+    rng = np.random.default_rng(8)
+    eta, quantum, floor_std, tension_std, threshold = 5e-4, 3e-5, 2e-6, 0.01, 1.0
+    noise = np.array([eta, quantum, floor_std, tension_std, threshold])
+    es = rng.uniform(2e4, 8e4, 8)
+    for _ in range(50):
+        lengths, rates = rng.uniform(0.5, 1.2, 8), rng.normal(size=8) * 0.05
+        tensions = rng.uniform(-1.0, 40.0, 8)  # slack, near slack and taut
+        for a in (lengths, tensions, rates):
+            a.flags.writeable = False  # as a Measurement's arrays (one compiled signature)
+        reference = rng.uniform(0.5, 1.2, (2, 8))
+        readings, var = fc.cable_readings(lengths, tensions, rates, reference, es, noise)
+        corrected = fm.corrected_readings(lengths, tensions, rates, es, eta)
+        np.testing.assert_allclose(readings[0], corrected, rtol=1e-15)
+        assert np.array_equal(readings[1], reference[1])
+        assert np.array_equal(readings[2], lengths - reference[0])
+        expected = fm.cable_noise_var(
+            lengths, tensions, es, quantum, floor_std, tension_std, threshold
+        )
+        np.testing.assert_allclose(var, expected, rtol=1e-14)
 
 
 def test_the_cable_update_is_the_reference(twin, layout):
@@ -341,5 +370,5 @@ def test_a_run_uses_the_signatures_the_filter_compiled_when_built(tmp_path):
     s = load_scenario(ROOT / "scenarios" / "paper_pbvs.toml").with_overrides(duration=0.5)
     assert "fused" in s.estimators.passive or s.estimators.in_loop == "fused"
     run(s, tmp_path / "run")
-    for stage in (fc.predict, fc.update_cables, fc.update_tag, fc.inject):
+    for stage in (fc.predict, fc.cable_readings, fc.update_cables, fc.update_tag, fc.inject):
         assert len(stage.signatures) == 1, stage.signatures
