@@ -48,9 +48,39 @@ from cdpr_twin.sim.model import (
 )
 from cdpr_twin.sim.monitor import divergence
 from cdpr_twin.sim.occluder import occluder_of
+from cdpr_twin.sim.rope_kernel import jit
 from cdpr_twin.sim.winch import WinchServos, check_lengths, checked_rates, whole_steps
 
 TAG_SITE = "tag_center"
+
+
+@jit
+def set_stiffness(
+    l0: np.ndarray,
+    es: np.ndarray,
+    enabled: np.ndarray,
+    gain: np.ndarray,
+    bias: np.ndarray,
+    bias_unit: np.ndarray,
+) -> None:
+    """Write each cable's stiffness k = E·S/l0 into its actuator's gain and bias, in place.
+
+    Compiled: one call for the six NumPy calls on (m,) arrays it replaces (twice a control
+    tick), with the same arithmetic, so the same bits.
+
+    Args:
+        l0: (m,) rest lengths [m] (0 before reset: no stiffness).
+        es: (m,) axial stiffnesses E·S [N].
+        enabled: (m,) bool, False for a cut cable (no stiffness).
+        gain: (m, ≥1) the actuators' gain parameters; column 0 gets k [N/m].
+        bias: (m, ≥3) the actuators' bias parameters; columns 0–2 get k·``bias_unit``.
+        bias_unit: (3,) the bias per unit stiffness [m, 1, s].
+    """
+    for i in range(l0.size):
+        k = es[i] / l0[i] if l0[i] > 0 and enabled[i] else 0.0
+        gain[i, 0] = k
+        for j in range(3):
+            bias[i, j] = k * bias_unit[j]
 
 
 class Physics:
@@ -257,6 +287,8 @@ class Physics:
         self.drum_radius_set, self._drum_ratio = radii, self.drum_radius_true / radii  # cable/cmd
         if self.drive.drums:
             self._drums = Drums(self.drive, self.drum_radius_true, radii)
+        self.drums_as_set = self._drums is None and np.array_equal(radii, self.drum_radius_true)
+        """Whether each drum pays out exactly its command: true radii as set, no drum model."""
 
     def clear_hooks(self) -> None:
         """Drop every hook: they hold this physics, a cycle that kept a closed run's model alive."""
@@ -299,10 +331,7 @@ class Physics:
         quat[:, 3] = np.sin(half)
         d.mocap_quat[self._mocap] = quat
         l0 = d.act[self._actuators]
-        on = (l0 > 0) & self.cable_enabled  # (l0 = 0 before reset())
-        k = np.divide(self._es, l0, out=np.zeros(self.n_cables), where=on)
-        self._gain[:, 0] = k
-        self._bias[:, :3] = k[:, None] * self._bias_unit
+        set_stiffness(l0, self._es, self.cable_enabled, self._gain, self._bias, self._bias_unit)
 
     def step(self, n: int) -> None:
         """Advance n physics steps, refreshing every ``align_every`` and firing due hooks.
@@ -310,13 +339,13 @@ class Physics:
         Raises:
             SimulationError: when the simulation diverges.
         """
-        dt = self.timestep
+        dt, model, data, hooks = self.timestep, self.model, self.data, self._hooks
         while n > 0:
             chunk = min(n, self.align_every)
-            chunk = fire_due(self._hooks, self.data.time, dt, chunk) if self._hooks else chunk
+            chunk = fire_due(hooks, data.time, dt, chunk) if hooks else chunk
             self.refresh()
             self._drive_winches(chunk * dt)
-            mujoco.mj_step(self.model, self.data, nstep=chunk)
+            mujoco.mj_step(model, data, nstep=chunk)
             n -= chunk
         self._check_state()
 
@@ -371,9 +400,13 @@ class Physics:
             ValueError: non-finite or out-of-range rates, or rates that would run a winch past
                 its range within those steps (servos: the exact lengths their loops reach).
         """
-        rates = checked_rates(rates, self.n_cables, self._ctrl_lo, self._ctrl_hi)
+        self._command(checked_rates(rates, self.n_cables, self._ctrl_lo, self._ctrl_hi), steps)
+
+    def _command(self, rates: np.ndarray, steps: int) -> None:
+        """:meth:`set_winch_rates` of rates (m,) [m/s] that :func:`checked_rates` returned."""
         paid = self._servos.paid_out(rates, steps, self.timestep) * self._drum_ratio
-        check_lengths(self.rest_lengths + paid, self._act_range)
+        # the lengths reached, read in place (the public rest_lengths copies)
+        check_lengths(self.data.act[self._actuators] + paid, self._act_range)
         self._servos.set_command(rates)
         if (
             self._servos.ideal and self._drums is None
@@ -403,9 +436,9 @@ class Physics:
                 "call reset(T_base_platform) before advance(): the winches have paid out no "
                 "cable yet"
             )
-        checked_rates(cable_rates, self.n_cables, self._ctrl_lo, self._ctrl_hi)  # rates first
+        rates = checked_rates(cable_rates, self.n_cables, self._ctrl_lo, self._ctrl_hi)  # first
         n = self.steps_in(duration)
-        self.set_winch_rates(cable_rates, n)
+        self._command(rates, n)
         self.step(n)
 
     # ------------------------------------------------------------------ placing
