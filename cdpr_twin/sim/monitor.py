@@ -150,9 +150,10 @@ def divergence(data: mujoco.MjData) -> list[str]:
     """Names of the divergence warnings MuJoCo raised (empty while the state is sound)."""
     # every count in one read: a warning's own struct is a binding object per look
     counts = data.warning.number.tolist()
-    return [mujoco.mjtWarning(w).name for w in DIVERGENCE_WARNINGS if counts[w] > 0]
+    return [mujoco.mjtWarning(w).name for w in _DIVERGENCE_IDS if counts[w] > 0]
 
 
+_DIVERGENCE_IDS = tuple(map(int, DIVERGENCE_WARNINGS))
 _OTHER_WARNINGS = tuple(
     w for w in range(mujoco.mjtWarning.mjNWARNING) if w not in set(DIVERGENCE_WARNINGS)
 )
@@ -217,10 +218,11 @@ class Monitor:
         self._placement(seen)
         self._constraint(p.taut, seen)
         self._mujoco(seen)
-        for kind, (detail, cable) in seen.items():
-            if kind not in self._active:
-                self.faults.append(Fault(p.time, kind, detail, cable))
-        self._active = set(seen)
+        if seen or self._active:  # (nothing to compare while all is well)
+            for kind, (detail, cable) in seen.items():
+                if kind not in self._active:
+                    self.faults.append(Fault(p.time, kind, detail, cable))
+            self._active = set(seen)
 
     def _placement(self, seen: dict) -> None:
         """Frame, floor and speed limits, on Python floats (a check runs twice a tick)."""

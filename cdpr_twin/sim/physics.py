@@ -55,7 +55,10 @@ TAG_SITE = "tag_center"
 
 
 @jit
-def set_stiffness(
+def set_swivels_and_stiffness(
+    yaw: np.ndarray,
+    mocap_quat: np.ndarray,
+    mocap: np.ndarray,
     l0: np.ndarray,
     es: np.ndarray,
     enabled: np.ndarray,
@@ -63,12 +66,15 @@ def set_stiffness(
     bias: np.ndarray,
     bias_unit: np.ndarray,
 ) -> None:
-    """Write each cable's stiffness k = E·S/l0 into its actuator's gain and bias, in place.
+    """Turn each swivel to its yaw and write its cable's stiffness k = E·S/l0, in place.
 
-    Compiled: one call for the six NumPy calls on (m,) arrays it replaces (twice a control
+    Compiled: one call for the dozen NumPy calls on (m,) arrays it replaces (twice a control
     tick), with the same arithmetic, so the same bits.
 
     Args:
+        yaw: (m,) each swivel's yaw φ_i about its base z axis [rad] (eq. 20).
+        mocap_quat: (k, 4) MuJoCo's mocap quaternions [w, x, y, z]; row ``mocap[i]`` is set.
+        mocap: (m,) int, each swivel's mocap row.
         l0: (m,) rest lengths [m] (0 before reset: no stiffness).
         es: (m,) axial stiffnesses E·S [N].
         enabled: (m,) bool, False for a cut cable (no stiffness).
@@ -77,6 +83,9 @@ def set_stiffness(
         bias_unit: (3,) the bias per unit stiffness [m, 1, s].
     """
     for i in range(l0.size):
+        half = 0.5 * yaw[i]
+        quat = mocap_quat[mocap[i]]
+        quat[0], quat[1], quat[2], quat[3] = math.cos(half), 0.0, 0.0, math.sin(half)
         k = es[i] / l0[i] if l0[i] > 0 and enabled[i] else 0.0
         gain[i, 0] = k
         for j in range(3):
@@ -160,6 +169,7 @@ class Physics:
         self._tendons = m.actuator_trnid[actuators, 0]
         self._act_range = m.actuator_actrange[actuators].copy()
         self._anchors, self._mocap = as_slice(anchors), as_slice(mocap)
+        self._mocap_ids = np.array(mocap)
         self._actuator_ids = actuators
         self._actuators = as_slice(actuators)
         self._gain = m.actuator_gainprm[self._actuators]  # views when the ids are contiguous
@@ -202,8 +212,8 @@ class Physics:
     @property
     def taut(self) -> np.ndarray:
         """(m,) each cable taut: MuJoCo's straight cable pulls (a heavy one may hang: sag.py)."""
-        # (mypy types a property read on its class as the getter function, not the property)
-        return Physics.tensions.fget(self) > 0.0  # type: ignore[attr-defined]
+        # tension −f > 0 is f < 0: one comparison, whatever a subclass's tensions add
+        return self.data.actuator_force[self._actuators] < 0.0
 
     @property
     def tensions(self) -> np.ndarray:
@@ -325,13 +335,20 @@ class Physics:
         """
         d = self.data
         lvec = d.site_xpos[self._anchors] - self._a
-        half = 0.5 * np.arctan2(lvec[:, 1], lvec[:, 0])
-        quat = self._quat_buf
-        quat[:, 0] = np.cos(half)
-        quat[:, 3] = np.sin(half)
-        d.mocap_quat[self._mocap] = quat
+        # (NumPy's arctan2, not the compiled libm one: they differ in the last bit)
+        yaw = np.arctan2(lvec[:, 1], lvec[:, 0])
         l0 = d.act[self._actuators]
-        set_stiffness(l0, self._es, self.cable_enabled, self._gain, self._bias, self._bias_unit)
+        set_swivels_and_stiffness(
+            yaw,
+            d.mocap_quat,
+            self._mocap_ids,
+            l0,
+            self._es,
+            self.cable_enabled,
+            self._gain,
+            self._bias,
+            self._bias_unit,
+        )
 
     def step(self, n: int) -> None:
         """Advance n physics steps, refreshing every ``align_every`` and firing due hooks.
