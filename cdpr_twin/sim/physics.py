@@ -143,6 +143,11 @@ class Physics:
         self.cable_enabled = np.ones(self.n_cables, dtype=bool)
         self._running: np.ndarray | None = None  # (m,) 0 for a stalled winch; None: none is
         self._index(model)
+        # views into MjData's buffers, which live as long as it does (the actuators' ids are
+        # contiguous: _index refuses others), read each tick without a look-up
+        d, q, v = self.data, self._qpos, self._dof
+        self._l0, self._force = d.act[self._actuators], d.actuator_force[self._actuators]
+        self._pose, self._twist = d.qpos[q : q + 7], d.qvel[v : v + 6]
         self._entry = float(numeric(model, "cable_entry_height")[0])
         self._damping_time = float(numeric(model, "cable_damping_time")[0])
         # force = k·l0 + k·h − k·L − η·k·L̇: the bias per unit stiffness
@@ -196,13 +201,13 @@ class Physics:
     @property
     def T_base_platform(self) -> np.ndarray:
         """Ground-truth platform pose (4, 4)."""
-        q = self.data.qpos[self._qpos : self._qpos + 7]
+        q = self._pose
         return se3.transform(se3.matrix_from_quat_wxyz(q[3:]), q[:3])
 
     @property
     def rest_lengths(self) -> np.ndarray:
         """Unstretched lengths l0 paid out by the winches. (m,) [m]."""
-        return self.data.act[self._actuators].copy()
+        return self._l0.copy()
 
     @property
     def cable_lengths(self) -> np.ndarray:
@@ -213,12 +218,12 @@ class Physics:
     def taut(self) -> np.ndarray:
         """(m,) each cable taut: MuJoCo's straight cable pulls (a heavy one may hang: sag.py)."""
         # tension −f > 0 is f < 0: one comparison, whatever a subclass's tensions add
-        return self.data.actuator_force[self._actuators] < 0.0
+        return self._force < 0.0
 
     @property
     def tensions(self) -> np.ndarray:
         """True cable tensions (m,) [N]."""
-        return 0.0 - self.data.actuator_force[self._actuators]  # 0.0 -: no "-0.0" when slack
+        return 0.0 - self._force  # 0.0 -: no "-0.0" when slack
 
     @property
     def winch_rates(self) -> np.ndarray:
@@ -228,8 +233,7 @@ class Physics:
     @property
     def platform_state(self) -> tuple[np.ndarray, np.ndarray]:
         """Views (do not write) of [x, y, z, qw, qx, qy, qz] and [v (world), ω (platform)]."""
-        d, q, v = self.data, self._qpos, self._dof
-        return d.qpos[q : q + 7], d.qvel[v : v + 6]
+        return self._pose, self._twist
 
     @property
     def has_camera(self) -> bool:
@@ -337,12 +341,11 @@ class Physics:
         lvec = d.site_xpos[self._anchors] - self._a
         # (NumPy's arctan2, not the compiled libm one: they differ in the last bit)
         yaw = np.arctan2(lvec[:, 1], lvec[:, 0])
-        l0 = d.act[self._actuators]
         set_swivels_and_stiffness(
             yaw,
             d.mocap_quat,
             self._mocap_ids,
-            l0,
+            self._l0,
             self._es,
             self.cable_enabled,
             self._gain,
@@ -376,7 +379,7 @@ class Physics:
 
     def _drum_loads(self) -> tuple[np.ndarray, np.ndarray]:
         """The cables' forces at the drums (m,) [N] and their stiffnesses from there (m,) [N/m]."""
-        return self.tensions, self._es / self.data.act[self._actuators]
+        return self.tensions, self._es / self._l0
 
     def _wind(self, drums: Drums, h: float) -> np.ndarray:
         """The rates that pay out, over ``h`` seconds, what the drums wind (m,) [m/s]."""
@@ -423,7 +426,7 @@ class Physics:
         """:meth:`set_winch_rates` of rates (m,) [m/s] that :func:`checked_rates` returned."""
         paid = self._servos.paid_out(rates, steps, self.timestep) * self._drum_ratio
         # the lengths reached, read in place (the public rest_lengths copies)
-        check_lengths(self.data.act[self._actuators] + paid, self._act_range)
+        check_lengths(self._l0 + paid, self._act_range)
         self._servos.set_command(rates)
         if (
             self._servos.ideal and self._drums is None
