@@ -154,7 +154,6 @@ class Physics:
         self._bias_unit = np.array([self._entry, -1.0, -self._damping_time])
         self._es = self.geometry.es.copy()
         self._a = self.geometry.a_base.copy()
-        self._quat_buf = np.zeros((self.n_cables, 4))
         self.was_reset = False
         self.settle_error: tuple[float, float] = (math.nan, math.nan)
 
@@ -334,8 +333,8 @@ class Physics:
     def refresh(self) -> None:
         """Point each swivel at its B_i (eq. 20) and set the cable stiffness E·S/l0.
 
-        Called every ``align_every`` physics steps: the hot path of the core (index arrays
-        are slices wherever the model's ids are contiguous, so the assignments are views).
+        Called every ``align_every`` physics steps: the hot path of the core (one compiled
+        call writes the swivels' quaternions and the actuators' gains and biases in place).
         """
         d = self.data
         lvec = d.site_xpos[self._anchors] - self._a
