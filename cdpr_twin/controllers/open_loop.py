@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass
 from typing import Literal
 
@@ -53,6 +54,8 @@ class Segment:
         self.T_start, self.T_end, self.duration = T_start, T_end, float(duration)
         self.dt = T_end[:3, 3] - T_start[:3, 3]
         self.theta_u = so3_log(T_start[:3, :3].T @ T_end[:3, :3])  # θ_p u_p of ᵖˢR_pf
+        # the twist per unit ṡ, [Δt, R_s θu] (eq. 27b, 29): one product a sample
+        self._twist_unit = np.concatenate([self.dt, T_start[:3, :3] @ self.theta_u])
 
     def pose(self, t: float) -> np.ndarray:
         """Planned pose at time t from the segment start (eq. 27a, 28). Returns (4, 4)."""
@@ -67,8 +70,7 @@ class Segment:
         writes θu ṡ, which is the same only when R_s = I).
         """
         _, ds = quintic(t / self.duration)
-        sdot = ds / self.duration
-        return np.concatenate([self.dt * sdot, self.T_start[:3, :3] @ self.theta_u * sdot])
+        return self._twist_unit * (ds / self.duration)
 
 
 @dataclass(frozen=True)
@@ -133,7 +135,7 @@ class OpenLoopController(Controller):
         self.check()
         self.jacobian_model = options.jacobian_model
         self.segments: list[Segment] = []
-        self._starts = np.zeros(0)
+        self._starts: list[float] = []
         self._total = self.total_duration
 
     def check(self) -> None:
@@ -187,10 +189,11 @@ class OpenLoopController(Controller):
         self.segments = [
             Segment(a, b, d) for a, b, d in zip(poses[:-1], poses[1:], self.durations, strict=True)
         ]
-        self._starts = np.concatenate([[0.0], np.cumsum(self.durations)])
+        self._starts = np.concatenate([[0.0], np.cumsum(self.durations)]).tolist()
 
     def _locate(self, t: float) -> tuple[Segment, float]:
-        k = int(self._starts.searchsorted(t, side="right")) - 1
+        # (a list's bisect: NumPy's searchsorted costs more than the search on a scalar)
+        k = bisect.bisect_right(self._starts, t) - 1
         k = min(max(k, 0), len(self.segments) - 1)
         return self.segments[k], t - self._starts[k]
 
@@ -220,11 +223,14 @@ class OpenLoopController(Controller):
         if not self.segments:
             raise RuntimeError("open_loop: call reset(T_base_platform0) before command()")
         mid = t + 0.5 * period
-        T = self.planned_pose(mid)
-        twist_base = self.planned_twist_base(mid)
+        # planned_pose(mid) and planned_twist_base(mid) from one look-up of the segment
+        seg, tau = self._locate(min(mid, self._total))
+        T = seg.pose(tau)
+        outside = mid < 0 or mid > self._total
+        twist_base = np.zeros(6) if outside else seg.twist_base(tau)
         rates = jacobian(self.geometry, T, "base", self.jacobian_model) @ twist_base
-        R = T[:3, :3]
-        twist_platform = np.concatenate([R.T @ twist_base[:3], R.T @ twist_base[3:]])
+        # rows [v, ω] times R: [Rᵀv, Rᵀω] in one product
+        twist_platform = (twist_base.reshape(2, 3) @ T[:3, :3]).ravel()
         done = t + period >= self._total - 1e-9
         return Command(
             rates, twist_platform, done=done, status=Status.DONE if done else Status.TRACKING

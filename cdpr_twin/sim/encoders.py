@@ -64,12 +64,7 @@ class Encoders:
     @property
     def ideal(self) -> bool:
         """Exact encoders on drums whose radii are the ones they are set to."""
-        p = self.physics
-        return (
-            self.realism.encoder_counts == 0
-            and np.array_equal(p.drum_radius_set, p.drum_radius_true)
-            and p.motor_positions is None
-        )
+        return self.realism.encoder_counts == 0 and self.physics.drums_as_set
 
     @property
     def quantum(self) -> float:

@@ -148,9 +148,12 @@ def robot_limits(physics, sensor_max: float, slack_time: float) -> MonitorLimits
 
 def divergence(data: mujoco.MjData) -> list[str]:
     """Names of the divergence warnings MuJoCo raised (empty while the state is sound)."""
-    return [mujoco.mjtWarning(w).name for w in DIVERGENCE_WARNINGS if data.warning[w].number > 0]
+    # every count in one read: a warning's own struct is a binding object per look
+    counts = data.warning.number.tolist()
+    return [mujoco.mjtWarning(w).name for w in _DIVERGENCE_IDS if counts[w] > 0]
 
 
+_DIVERGENCE_IDS = tuple(map(int, DIVERGENCE_WARNINGS))
 _OTHER_WARNINGS = tuple(
     w for w in range(mujoco.mjtWarning.mjNWARNING) if w not in set(DIVERGENCE_WARNINGS)
 )
@@ -174,15 +177,14 @@ class Monitor:
         self._half = tuple(map(float, physics.platform_half_size))  # (3,) [m]
         self._active: set[FaultKind] = set()
         self._slack_since = math.nan
-        self._other = np.array(_OTHER_WARNINGS)
-        self._warnings = np.zeros(len(_OTHER_WARNINGS), dtype=int)
+        self._warnings = [0] * mujoco.mjtWarning.mjNWARNING  # each warning's count last seen
         self._taken = 0
 
     def reset(self) -> None:
         """Forget every fault and onset (the robot was just reset)."""
         self.faults, self._taken, self._active = [], 0, set()
         self._slack_since = math.nan
-        self._warnings = self.physics.data.warning.number[self._other]
+        self._warnings = self.physics.data.warning.number.tolist()
 
     def next_time(self) -> float:
         """Always due: the monitor looks at every refresh chunk."""
@@ -206,19 +208,21 @@ class Monitor:
         seen: dict[FaultKind, tuple[str, int]] = {}
         tau = p.tensions
         worst = int(tau.argmax())
+        peak = tau.item(worst)
         for kind, limit in (
             (FaultKind.BREAKING_LOAD, lim.breaking_load),
             (FaultKind.SENSOR_RANGE, lim.sensor_max),
         ):
-            if tau[worst] > limit:
-                seen[kind] = (f"cable {worst + 1} at {tau[worst]:.1f} N > {limit:g} N", worst + 1)
+            if peak > limit:
+                seen[kind] = (f"cable {worst + 1} at {peak:.1f} N > {limit:g} N", worst + 1)
         self._placement(seen)
         self._constraint(p.taut, seen)
         self._mujoco(seen)
-        for kind, (detail, cable) in seen.items():
-            if kind not in self._active:
-                self.faults.append(Fault(p.time, kind, detail, cable))
-        self._active = set(seen)
+        if seen or self._active:  # (nothing to compare while all is well)
+            for kind, (detail, cable) in seen.items():
+                if kind not in self._active:
+                    self.faults.append(Fault(p.time, kind, detail, cable))
+            self._active = set(seen)
 
     def _placement(self, seen: dict) -> None:
         """Frame, floor and speed limits, on Python floats (a check runs twice a tick)."""
@@ -247,7 +251,7 @@ class Monitor:
 
     def _constraint(self, taut_cables: np.ndarray, seen: dict) -> None:
         lim, t = self.limits, self.physics.data.time
-        taut = len(taut_cables.nonzero()[0])
+        taut = int(np.count_nonzero(taut_cables))
         if taut >= lim.min_taut:
             self._slack_since = math.nan
             return
@@ -260,10 +264,11 @@ class Monitor:
             )
 
     def _mujoco(self, seen: dict) -> None:
-        d = self.physics.data
-        counts = d.warning.number[self._other]
-        new = (counts > self._warnings).nonzero()[0]
-        self._warnings = counts
-        if new.size:
-            names = [mujoco.mjtWarning(_OTHER_WARNINGS[i]).name for i in new]
+        counts = self.physics.data.warning.number.tolist()
+        if counts == self._warnings:  # (the usual case: no warning since the last check)
+            return
+        last, self._warnings = self._warnings, counts
+        new = [w for w in _OTHER_WARNINGS if counts[w] > last[w]]
+        if new:
+            names = [mujoco.mjtWarning(w).name for w in new]
             seen[FaultKind.MUJOCO_WARNING] = (", ".join(names), 0)

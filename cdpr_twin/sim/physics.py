@@ -48,9 +48,48 @@ from cdpr_twin.sim.model import (
 )
 from cdpr_twin.sim.monitor import divergence
 from cdpr_twin.sim.occluder import occluder_of
+from cdpr_twin.sim.rope_kernel import jit
 from cdpr_twin.sim.winch import WinchServos, check_lengths, checked_rates, whole_steps
 
 TAG_SITE = "tag_center"
+
+
+@jit
+def set_swivels_and_stiffness(
+    yaw: np.ndarray,
+    mocap_quat: np.ndarray,
+    mocap: np.ndarray,
+    l0: np.ndarray,
+    es: np.ndarray,
+    enabled: np.ndarray,
+    gain: np.ndarray,
+    bias: np.ndarray,
+    bias_unit: np.ndarray,
+) -> None:
+    """Turn each swivel to its yaw and write its cable's stiffness k = E·S/l0, in place.
+
+    Compiled: one call for the dozen NumPy calls on (m,) arrays it replaces (twice a control
+    tick), with the same arithmetic, so the same bits.
+
+    Args:
+        yaw: (m,) each swivel's yaw φ_i about its base z axis [rad] (eq. 20).
+        mocap_quat: (k, 4) MuJoCo's mocap quaternions [w, x, y, z]; row ``mocap[i]`` is set.
+        mocap: (m,) int, each swivel's mocap row.
+        l0: (m,) rest lengths [m] (0 before reset: no stiffness).
+        es: (m,) axial stiffnesses E·S [N].
+        enabled: (m,) bool, False for a cut cable (no stiffness).
+        gain: (m, ≥1) the actuators' gain parameters; column 0 gets k [N/m].
+        bias: (m, ≥3) the actuators' bias parameters; columns 0–2 get k·``bias_unit``.
+        bias_unit: (3,) the bias per unit stiffness [m, 1, s].
+    """
+    for i in range(l0.size):
+        half = 0.5 * yaw[i]
+        quat = mocap_quat[mocap[i]]
+        quat[0], quat[1], quat[2], quat[3] = math.cos(half), 0.0, 0.0, math.sin(half)
+        k = es[i] / l0[i] if l0[i] > 0 and enabled[i] else 0.0
+        gain[i, 0] = k
+        for j in range(3):
+            bias[i, j] = k * bias_unit[j]
 
 
 class Physics:
@@ -104,13 +143,17 @@ class Physics:
         self.cable_enabled = np.ones(self.n_cables, dtype=bool)
         self._running: np.ndarray | None = None  # (m,) 0 for a stalled winch; None: none is
         self._index(model)
+        # views into MjData's buffers, which live as long as it does (the actuators' ids are
+        # contiguous: _index refuses others), read each tick without a look-up
+        d, q, v = self.data, self._qpos, self._dof
+        self._l0, self._force = d.act[self._actuators], d.actuator_force[self._actuators]
+        self._pose, self._twist = d.qpos[q : q + 7], d.qvel[v : v + 6]
         self._entry = float(numeric(model, "cable_entry_height")[0])
         self._damping_time = float(numeric(model, "cable_damping_time")[0])
         # force = k·l0 + k·h − k·L − η·k·L̇: the bias per unit stiffness
         self._bias_unit = np.array([self._entry, -1.0, -self._damping_time])
         self._es = self.geometry.es.copy()
         self._a = self.geometry.a_base.copy()
-        self._quat_buf = np.zeros((self.n_cables, 4))
         self.was_reset = False
         self.settle_error: tuple[float, float] = (math.nan, math.nan)
 
@@ -130,6 +173,7 @@ class Physics:
         self._tendons = m.actuator_trnid[actuators, 0]
         self._act_range = m.actuator_actrange[actuators].copy()
         self._anchors, self._mocap = as_slice(anchors), as_slice(mocap)
+        self._mocap_ids = np.array(mocap)
         self._actuator_ids = actuators
         self._actuators = as_slice(actuators)
         self._gain = m.actuator_gainprm[self._actuators]  # views when the ids are contiguous
@@ -156,13 +200,13 @@ class Physics:
     @property
     def T_base_platform(self) -> np.ndarray:
         """Ground-truth platform pose (4, 4)."""
-        q = self.data.qpos[self._qpos : self._qpos + 7]
+        q = self._pose
         return se3.transform(se3.matrix_from_quat_wxyz(q[3:]), q[:3])
 
     @property
     def rest_lengths(self) -> np.ndarray:
         """Unstretched lengths l0 paid out by the winches. (m,) [m]."""
-        return self.data.act[self._actuators].copy()
+        return self._l0.copy()
 
     @property
     def cable_lengths(self) -> np.ndarray:
@@ -172,13 +216,13 @@ class Physics:
     @property
     def taut(self) -> np.ndarray:
         """(m,) each cable taut: MuJoCo's straight cable pulls (a heavy one may hang: sag.py)."""
-        # (mypy types a property read on its class as the getter function, not the property)
-        return Physics.tensions.fget(self) > 0.0  # type: ignore[attr-defined]
+        # tension −f > 0 is f < 0: one comparison, whatever a subclass's tensions add
+        return self._force < 0.0
 
     @property
     def tensions(self) -> np.ndarray:
         """True cable tensions (m,) [N]."""
-        return 0.0 - self.data.actuator_force[self._actuators]  # 0.0 -: no "-0.0" when slack
+        return 0.0 - self._force  # 0.0 -: no "-0.0" when slack
 
     @property
     def winch_rates(self) -> np.ndarray:
@@ -188,8 +232,7 @@ class Physics:
     @property
     def platform_state(self) -> tuple[np.ndarray, np.ndarray]:
         """Views (do not write) of [x, y, z, qw, qx, qy, qz] and [v (world), ω (platform)]."""
-        d, q, v = self.data, self._qpos, self._dof
-        return d.qpos[q : q + 7], d.qvel[v : v + 6]
+        return self._pose, self._twist
 
     @property
     def has_camera(self) -> bool:
@@ -257,6 +300,8 @@ class Physics:
         self.drum_radius_set, self._drum_ratio = radii, self.drum_radius_true / radii  # cable/cmd
         if self.drive.drums:
             self._drums = Drums(self.drive, self.drum_radius_true, radii)
+        self.drums_as_set = self._drums is None and np.array_equal(radii, self.drum_radius_true)
+        """Whether each drum pays out exactly its command: true radii as set, no drum model."""
 
     def clear_hooks(self) -> None:
         """Drop every hook: they hold this physics, a cycle that kept a closed run's model alive."""
@@ -288,21 +333,24 @@ class Physics:
     def refresh(self) -> None:
         """Point each swivel at its B_i (eq. 20) and set the cable stiffness E·S/l0.
 
-        Called every ``align_every`` physics steps: the hot path of the core (index arrays
-        are slices wherever the model's ids are contiguous, so the assignments are views).
+        Called every ``align_every`` physics steps: the hot path of the core (one compiled
+        call writes the swivels' quaternions and the actuators' gains and biases in place).
         """
         d = self.data
         lvec = d.site_xpos[self._anchors] - self._a
-        half = 0.5 * np.arctan2(lvec[:, 1], lvec[:, 0])
-        quat = self._quat_buf
-        quat[:, 0] = np.cos(half)
-        quat[:, 3] = np.sin(half)
-        d.mocap_quat[self._mocap] = quat
-        l0 = d.act[self._actuators]
-        on = (l0 > 0) & self.cable_enabled  # (l0 = 0 before reset())
-        k = np.divide(self._es, l0, out=np.zeros(self.n_cables), where=on)
-        self._gain[:, 0] = k
-        self._bias[:, :3] = k[:, None] * self._bias_unit
+        # (NumPy's arctan2, not the compiled libm one: they differ in the last bit)
+        yaw = np.arctan2(lvec[:, 1], lvec[:, 0])
+        set_swivels_and_stiffness(
+            yaw,
+            d.mocap_quat,
+            self._mocap_ids,
+            self._l0,
+            self._es,
+            self.cable_enabled,
+            self._gain,
+            self._bias,
+            self._bias_unit,
+        )
 
     def step(self, n: int) -> None:
         """Advance n physics steps, refreshing every ``align_every`` and firing due hooks.
@@ -310,13 +358,13 @@ class Physics:
         Raises:
             SimulationError: when the simulation diverges.
         """
-        dt = self.timestep
+        dt, model, data, hooks = self.timestep, self.model, self.data, self._hooks
         while n > 0:
             chunk = min(n, self.align_every)
-            chunk = fire_due(self._hooks, self.data.time, dt, chunk) if self._hooks else chunk
+            chunk = fire_due(hooks, data.time, dt, chunk) if hooks else chunk
             self.refresh()
             self._drive_winches(chunk * dt)
-            mujoco.mj_step(self.model, self.data, nstep=chunk)
+            mujoco.mj_step(model, data, nstep=chunk)
             n -= chunk
         self._check_state()
 
@@ -330,7 +378,7 @@ class Physics:
 
     def _drum_loads(self) -> tuple[np.ndarray, np.ndarray]:
         """The cables' forces at the drums (m,) [N] and their stiffnesses from there (m,) [N/m]."""
-        return self.tensions, self._es / self.data.act[self._actuators]
+        return self.tensions, self._es / self._l0
 
     def _wind(self, drums: Drums, h: float) -> np.ndarray:
         """The rates that pay out, over ``h`` seconds, what the drums wind (m,) [m/s]."""
@@ -371,9 +419,13 @@ class Physics:
             ValueError: non-finite or out-of-range rates, or rates that would run a winch past
                 its range within those steps (servos: the exact lengths their loops reach).
         """
-        rates = checked_rates(rates, self.n_cables, self._ctrl_lo, self._ctrl_hi)
+        self._command(checked_rates(rates, self.n_cables, self._ctrl_lo, self._ctrl_hi), steps)
+
+    def _command(self, rates: np.ndarray, steps: int) -> None:
+        """:meth:`set_winch_rates` of rates (m,) [m/s] that :func:`checked_rates` returned."""
         paid = self._servos.paid_out(rates, steps, self.timestep) * self._drum_ratio
-        check_lengths(self.rest_lengths + paid, self._act_range)
+        # the lengths reached, read in place (the public rest_lengths copies)
+        check_lengths(self._l0 + paid, self._act_range)
         self._servos.set_command(rates)
         if (
             self._servos.ideal and self._drums is None
@@ -403,9 +455,9 @@ class Physics:
                 "call reset(T_base_platform) before advance(): the winches have paid out no "
                 "cable yet"
             )
-        checked_rates(cable_rates, self.n_cables, self._ctrl_lo, self._ctrl_hi)  # rates first
+        rates = checked_rates(cable_rates, self.n_cables, self._ctrl_lo, self._ctrl_hi)  # first
         n = self.steps_in(duration)
-        self.set_winch_rates(cable_rates, n)
+        self._command(rates, n)
         self.step(n)
 
     # ------------------------------------------------------------------ placing

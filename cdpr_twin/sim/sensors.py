@@ -96,6 +96,8 @@ class Sensors:
         if math.isnan(realism.tension.bias_std):
             raise ModelError(f"{physics.source} has no tension-sensor data; set bias_std")
         self.physics, self.nominal, self.realism = physics, nominal, realism
+        # whether the physics' sensors read other than its straight cables' pull (asked once)
+        self._sensed_apart = hasattr(type(physics), "sensed_tensions")
         noise = realism.tension.noise_std
         self.tension = TensionSensors(
             physics.n_cables,
@@ -139,7 +141,7 @@ class Sensors:
     def _sensed(self) -> np.ndarray:
         """True tensions where the sensors sit (heavy cables: that end of the catenary)."""
         p = self.physics
-        if hasattr(type(p), "sensed_tensions"):
+        if self._sensed_apart:
             return cast(_SensedTensions, p).sensed_tensions
         return p.tensions
 

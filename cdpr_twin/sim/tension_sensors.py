@@ -57,12 +57,13 @@ class TensionSensors:
         self.gain_error = robot_rng.normal(0.0, realism.gain_error_std, n_cables)
         self._calibration_error = realism.bias_std > 0 or realism.gain_error_std > 0
         self._failed = np.zeros(n_cables, dtype=bool)
+        self._any_failed = False  # (a bool: each reading asks)
         self._stuck = np.zeros(n_cables)  # what a failed sensor reads [N]
         self._last = np.full(n_cables, np.nan)
 
     def fail(self, i: int, value: float = math.nan) -> None:
         """Sensor i (from 0) fails: it reads ``value`` [N] from now on (NaN: its last reading)."""
-        self._failed[i] = True
+        self._failed[i] = self._any_failed = True
         self._stuck[i] = self._last[i] if math.isnan(value) else value
 
     def read(self, true_tensions: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
@@ -85,7 +86,7 @@ class TensionSensors:
             lo, hi = self.realism.range_min, self.realism.range_max
             clipped = (tensions <= lo) | (tensions >= hi)
             tensions = np.clip(tensions, lo, hi)
-        if np.logical_or.reduce(self._failed):  # (a copy: the caller's array is never written)
+        if self._any_failed:  # (a copy: the caller's array is never written)
             tensions = np.where(self._failed, self._stuck, tensions)
         self._last = tensions
         return tensions, clipped

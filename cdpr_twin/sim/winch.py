@@ -249,7 +249,7 @@ def checked_rates(rates: np.ndarray, n: int, lo: np.ndarray, hi: np.ndarray) -> 
         raise ValueError(
             f"cable_rates must be finite, got {rates.tolist()} (NaN or inf from the controller?)"
         )
-    if np.logical_or.reduce(rates < lo) or np.logical_or.reduce(rates > hi):
+    if np.logical_or.reduce((rates < lo) | (rates > hi)):
         out = [f"{r:.3g}" for r in rates]  # (significant digits: a tiny range stays legible)
         raise WinchLimitError(
             f"cable rates [{', '.join(out)}] m/s exceed the winches' range "
@@ -268,9 +268,7 @@ def check_lengths(l0_end: np.ndarray, act_range: np.ndarray) -> None:
     Raises:
         WinchLimitError: when a length leaves the range.
     """
-    if np.logical_or.reduce(l0_end < act_range[:, 0]) or np.logical_or.reduce(
-        l0_end > act_range[:, 1]
-    ):
+    if np.logical_or.reduce((l0_end < act_range[:, 0]) | (l0_end > act_range[:, 1])):
         raise WinchLimitError(
             f"these rates would run winch lengths to {np.round(l0_end, 4)} m, "
             f"outside the winch range {act_range[0].tolist()} m"
