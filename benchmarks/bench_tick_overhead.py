@@ -7,10 +7,11 @@ baseline, the twin alone stepping the same control period at zero rates and read
 (``bench_scenarios.physics_only``'s loop). Each measurement is a fresh interpreter; with
 ``--before``, the revision ``REV`` is checked out into a temporary git worktree and measured in
 turns with this checkout (before, after, before, after, …), so that both see the same machine
-at the same time. Per variant it prints the fastest of the repeats (the one least disturbed by
-other work on the machine): physics alone and the run, in µs per tick; their ratio (the run's
-speed as a fraction of physics alone's); and the overhead, run − physics alone, the Python a
-tick runs around the physics (estimators, controller, monitor, records).
+at the same time. Each interpreter times three pairs (the run, then physics alone, back to
+back). Per variant it prints medians over all pairs: physics alone and the run, in µs per
+tick; their ratio pair by pair (the run's speed as a fraction of physics alone's); and the
+overhead, run − physics alone, the Python a tick runs around the physics (estimators,
+controller, monitor, records).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import argparse
 import json
 import os
 import platform
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -28,8 +30,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def measure() -> dict[str, float]:
-    """µs per tick of physics alone and of the run, in this interpreter (its ``cdpr_twin``)."""
+def measure(pairs: int = 3) -> list[dict[str, float]]:
+    """µs per tick of the run and of physics alone, ``pairs`` times in turns, in this interpreter.
+
+    Each pair times the run, then physics alone for as many ticks, back to back: a machine
+    that slows down for a while slows both, so a pair's ratio holds better than either time.
+    """
     import numpy as np
 
     import cdpr_twin.sim  # noqa: F401  (defaults MUJOCO_GL=egl before mujoco is imported)
@@ -38,29 +44,32 @@ def measure() -> dict[str, float]:
     from cdpr_twin.sim.twin import Twin
 
     s = load_scenario("paper_open_loop").with_realism("ideal").with_overrides(camera=False)
+    rows = []
     with tempfile.TemporaryDirectory() as tmp:
         run(s, Path(tmp) / "warm-up")
-        result = run(s, Path(tmp) / "run")
-    ticks = int(result.summary["ticks_recorded"])
-    # bench_scenarios.physics_only's loop, kept here: that module imports what an older
-    # revision's package may not have
-    with Twin(
-        s.model.file,
-        deviations=s.truth,
-        camera=False,
-        align_every=s.model.align_every,
-        timestep=s.model.timestep,
-    ) as twin:
-        twin.reset(s.start_pose)
-        t0 = time.perf_counter()
-        for _ in range(ticks):
-            twin.advance(s.model.control_period, np.zeros(twin.physics.n_cables))
-            twin.sense()
-        physics = (time.perf_counter() - t0) / ticks
-    return {"physics_us": physics * 1e6, "run_us": result.wall_time / ticks * 1e6}
+        for k in range(pairs):
+            result = run(s, Path(tmp) / f"run-{k}")
+            ticks = int(result.summary["ticks_recorded"])
+            # bench_scenarios.physics_only's loop, kept here: that module imports what an
+            # older revision's package may not have
+            with Twin(
+                s.model.file,
+                deviations=s.truth,
+                camera=False,
+                align_every=s.model.align_every,
+                timestep=s.model.timestep,
+            ) as twin:
+                twin.reset(s.start_pose)
+                t0 = time.perf_counter()
+                for _ in range(ticks):
+                    twin.advance(s.model.control_period, np.zeros(twin.physics.n_cables))
+                    twin.sense()
+                physics = (time.perf_counter() - t0) / ticks
+            rows.append({"physics_us": physics * 1e6, "run_us": result.wall_time / ticks * 1e6})
+    return rows
 
 
-def _measured(root: Path) -> dict[str, float]:
+def _measured(root: Path) -> list[dict[str, float]]:
     """:func:`measure` in a fresh interpreter that imports ``cdpr_twin`` from ``root``."""
     env = {**os.environ, "PYTHONPATH": str(root)}
     out = subprocess.run(
@@ -105,7 +114,7 @@ def main() -> None:
             runs: dict[str, list[dict[str, float]]] = {name: [] for name in variants}
             for _ in range(args.repeats):
                 for name, root in variants.items():
-                    runs[name].append(_measured(root))
+                    runs[name] += _measured(root)
         finally:
             if args.before:
                 subprocess.run(
@@ -113,15 +122,17 @@ def main() -> None:
                     check=False,
                 )
     print(f"paper_open_loop, ideal, camera off; {_cpu()}, {os.cpu_count()} cores")
-    print(f"fastest of {args.repeats}, µs per tick (variants measured in turns)\n")
+    print(
+        f"medians of {args.repeats} interpreters × 3 pairs, µs per tick (variants in turns);"
+        " ratio: physics alone / run, pair by pair\n"
+    )
     print(f"{'variant':28s} {'physics':>8s} {'run':>8s} {'ratio':>6s} {'overhead':>9s}")
     for name, rows in runs.items():
-        physics = min(r["physics_us"] for r in rows)
-        run_us = min(r["run_us"] for r in rows)
-        print(
-            f"{name:28s} {physics:8.0f} {run_us:8.0f} {physics / run_us:6.2f} "
-            f"{run_us - physics:9.0f}"
-        )
+        physics = statistics.median(r["physics_us"] for r in rows)
+        run_us = statistics.median(r["run_us"] for r in rows)
+        ratio = statistics.median(r["physics_us"] / r["run_us"] for r in rows)
+        overhead = statistics.median(r["run_us"] - r["physics_us"] for r in rows)
+        print(f"{name:28s} {physics:8.0f} {run_us:8.0f} {ratio:6.2f} {overhead:9.0f}")
 
 
 if __name__ == "__main__":
