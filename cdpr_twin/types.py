@@ -167,6 +167,11 @@ class Command:
             value = getattr(self, name)
             if value is not None:
                 object.__setattr__(self, name, _frozen(value, float))
+        if self.twist_platform.shape != (6,):
+            raise ValueError(
+                f"Command.twist_platform must be (6,) [v, ω] of the platform, got shape "
+                f"{self.twist_platform.shape}"
+            )
 
 
 @dataclass(frozen=True, eq=False)
@@ -236,7 +241,10 @@ class Measurement:
     tensions_clipped: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        for name in ("cable_lengths", "tensions", "image", "tensions_clipped"):
+        # readings as floats whatever a log held (ints, float32): estimators compute on float64
+        for name in ("cable_lengths", "tensions"):
+            object.__setattr__(self, name, _frozen(getattr(self, name), float))
+        for name in ("image", "tensions_clipped"):
             value = getattr(self, name)
             if value is not None:
                 object.__setattr__(self, name, _frozen(value))

@@ -139,7 +139,7 @@ class RunMetrics:
         self._pending: list[tuple[dict[str, PoseEstimate], np.ndarray]] = []
 
     def add(self, tick: TickRecord) -> None:
-        """Account one tick: each estimator's deviation, and a checkpoint if one is due."""
+        """Take one tick: its deviations are accounted with its batch's, a checkpoint now."""
         self._pending.append((tick.estimates, tick.T_base_platform))
         if len(self._pending) >= self.batch:
             self._account()

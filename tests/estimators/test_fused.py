@@ -277,6 +277,30 @@ def test_a_measurement_of_another_robot_is_refused_in_one_line(twin):
         est.update(seven)
 
 
+def test_a_twist_that_is_not_six_numbers_is_refused_in_one_line():
+    """The compiled prediction reads six entries of the commanded twist: a command with
+    another count is an error naming the field, made where the command is built."""
+    for n in (3, 8):
+        with pytest.raises(ValueError, match=r"^Command.twist_platform must be \(6,\)"):
+            Command(np.zeros(8), np.zeros(n))
+
+
+def test_integer_readings_of_a_log_give_the_same_estimate_as_floats(twin):
+    """A log may hold integers: the measurement holds them as float64, so the filter computes
+    on the same numbers (an integer-valued reading is the same float) and the same estimate."""
+    lengths = np.round(twin.sense().cable_lengths, 0) + 1.0
+    tensions = np.arange(20, 28)
+    estimates = []
+    for kind in (int, float):
+        est = make_estimator("fused", twin.nominal_geometry)
+        est.reset(paper_pose("p0"))
+        m = Measurement(0.04, lengths.astype(kind), tensions.astype(kind))
+        assert m.cable_lengths.dtype == m.tensions.dtype == np.float64
+        estimates.append(est.update(m))
+    assert np.array_equal(estimates[0].T_base_platform, estimates[1].T_base_platform)
+    assert np.array_equal(estimates[0].covariance, estimates[1].covariance)
+
+
 def test_a_layout_with_a_corrected_state_after_a_considered_one_is_refused():
     from cdpr_twin.estimators import fused_models as fm
 
