@@ -23,7 +23,8 @@ class ControlEstimator(Estimator):
 
     def __init__(self, geometry: CdprGeometry, options: NoOptions | None = None) -> None:
         super().__init__(geometry, options)
-        newton.warm_up()  # its compose_exp: compiled (or loaded) now, not at the first update
+        # its compose_exp: compiled (or loaded) now, not at the first update
+        newton.warm_up()
 
     def _step(
         self,

@@ -215,7 +215,8 @@ class FusedEstimator(Estimator):
         )
         self._max_condition = float(o.max_condition)
         self._no_rates = np.zeros(m)
-        self._no_rates.flags.writeable = False  # the compiled signature's: a Command's rates
+        # the compiled signature's: a Command's rates
+        self._no_rates.flags.writeable = False
         self.P = np.zeros((self._n, self._n))
         fc.warm_up(self._cables, self._n, self._blocks)
 
@@ -228,7 +229,8 @@ class FusedEstimator(Estimator):
         self._rho = np.zeros(self._m)
         self._T_tag = np.eye(4)
         self._anchored = False
-        self._ref: np.ndarray | None = None  # (2, m): the lengths and corrected readings at t₀
+        # (2, m): the lengths and corrected readings at t₀
+        self._ref: np.ndarray | None = None
         self._last_twist = np.zeros(6)
         P0 = np.diag([o.initial_position_std**2] * 3 + [o.initial_rotation_std**2] * 3)
         self.P = np.zeros((self._n, self._n))
@@ -374,7 +376,8 @@ class FusedEstimator(Estimator):
             raise ValueError(f"fused: measurement time {m.time} s precedes {self._time} s")
         twist = m.twist_platform
         shapes = (m.cable_lengths.shape, m.tensions.shape, m.cable_rates.shape)
-        if shapes != ((self._m,),) * 3:  # (the compiled stages read m entries of each)
+        # the compiled stages read m entries of each
+        if shapes != ((self._m,),) * 3:
             raise ValueError(
                 f"fused: cable_lengths, tensions and the command's cable_rates must have "
                 f"{self._m} entries (the geometry's cables), got shapes {shapes}"

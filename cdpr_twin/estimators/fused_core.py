@@ -90,7 +90,8 @@ def joseph_update_hp(
     """:func:`joseph_update` given HP = H P (k, n), for a caller that has it already."""
     S = add_to(mt(HP, H), R)
     S_inv = inv(S)
-    K = tm(HP[:, :c], S_inv)  # (c, k): the corrected states' rows only
+    # (c, k): the corrected states' rows only
+    K = tm(HP[:, :c], S_inv)
     KHP = mm(K, HP)  # (c, n)
     KSK = mt(mm(K, S), K)
     n = P.shape[0]
@@ -357,7 +358,8 @@ def update_cables(
     for j in range(k):
         for a in range(n):
             Hu[j, a] = H[idx[j], a]
-            HPu[j, a] = HP[idx[j], a]  # the gate's H P: the same rows, not computed again
+            # the gate's H P: the same rows, not computed again
+            HPu[j, a] = HP[idx[j], a]
         R[j, j], ru[j] = var[idx[j]], r[idx[j]]
     return CABLES_USED, outlier, joseph_update_hp(P, Hu, HPu, R, ru, c)[0]
 
@@ -514,7 +516,8 @@ def warm_up(cables: np.ndarray, n: int, blocks: np.ndarray) -> None:
         blocks,
     )
     frozen = np.ones(m)
-    frozen.flags.writeable = False  # as a Measurement's (and its Command's) arrays
+    # as a Measurement's (and its Command's) arrays
+    frozen.flags.writeable = False
     cable_readings(frozen, frozen, frozen, np.ones((2, m)), np.ones(m), np.ones(5))
     z = np.eye(4)
     z[:3, 3] = [0.01, 0.02, 0.3]

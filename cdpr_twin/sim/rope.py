@@ -197,7 +197,8 @@ class RopePhysics(Physics):
                 "realism.cable.strain_damping = true (damping on L̇ would hold a paid-out cable)"
             )
         self.cable, self.pulley = cable, pulley
-        self._quat_buf = np.zeros((n, 4))  # the swivels' quaternions, tilt then yaw
+        # the swivels' quaternions, tilt then yaw
+        self._quat_buf = np.zeros((n, 4))
         self.rope_ratio = draw_rope_ratios(cable, robot_seed, n)
         self.es0 = self.geometry.es * self.rope_ratio
         self._es = self.es0 * cable.relaxed_ratio  # the relaxed stiffness holds a rest
